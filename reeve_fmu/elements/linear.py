@@ -1,0 +1,166 @@
+"""Linear two-node ALE rope element in 1D, 2D and 3D (method.md §1.2, §2.2-2.4, §3.1, §3.3).
+
+Local coordinates qe = [r1 (nd), r2 (nd), s1, s2]: node positions and material coordinates. In 1D the
+position is the scalar coordinate along the span's fixed line. Everything is derived from the element's
+kinetic and potential energy written in xi = (s - s1)/l including the l-dependence (Lagrange form),
+so the boundary (momentum/energy flux) terms are kept and energy is conserved across kinks and
+zero-length wraps (method §2.3, §6.5).
+
+    mass            closed form, exact material mass rhoA*l
+    Q_v             dT/dq - dM/dt qdot, material part + boundary part B_e
+    gravity         potential form V = -rhoA l g.(r1+r2)/2  (+ rhoA l C for 1D lines off the origin)
+    elastic         engineering strain eps = lambda - 1, N = EA eps, optional tension-only
+    damping         Kelvin-Voigt N_d = EA nu deps/dt from a Rayleigh function (no boundary terms)
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import njit
+
+
+@njit(cache=True)
+def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
+    """Fill Me (ne x ne) and Qe (ne) for one element; return (N_elastic, N_damping, lambda, w, V).
+
+    g: gravity in local coordinates (nd); C: g.r_perp for 1D lines (0 otherwise); ne = 2 nd + 2.
+    V is the element's potential energy (gravity + strain). Raises nothing: a non-positive material
+    length returns lambda = -1 so the caller can stop with a clear event.
+    """
+    i1 = 2 * nd
+    i2 = 2 * nd + 1
+    l = qe[i2] - qe[i1]
+    if not l > 0.0:
+        return 0.0, 0.0, -1.0, 0.0, 0.0
+    sd1 = ve[i1]
+    sd2 = ve[i2]
+    ldot = sd2 - sd1
+    dist2 = 0.0
+    for k in range(nd):
+        dk = qe[nd + k] - qe[k]
+        dist2 += dk * dk
+    dist = math.sqrt(dist2)
+    lam = dist / l
+    inv_l = 1.0 / l
+
+    # --- mass matrix (closed form) -----------------------------------------------------------
+    m = rhoA * l
+    for a in range(2 * nd + 2):
+        for b in range(2 * nd + 2):
+            Me[a, b] = 0.0
+    dd = lam * lam  # d.d
+    for k in range(nd):
+        dk = (qe[nd + k] - qe[k]) * inv_l
+        Me[k, k] = m / 3.0
+        Me[nd + k, nd + k] = m / 3.0
+        Me[k, nd + k] = m / 6.0
+        Me[nd + k, k] = m / 6.0
+        Me[k, i1] = -m * dk / 3.0
+        Me[k, i2] = -m * dk / 6.0
+        Me[nd + k, i1] = -m * dk / 6.0
+        Me[nd + k, i2] = -m * dk / 3.0
+        Me[i1, k] = Me[k, i1]
+        Me[i2, k] = Me[k, i2]
+        Me[i1, nd + k] = Me[nd + k, i1]
+        Me[i2, nd + k] = Me[nd + k, i2]
+    Me[i1, i1] = m * dd / 3.0
+    Me[i2, i2] = m * dd / 3.0
+    Me[i1, i2] = m * dd / 6.0
+    Me[i2, i1] = m * dd / 6.0
+
+    # --- quadratic-velocity vector, Lagrange form -------------------------------------------
+    c3 = m / 3.0
+    w1 = 2.0 * sd1 + sd2
+    w2 = sd1 + 2.0 * sd2
+    d_dd = 0.0   # d . d_dot
+    d_rA = 0.0   # d . rdot_A
+    d_rB = 0.0
+    rA2 = 0.0
+    rB2 = 0.0
+    gm = C       # g . (r1 + r2)/2 (+ C)
+    rel = 0.0    # t . (rdot2 - rdot1)
+    for k in range(nd):
+        dk = (qe[nd + k] - qe[k]) * inv_l
+        ddk = (ve[nd + k] - ve[k] - dk * ldot) * inv_l
+        rAk = ve[k] - dk * sd1
+        rBk = ve[nd + k] - dk * sd2
+        d_dd += dk * ddk
+        d_rA += dk * rAk
+        d_rB += dk * rBk
+        rA2 += rAk * rAk
+        rB2 += rBk * rBk
+        Qe[k] = c3 * ddk * w1 + rhoA * rAk * sd1 + 0.5 * m * g[k]
+        Qe[nd + k] = c3 * ddk * w2 - rhoA * rBk * sd2 + 0.5 * m * g[k]
+        gm += 0.5 * g[k] * (qe[k] + qe[nd + k])
+        if dist > 0.0:
+            rel += (qe[nd + k] - qe[k]) / dist * (ve[nd + k] - ve[k])
+    Qe[i1] = -c3 * d_dd * w1 + rhoA * (-sd1 * d_rA - 0.5 * rA2) - rhoA * gm
+    Qe[i2] = -c3 * d_dd * w2 + rhoA * (sd2 * d_rB + 0.5 * rB2) + rhoA * gm
+
+    # --- axial elastic and Kelvin-Voigt forces ----------------------------------------------
+    eps = lam - 1.0
+    if tonly and eps <= 0.0:
+        N = 0.0
+        w = 0.0
+        Nd = 0.0
+    else:
+        N = EA * eps
+        w = 0.5 * EA * eps * eps
+        epsdot = rel * inv_l - lam * ldot * inv_l
+        Nd = EA * nu * epsdot
+        if tonly and N + Nd < 0.0:
+            Nd = -N  # a rope cannot push: the damper only unloads the spring down to zero
+    Ntot = N + Nd
+    if dist > 0.0:
+        for k in range(nd):
+            tk = (qe[nd + k] - qe[k]) / dist
+            Qe[k] += Ntot * tk
+            Qe[nd + k] -= Ntot * tk
+    esh = N * lam - w + Nd * lam   # Eshelby (configurational) force, + damping part
+    Qe[i1] -= esh
+    Qe[i2] += esh
+    V = l * w - m * gm
+    return N, Nd, lam, w, V
+
+
+@njit(cache=True)
+def end_tension(nd, rhoA, qe, ve, ae, Me, Qe, end):
+    """Rope force at an element end (end = 0: node 1, 1: node 2), from the element's consistent nodal
+    force minus inertia and minus the convective momentum flux rhoA rdot s_dot (which the support
+    takes, not the rope). Exact static end tensions for a hanging span, see tests."""
+    i1 = 2 * nd
+    i2 = 2 * nd + 1
+    l = qe[i2] - qe[i1]
+    dist2 = 0.0
+    for k in range(nd):
+        dk = qe[nd + k] - qe[k]
+        dist2 += dk * dk
+    dist = math.sqrt(dist2)
+    if dist <= 0.0 or l <= 0.0:
+        return 0.0
+    ne = 2 * nd + 2
+    off = 0 if end == 0 else nd
+    sdot = ve[i1] if end == 0 else ve[i2]
+    T = 0.0
+    for k in range(nd):
+        tk = (qe[nd + k] - qe[k]) / dist
+        f = Qe[off + k]
+        for b in range(ne):
+            f -= Me[off + k, b] * ae[b]
+        dk = (qe[nd + k] - qe[k]) / l
+        rdot_mat = ve[off + k] - dk * sdot
+        if end == 0:
+            f -= rhoA * rdot_mat * sdot
+            T += tk * f
+        else:
+            f += rhoA * rdot_mat * sdot
+            T -= tk * f
+    return T
+
+
+def element_arrays(nd: int):
+    """Work arrays for one element."""
+    ne = 2 * nd + 2
+    return np.zeros((ne, ne)), np.zeros(ne)

@@ -1,0 +1,534 @@
+"""Compile a Scene into an immutable Model (arrays) and create States.
+
+Coordinates (method.md §4.3, §4.6). Every rope node is either *Eulerian* (a tangent point fixed on a
+sheave or its body; its material coordinate s is free) or *Lagrangian* (a rope end; s fixed), so the
+ALE mass matrix has no null vector (§6.2). The generalized coordinates q are:
+
+    body translations          one per free axis (absolute coordinate of the body's reference point)
+    sigma per sheave/drum      material coordinate s at the sheave's in-tangent node [m]
+    hitch deflections          rope-end spring deflection along the span [m] (if hitch_stiffness > 0)
+    interior node positions    nd per interior node when a span has several elements
+
+and every element coordinate p (node positions and s) is linear in them: p = B q + c. c holds the
+constant parts and the rope lengths (s at the far rope end), which the initial statics may solve for.
+Wraps: W0 puts in- and out-node at the same s; W1 gives the wrap a constant material length R*theta
+whose rope mass moves with the sheave (its kinetic energy is lumped into the body and sigma rows).
+Tangent points are computed from the initial geometry and stay fixed in the sheave's body frame
+(exact while the span directions keep their initial direction; bodies here only translate).
+
+Sign convention: a sheave angle theta = -(sigma - sigma_0)/R is positive when the rope runs over the
+sheave in the route direction (from the route's first stop toward its last). A positive drive torque
+drives that way. The elevator scenes start their route at the car side, so positive = car up.
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .geometry import GeometryError, tangent, wrap_angle
+from .profiles import Profile, scurve, speed_table
+from .scene import AXES, Scene, SceneError
+
+Kernel = namedtuple("Kernel", [
+    "nd", "nq",
+    "B_ptr", "B_idx", "B_val",
+    "el_idx", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
+    "M0", "F0",
+    "spr_dof", "spr_k", "spr_c",
+    "drum_dof", "drum_rhoA", "drum_sign",
+    "mot_dof", "mot_R", "drive_kind", "torque_table",
+    "free", "presc", "presc_gain", "profile",
+    "out_kind", "out_i", "out_j", "out_scale",
+])
+
+DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
+OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL = range(7)
+
+
+@dataclass
+class State:
+    """Everything that evolves: saving/restoring FMU state is copying this (arrays are copied)."""
+    t: float
+    q: np.ndarray        # generalized coordinates
+    v: np.ndarray        # velocities
+    a: np.ndarray        # generalized-alpha acceleration-like variable
+    qdd: np.ndarray      # accelerations
+    c: np.ndarray        # constant part of p = B q + c (holds the rope lengths)
+    q_ref: np.ndarray    # q at t0 (angle zero, prescribed-motion offsets)
+    u: np.ndarray        # inputs held over the step (motor torque, brake command)
+    jac: np.ndarray      # LU factors of the Newton matrix (reused across steps)
+    piv: np.ndarray      # LU pivots
+    info: np.ndarray     # [h of jac (0 = none), steps, newton iterations, jacobian updates, status]
+
+    def copy(self) -> "State":
+        return State(self.t, *(getattr(self, f).copy() for f in
+                               ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info")))
+
+    def to_dict(self) -> dict:
+        """Builtin-typed snapshot (JSON-safe, bit-exact floats)."""
+        d = {"t": float(self.t)}
+        for f in ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info"):
+            d[f] = getattr(self, f).tolist()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "State":
+        return cls(float(d["t"]), *(np.array(d[f], dtype=np.int64 if f == "piv" else float)
+                                    for f in ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv",
+                                              "info")))
+
+
+@dataclass(frozen=True)
+class Model:
+    scene: Scene
+    nd: int
+    K: Kernel
+    q_names: tuple
+    q_kind: tuple            # 'body' | 'sheave' | 'hitch' | 'interior'
+    q0: np.ndarray           # initial guess from the geometry
+    B: np.ndarray            # dense p = B q + Bpar par + c0 (statics, checks)
+    Bpar: np.ndarray
+    c0: np.ndarray
+    par0: np.ndarray         # rope lengths (s at the last node) from the geometry / scene
+    output_names: tuple
+    input_names: tuple
+    sheave_dof: dict         # sheave name -> q index
+    body_dofs: dict          # body name -> {axis: q index}
+    ropes: tuple             # per rope: dict(name, s_nodes, wraps, drums) for bookkeeping
+    statics_unknowns: tuple  # ('q', i) or ('par', j)
+    statics_equations: tuple # q indices
+    drive_dof: int
+    drive_R: float
+    element_span: tuple      # (rope, span index) per element
+    info: dict = field(default_factory=dict)
+
+    @property
+    def nq(self):
+        return self.K.nq
+
+    def output_index(self, name):
+        return self.output_names.index(name)
+
+
+class _Affine:
+    """3D point r = r0 + sum_j q_j b_j (b_j in R^3)."""
+
+    def __init__(self, r0):
+        self.r0 = np.asarray(r0, float).copy()
+        self.terms = {}
+
+    def add(self, j, b):
+        self.terms[j] = self.terms.get(j, np.zeros(3)) + np.asarray(b, float)
+        return self
+
+
+def build_model(scene: Scene) -> Model:
+    """Compile a validated scene."""
+    try:
+        return _build(scene)
+    except GeometryError as exc:
+        raise SceneError(f"{scene.source}: geometry: {exc}") from None
+
+
+def _build(scene: Scene) -> Model:
+    nd = {"axial-1d": 1, "planar": 2, "spatial": 3}[scene.model]
+    g = np.asarray(scene.gravity, float)
+    bodies = {b.name: b for b in scene.bodies}
+    sheaves = {s.name: s for s in scene.sheaves}
+
+    q_names, q_kind, q0 = [], [], []
+
+    def new_q(name, kind, value):
+        q_names.append(name), q_kind.append(kind), q0.append(float(value))
+        return len(q_names) - 1
+
+    body_dofs = {}
+    for b in scene.bodies:
+        if scene.model == "planar" and "y" in b.free:
+            raise SceneError(f"{scene.source}: [bodies.{b.name}.free] the planar model moves in x-z; "
+                             f"'y' cannot be free")
+        body_dofs[b.name] = {ax: new_q(f"{b.name}.{ax}", "body", b.position[AXES.index(ax)]) for ax in b.free}
+
+    def body_point(body, offset):
+        """Affine 3D position of a point fixed to a body (or the ground)."""
+        if body is None or body == "ground":
+            return _Affine(offset)
+        b = bodies[body]
+        r = _Affine(np.asarray(b.position) + np.asarray(offset))
+        for ax, j in body_dofs[body].items():
+            k = AXES.index(ax)
+            r.r0[k] -= b.position[k]
+            e = np.zeros(3)
+            e[k] = 1.0
+            r.add(j, e)
+        return r
+
+    def world(body, offset):
+        if body is None or body == "ground":
+            return np.asarray(offset, float)
+        return np.asarray(bodies[body].position, float) + np.asarray(offset, float)
+
+    # ------------------------------------------------------------------ nodes, spans, elements
+    nodes = []          # dict(r=_Affine, e=unit span dir, s=(dict q->coef, dict par->coef, const))
+    elements = []       # (node_a, node_b, rope index, span index)
+    rope_info = []
+    n_par = len(scene.ropes)
+    par0 = np.zeros(n_par)
+    M0_terms = []       # (i, j, value) in q space
+    F0 = {}
+    springs = []        # (dof, k, c)
+    drums = []          # (dof, rhoA, sign)
+    sheave_dof = {}
+    tension_taps = {}   # sheave name -> {'in': (element, end), 'out': (element, end)}
+    rope_end_taps = []
+    wrap_len_total = []
+    dof_R = {}
+
+    for ir, rope in enumerate(scene.ropes):
+        rhoA = rope.rhoA * rope.count
+        stops = rope.route
+        # geometry of the stops at t = 0
+        geo = []
+        for st in stops:
+            if st.sheave is not None:
+                sh = sheaves[st.sheave]
+                geo.append((world(sh.body, sh.center), sh.radius, np.asarray(sh.axis),
+                            1.0 if st.wrap == "ccw" else -1.0))
+            else:
+                geo.append((world(None if st.anchor == "ground" else st.anchor, st.at), 0.0, None, 1.0))
+        spans = []
+        for k in range(len(stops) - 1):
+            (cA, RA, aA, sA), (cB, RB, aB, sB) = geo[k], geo[k + 1]
+            TA, TB = tangent(cA, RA, aA, sA, cB, RB, aB, sB)
+            if np.linalg.norm(TB - TA) < 1e-6:
+                raise SceneError(f"{scene.source}: [ropes.{rope.name}.route] span {k} between "
+                                 f"stops {k} and {k + 1} has zero length")
+            spans.append((TA, TB))
+        # material coordinates along the route (unstretched guess = geometric length)
+        s_run = 0.0
+        sig = {}   # stop index -> sigma dof
+        wraps = {}
+        s_cursor = []   # per span: (s row of start node, s row of end node)
+        first_drum = stops[0].sheave is not None
+        last_drum = stops[-1].sheave is not None
+        for k, st in enumerate(stops):
+            if st.sheave is None:
+                continue
+            sh = sheaves[st.sheave]
+            c, R, a, sgn = geo[k]
+            if 0 < k < len(stops) - 1:
+                T_in, T_out = spans[k - 1][1], spans[k][0]
+                theta = wrap_angle(c, a, sgn, T_in, T_out)
+                lw = R * theta if rope.wrap_model == "W1" else 0.0
+                wraps[k] = (lw, T_in, T_out, theta)
+            else:
+                wraps[k] = (0.0, None, None, 0.0)
+        # assign s guesses
+        s_at = {}
+        if first_drum:
+            s_run = sheaves[stops[0].sheave].stored
+        for k in range(len(stops) - 1):
+            if k in wraps and 0 < k:
+                s_run += wraps[k][0]
+            s_at[("start", k)] = s_run
+            s_run += float(np.linalg.norm(spans[k][1] - spans[k][0]))
+            s_at[("end", k)] = s_run
+        L_geo = s_run + (sheaves[stops[-1].sheave].stored if last_drum else 0.0)
+        par0[ir] = rope.length if rope.length is not None else L_geo
+        scale = par0[ir] / L_geo if rope.length is not None else 1.0
+
+        for k, st in enumerate(stops):
+            if st.sheave is None:
+                continue
+            sh = sheaves[st.sheave]
+            s_guess = s_at[("end", k - 1)] if k > 0 else s_at[("start", 0)]
+            j = new_q(f"{sh.name}.s", "sheave", s_guess * scale)
+            sig[k] = j
+            sheave_dof[sh.name] = j
+            dof_R[j] = sh.radius
+            lw, T_in, T_out, theta = wraps[k]
+            M0_terms.append((j, j, sh.inertia / sh.radius ** 2 + rhoA * lw))
+            if scene.drive.sheave == sh.name:
+                M0_terms.append((j, j, scene.drive.motor_inertia / sh.radius ** 2))
+            if sh.kind == "drum":
+                drums.append((j, rhoA, 1.0 if k == 0 else -1.0))
+            if lw > 0 and sh.body is not None:
+                chord = T_out - T_in
+                for ax, jb in body_dofs[sh.body].items():
+                    kk = AXES.index(ax)
+                    M0_terms.append((jb, jb, rhoA * lw))
+                    M0_terms.append((jb, j, -rhoA * chord[kk]))
+                    M0_terms.append((j, jb, -rhoA * chord[kk]))
+                    F0[jb] = F0.get(jb, 0.0) + rhoA * lw * g[kk]
+            wrap_len_total.append((ir, lw))
+
+        def s_row(kind, k):
+            """s of the node at the start of span k (kind 'start') or its end ('end')."""
+            stop = k if kind == "start" else k + 1
+            st = stops[stop]
+            if st.sheave is not None:
+                j = sig[stop]
+                lw = wraps[stop][0]
+                off = lw if (kind == "start" and 0 < stop < len(stops) - 1) else 0.0
+                return ({j: 1.0}, {}, off)
+            if stop == 0:
+                return ({}, {}, 0.0)
+            return ({}, {ir: 1.0}, 0.0)
+
+        span_nodes = []
+        for k, (TA, TB) in enumerate(spans):
+            e = (TB - TA) / np.linalg.norm(TB - TA)
+            ends = []
+            for kind, T, stop in (("start", TA, k), ("end", TB, k + 1)):
+                st = stops[stop]
+                if st.sheave is not None:
+                    sh = sheaves[st.sheave]
+                    r = body_point(sh.body, T - world(sh.body, (0, 0, 0)))
+                else:
+                    body = None if st.anchor == "ground" else st.anchor
+                    r = body_point(body, T - world(body, (0, 0, 0)))
+                    if st.hitch_stiffness > 0 or st.hitch_damping > 0:
+                        jh = new_q(f"{rope.name}.hitch{0 if stop == 0 else 1}", "hitch", 0.0)
+                        # deflection along the span, positive toward the rope (spring extends)
+                        r.add(jh, e if stop == 0 else -e)
+                        springs.append((jh, st.hitch_stiffness * rope.count, st.hitch_damping * rope.count))
+                nodes.append(dict(r=r, e=e, s=s_row(kind, k)))
+                ends.append(len(nodes) - 1)
+            n_el = rope.elements_per_span
+            chain = [ends[0]]
+            for m in range(1, n_el):
+                xi = m / n_el
+                P = TA + xi * (TB - TA)
+                r = _Affine(P)
+                if nd == 1:
+                    j = new_q(f"{rope.name}.span{k}.node{m}", "interior", 0.0)
+                    r.r0 = P.copy()
+                    r.add(j, e)   # displacement along the span line
+                else:
+                    comps = [0, 2] if nd == 2 else [0, 1, 2]
+                    for kk in comps:
+                        b = np.zeros(3)
+                        b[kk] = 1.0
+                        r.r0[kk] = 0.0
+                        j = new_q(f"{rope.name}.span{k}.node{m}.{AXES[kk]}", "interior", P[kk])
+                        r.add(j, b)
+                sa, sb = nodes[ends[0]]["s"], nodes[ends[1]]["s"]
+                sq = {}
+                for d_, w_ in ((sa[0], 1 - xi), (sb[0], xi)):
+                    for jj, cc in d_.items():
+                        sq[jj] = sq.get(jj, 0.0) + w_ * cc
+                spar = {}
+                for d_, w_ in ((sa[1], 1 - xi), (sb[1], xi)):
+                    for jj, cc in d_.items():
+                        spar[jj] = spar.get(jj, 0.0) + w_ * cc
+                nodes.append(dict(r=r, e=e, s=(sq, spar, (1 - xi) * sa[2] + xi * sb[2])))
+                chain.append(len(nodes) - 1)
+            chain.append(ends[1])
+            first_el = len(elements)
+            for m in range(n_el):
+                elements.append((chain[m], chain[m + 1], ir, k))
+            span_nodes.append((chain[0], chain[-1], first_el, len(elements) - 1))
+            # tension taps
+            if stops[k].sheave is not None:
+                tension_taps.setdefault(stops[k].sheave, {})["out"] = (first_el, 0)
+            if stops[k + 1].sheave is not None:
+                tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(elements) - 1, 1)
+        rope_end_taps.append((rope.name, span_nodes[0][2], span_nodes[-1][3]))
+        rope_info.append(dict(name=rope.name, spans=span_nodes, wraps=wraps, sig=sig, rhoA=rhoA,
+                              first_drum=first_drum, last_drum=last_drum))
+
+    nq = len(q_names)
+    # bodies: mass and gravity
+    for b in scene.bodies:
+        for ax, j in body_dofs[b.name].items():
+            M0_terms.append((j, j, b.mass))
+            F0[j] = F0.get(j, 0.0) + b.mass * g[AXES.index(ax)]
+            if b.damping > 0:
+                springs.append((j, 0.0, b.damping))
+
+    # ------------------------------------------------------------------ p = B q + Bpar par + c0
+    n_nodes = len(nodes)
+    n_p = n_nodes * (nd + 1)
+    B = np.zeros((n_p, nq))
+    Bpar = np.zeros((n_p, n_par))
+    c0 = np.zeros(n_p)
+    el_C = np.zeros(len(elements))
+    for i, nd_ in enumerate(nodes):
+        r, e = nd_["r"], nd_["e"]
+        if nd == 1:
+            c0[i] = e @ r.r0
+            for j, b in r.terms.items():
+                B[i, j] += e @ b
+        else:
+            comps = [0, 2] if nd == 2 else [0, 1, 2]
+            for kk, comp in enumerate(comps):
+                c0[i * nd + kk] = r.r0[comp]
+                for j, b in r.terms.items():
+                    B[i * nd + kk, j] += b[comp]
+        sq, spar, sc = nd_["s"]
+        row = n_nodes * nd + i
+        c0[row] = sc
+        for j, cc in sq.items():
+            B[row, j] += cc
+        for j, cc in spar.items():
+            Bpar[row, j] += cc
+
+    def pidx(node):
+        return [node * nd + k for k in range(nd)]
+
+    ne = 2 * nd + 2
+    el_idx = np.zeros((len(elements), ne), dtype=np.int64)
+    el_g = np.zeros((len(elements), nd))
+    for ie, (a, b, ir, k) in enumerate(elements):
+        el_idx[ie] = pidx(a) + pidx(b) + [n_nodes * nd + a, n_nodes * nd + b]
+        e = nodes[a]["e"]
+        if nd == 1:
+            el_g[ie, 0] = e @ g
+            # potential of a line that does not pass through the origin: g . r_perp
+            r0 = nodes[a]["r"].r0
+            el_C[ie] = g @ (r0 - e * (e @ r0))
+        elif nd == 2:
+            el_g[ie] = g[[0, 2]]
+        else:
+            el_g[ie] = g
+    rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in elements]
+
+    # CSR of B
+    ptr, idx, val = [0], [], []
+    for row in range(n_p):
+        nz = np.nonzero(B[row])[0]
+        idx.extend(nz.tolist()), val.extend(B[row, nz].tolist())
+        ptr.append(len(idx))
+
+    M0 = np.zeros((nq, nq))
+    for i, j, vv in M0_terms:
+        M0[i, j] += vv
+    F0v = np.zeros(nq)
+    for j, vv in F0.items():
+        F0v[j] += vv
+
+    # ------------------------------------------------------------------ drive
+    dv = scene.drive
+    drive_kind = DRIVE_CODES[dv.kind]
+    mot_dof, mot_R = -1, 1.0
+    presc, presc_gain = [], []
+    profile = Profile(*(np.zeros(1) for _ in range(5)))
+    torque_table = np.zeros((2, 0))
+    if dv.kind != "none":
+        mot_dof = sheave_dof[dv.sheave]
+        mot_R = sheaves[dv.sheave].radius
+        if dv.kind == "speed":
+            presc, presc_gain = [mot_dof], [-dv.roping]
+            if dv.profile == "s-curve":
+                profile = scurve(dv.distance, dv.v_max, dv.a_max, dv.jerk, t_start=dv.t_start)
+            else:
+                profile = speed_table(dv.table)
+        elif dv.kind == "torque":
+            torque_table = np.array(dv.torque, float).T.copy()
+    free = [j for j in range(nq) if j not in presc]
+
+    # ------------------------------------------------------------------ outputs
+    out_names, ok, oi, oj, osc = [], [], [], [], []
+
+    def out(name, kind, i, j=0, scale=1.0):
+        out_names.append(name), ok.append(kind), oi.append(i), oj.append(j), osc.append(scale)
+        return len(out_names) - 1
+
+    for b in scene.bodies:
+        dofs = body_dofs[b.name]
+        for ax, j in dofs.items():
+            suffix = "" if (nd == 1 and len(dofs) == 1) else f".{ax}"
+            out(f"{b.name}.position{suffix}", OUT_Q, j)
+            out(f"{b.name}.velocity{suffix}", OUT_V, j)
+            out(f"{b.name}.acceleration{suffix}", OUT_A, j)
+    for sh in scene.sheaves:
+        if sh.name not in sheave_dof:
+            continue
+        j = sheave_dof[sh.name]
+        out(f"{sh.name}.angle", OUT_QREL, j, 0, -1.0 / sh.radius)
+        out(f"{sh.name}.speed", OUT_V, j, 0, -1.0 / sh.radius)
+        taps = tension_taps.get(sh.name, {})
+        ti = to = None
+        if "in" in taps:
+            ti = out(f"{sh.name}.tension_in", OUT_TENSION, taps["in"][0], taps["in"][1])
+        if "out" in taps:
+            to = out(f"{sh.name}.tension_out", OUT_TENSION, taps["out"][0], taps["out"][1])
+        if sh.kind == "traction" and ti is not None and to is not None:
+            out(f"{sh.name}.traction_ratio", OUT_RATIO, ti, to)
+    for name, e_first, e_last in rope_end_taps:
+        out(f"{name}.tension_start", OUT_TENSION, e_first, 0)
+        out(f"{name}.tension_end", OUT_TENSION, e_last, 1)
+    if dv.kind != "none":
+        out("motor.angle", OUT_QREL, mot_dof, 0, -1.0 / mot_R)
+        out("motor.speed", OUT_V, mot_dof, 0, -1.0 / mot_R)
+        out("motor.torque", OUT_TORQUE, mot_dof, 0, mot_R)
+
+    K = Kernel(
+        nd=nd, nq=nq,
+        B_ptr=np.array(ptr, np.int64), B_idx=np.array(idx, np.int64), B_val=np.array(val, float),
+        el_idx=el_idx, el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
+        el_EA=np.array([r.EA * r.count for r in rope_of_el], float),
+        el_nu=np.array([r.damping for r in rope_of_el], float),
+        el_tonly=np.array([int(r.tension_only) for r in rope_of_el], np.int64),
+        el_g=el_g, el_C=el_C, M0=M0, F0=F0v,
+        spr_dof=np.array([s[0] for s in springs], np.int64), spr_k=np.array([s[1] for s in springs], float),
+        spr_c=np.array([s[2] for s in springs], float),
+        drum_dof=np.array([d[0] for d in drums], np.int64), drum_rhoA=np.array([d[1] for d in drums], float),
+        drum_sign=np.array([d[2] for d in drums], float),
+        mot_dof=mot_dof, mot_R=float(mot_R), drive_kind=drive_kind, torque_table=torque_table,
+        free=np.array(free, np.int64), presc=np.array(presc, np.int64),
+        presc_gain=np.array(presc_gain, float), profile=profile.arrays,
+        out_kind=np.array(ok, np.int64), out_i=np.array(oi, np.int64), out_j=np.array(oj, np.int64),
+        out_scale=np.array(osc, float),
+    )
+
+    # ------------------------------------------------------------------ statics sets
+    locked = set(presc)
+    if dv.kind in ("torque", "external", "none") and mot_dof >= 0 and dv.kind != "none":
+        locked.add(mot_dof)   # held by the brake/drive during the initial statics
+    eqs = [j for j in range(nq) if j not in locked]
+    if scene.statics == "positions":
+        body_q = {j for d in body_dofs.values() for j in d.values()}
+        unknowns = [("q", j) for j in eqs if j not in body_q]
+        unknowns += [("q", j) for j in sorted(locked) if sheaves_kind(scene, q_names[j]) != "drum"]
+        unknowns += [("par", i) for i in range(n_par)]
+        if len(unknowns) != len(eqs):
+            raise SceneError(
+                f"{scene.source}: [initial.statics] 'positions' keeps every body where the scene puts it "
+                f"and solves the rope lengths: it needs as many body coordinates ({len(body_q)}) as ropes "
+                f"plus driven sheaves ({len(unknowns) - len(eqs) + len(body_q)}). "
+                f"Use statics = 'rope-length' (give ropes.length) or 'none'.")
+    else:
+        unknowns = [("q", j) for j in eqs]
+
+    inputs = ("motor.torque",) if dv.kind == "external" else ()
+    return Model(scene=scene, nd=nd, K=K, q_names=tuple(q_names), q_kind=tuple(q_kind),
+                 q0=np.array(q0, float), B=B, Bpar=Bpar, c0=c0, par0=par0,
+                 output_names=tuple(out_names), input_names=inputs, sheave_dof=sheave_dof,
+                 body_dofs=body_dofs, ropes=tuple(rope_info), statics_unknowns=tuple(unknowns),
+                 statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
+                 element_span=tuple((ir, k) for (_, _, ir, k) in elements),
+                 info=dict(n_nodes=n_nodes, wraps=wrap_len_total, dof_R=dof_R))
+
+
+def sheaves_kind(scene: Scene, qname: str) -> str:
+    name = qname.rsplit(".", 1)[0]
+    for s in scene.sheaves:
+        if s.name == name:
+            return s.kind
+    return ""
+
+
+def new_state(model: Model, q=None, par=None, t=0.0) -> State:
+    """A state at rest with the given coordinates (default: the geometric guess)."""
+    nq = model.nq
+    q = model.q0.copy() if q is None else np.asarray(q, float).copy()
+    par = model.par0 if par is None else np.asarray(par, float)
+    c = model.c0 + model.Bpar @ par
+    nf = len(model.K.free)
+    return State(t=float(t), q=q, v=np.zeros(nq), a=np.zeros(nq), qdd=np.zeros(nq), c=c,
+                 q_ref=q.copy(), u=np.zeros(max(len(model.input_names), 1)),
+                 jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=np.zeros(5))

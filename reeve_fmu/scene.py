@@ -1,0 +1,423 @@
+"""Scene files (TOML): parse and validate a reeving system description.
+
+Every error names the file, the key path and what is wrong (`SceneError`); nothing below this module
+ever sees an unvalidated value. The schema is documented in docs/scenes.md; `SCHEMA_KEYS` lists the
+allowed keys per table so a misspelt key is an error instead of a silently ignored default.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+import math
+from pathlib import Path
+from typing import Any
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+MODELS = ("axial-1d", "planar", "spatial")
+AXES = ("x", "y", "z")
+
+
+class SceneError(ValueError):
+    """A scene file is invalid. The message names the file, the key and the problem."""
+
+
+# ---------------------------------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class Body:
+    name: str
+    mass: float                      # kg
+    position: tuple                  # m, reference point [x, y, z] at t = 0
+    free: tuple                      # free translations, subset of ("x", "y", "z")
+    damping: float = 0.0             # N s/m, viscous guide friction on every free axis
+
+
+@dataclass(frozen=True)
+class Sheave:
+    name: str
+    center: tuple                    # m, relative to the body (absolute if body is None)
+    radius: float                    # m, pitch radius
+    body: str | None = None          # None: fixed to ground
+    inertia: float = 0.0             # kg m^2 about the axis
+    axis: tuple = (0.0, -1.0, 0.0)   # unit axis; default: ccw in the x-z drawing is positive
+    kind: str = "idler"              # idler | traction | drum
+    stored: float = 0.0              # m, rope stored on a drum at t = 0
+
+
+@dataclass(frozen=True)
+class RouteStop:
+    sheave: str | None = None        # a sheave, or None for an anchor
+    wrap: str = "ccw"                # ccw | cw, as seen in the x-z drawing (x right, z up)
+    anchor: str | None = None        # "ground" or a body name
+    at: tuple | None = None          # anchor point (relative to the body for body anchors)
+    hitch_stiffness: float = 0.0     # N/m per rope; 0 = rigid termination
+    hitch_damping: float = 0.0       # N s/m per rope
+
+
+@dataclass(frozen=True)
+class Rope:
+    name: str
+    EA: float                        # N per rope
+    rhoA: float                      # kg/m per rope
+    route: tuple                     # RouteStop ...
+    count: int = 1                   # parallel ropes
+    damping: float = 0.0             # s, Kelvin-Voigt time constant nu: N = EA (eps + nu deps/dt)
+    tension_only: bool = False
+    length: float | None = None      # m, unstretched length (needed for statics = "rope-length")
+    elements_per_span: int = 1
+    wrap_model: str = "W1"           # W0: zero-length wraps, W1: constant-material wraps
+
+
+@dataclass(frozen=True)
+class Drive:
+    kind: str = "none"               # none | speed | torque | external
+    sheave: str | None = None
+    roping: float = 1.0              # load speed = rim speed / roping (speed profiles are load speeds)
+    profile: str = "s-curve"         # s-curve | table (kind = speed)
+    distance: float = 0.0            # m, S-curve travel of the load (sign = direction, + = up)
+    v_max: float = 1.0
+    a_max: float = 0.8
+    jerk: float = 1.0
+    t_start: float = 0.0
+    table: tuple = ()                # ((t, v), ...) load speed [m/s]
+    torque: tuple = ()               # ((t, tau), ...) for kind = torque [N m]
+    motor_inertia: float = 0.0       # kg m^2 added to the driven sheave
+
+
+@dataclass(frozen=True)
+class Solver:
+    method: str = "gen-alpha"        # gen-alpha | radau | dop853
+    step: float = 1e-3               # s, internal step (gen-alpha)
+    rho_inf: float = 0.8             # spectral radius at infinity: 1 = no numerical dissipation
+    newton_tol: float = 1e-8         # relative Newton tolerance on accelerations
+    rtol: float = 1e-8               # scipy methods
+    atol: float = 1e-10
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    model: str
+    gravity: tuple
+    bodies: tuple
+    sheaves: tuple
+    ropes: tuple
+    drive: Drive
+    solver: Solver
+    statics: str = "positions"       # positions | rope-length | none
+    t_end: float = 10.0              # s, default simulation end
+    output_step: float = 1e-3        # s
+    source: str = "<scene>"
+    description: str = ""
+    extra: dict = field(default_factory=dict)   # sections owned by other layers (e.g. [accuracy])
+
+    def with_overrides(self, **kw) -> "Scene":
+        return replace(self, **kw)
+
+
+SCHEMA_KEYS = {
+    "scene": {"name", "description", "model", "gravity", "t_end", "output_step"},
+    "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol"},
+    "initial": {"statics"},
+    "bodies": {"name", "mass", "position", "free", "damping"},
+    "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored"},
+    "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
+              "wrap_model", "route"},
+    "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
+    "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
+              "table", "torque", "motor_inertia"},
+}
+TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive"}
+EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "buffers", "brake", "traction"}
+
+
+# ------------------------------------------------------------------------------------------ reading
+class _Reader:
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, path: str, msg: str):
+        raise SceneError(f"{self.source}: [{path}] {msg}")
+
+    def table(self, data, path, allowed):
+        if not isinstance(data, dict):
+            self.fail(path, f"must be a table, got {type(data).__name__}")
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            self.fail(path, f"unknown key(s) {', '.join(map(repr, unknown))}; allowed: {', '.join(sorted(allowed))}")
+        return data
+
+    def number(self, d, path, key, default=None, *, positive=False, nonneg=False, required=False):
+        if key not in d:
+            if required:
+                self.fail(path, f"missing required key '{key}'")
+            return default
+        v = d[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(f"{path}.{key}", f"must be a number, got {type(v).__name__} {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            self.fail(f"{path}.{key}", f"must be finite, got {v}")
+        if positive and v <= 0:
+            self.fail(f"{path}.{key}", f"must be > 0, got {v:g}")
+        if nonneg and v < 0:
+            self.fail(f"{path}.{key}", f"must be >= 0, got {v:g}")
+        return v
+
+    def string(self, d, path, key, default=None, choices=None, required=False):
+        if key not in d:
+            if required:
+                self.fail(path, f"missing required key '{key}'")
+            return default
+        v = d[key]
+        if not isinstance(v, str):
+            self.fail(f"{path}.{key}", f"must be a string, got {type(v).__name__} {v!r}")
+        if choices is not None and v not in choices:
+            self.fail(f"{path}.{key}", f"must be one of {', '.join(map(repr, choices))}, got {v!r}")
+        return v
+
+    def boolean(self, d, path, key, default=False):
+        if key not in d:
+            return default
+        v = d[key]
+        if not isinstance(v, bool):
+            self.fail(f"{path}.{key}", f"must be true or false, got {v!r}")
+        return v
+
+    def integer(self, d, path, key, default, minimum=1):
+        if key not in d:
+            return default
+        v = d[key]
+        if isinstance(v, bool) or not isinstance(v, int):
+            self.fail(f"{path}.{key}", f"must be an integer, got {type(v).__name__} {v!r}")
+        if v < minimum:
+            self.fail(f"{path}.{key}", f"must be >= {minimum}, got {v}")
+        return v
+
+    def vector(self, d, path, key, n=3, default=None, required=False, unit=False):
+        if key not in d:
+            if required:
+                self.fail(path, f"missing required key '{key}'")
+            return default
+        v = d[key]
+        if (not isinstance(v, list) or len(v) != n
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
+            self.fail(f"{path}.{key}", f"must be a list of {n} numbers, got {v!r}")
+        v = tuple(float(x) for x in v)
+        if not all(math.isfinite(x) for x in v):
+            self.fail(f"{path}.{key}", f"must be finite, got {v}")
+        if unit:
+            norm = math.sqrt(sum(x * x for x in v))
+            if norm < 1e-12:
+                self.fail(f"{path}.{key}", "must be a non-zero vector")
+            v = tuple(x / norm for x in v)
+        return v
+
+    def pairs(self, d, path, key):
+        v = d.get(key, [])
+        if not isinstance(v, list) or not all(
+                isinstance(p, list) and len(p) == 2
+                and all(not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) for x in p)
+                for p in v):
+            self.fail(f"{path}.{key}", f"must be a list of [t, value] pairs, got {v!r}")
+        ts = [p[0] for p in v]
+        if any(b <= a for a, b in zip(ts, ts[1:])):
+            self.fail(f"{path}.{key}", "times must be strictly increasing")
+        return tuple((float(a), float(b)) for a, b in v)
+
+    def array_of_tables(self, data, key):
+        v = data.get(key, [])
+        if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+            self.fail(key, "must be an array of tables ([[%s]])" % key)
+        return v
+
+
+def _unique_name(r: _Reader, d, path, seen):
+    name = r.string(d, path, "name", required=True)
+    if not name or any(c in name for c in " .,[]"):
+        r.fail(f"{path}.name", f"must be a non-empty name without spaces, dots, commas or brackets, got {name!r}")
+    if name in seen:
+        r.fail(f"{path}.name", f"duplicate name {name!r} (already used by {seen[name]})")
+    seen[name] = path
+    return name
+
+
+def parse_scene(data: dict, source: str = "<scene>") -> Scene:
+    """Validate a parsed TOML document and return a Scene."""
+    r = _Reader(source)
+    if not isinstance(data, dict):
+        r.fail("", "the document must be a TOML table")
+    unknown = sorted(set(data) - TOP_LEVEL - EXTRA_SECTIONS)
+    if unknown:
+        r.fail(unknown[0], f"unknown section; allowed: {', '.join(sorted(TOP_LEVEL | EXTRA_SECTIONS))}")
+
+    sc = r.table(data.get("scene", {}), "scene", SCHEMA_KEYS["scene"])
+    model = r.string(sc, "scene", "model", "axial-1d", MODELS)
+    gravity = r.vector(sc, "scene", "gravity", default=(0.0, 0.0, -9.81))
+    t_end = r.number(sc, "scene", "t_end", 10.0, positive=True)
+    output_step = r.number(sc, "scene", "output_step", 1e-3, positive=True)
+
+    sv = r.table(data.get("solver", {}), "solver", SCHEMA_KEYS["solver"])
+    solver = Solver(
+        method=r.string(sv, "solver", "method", "gen-alpha", ("gen-alpha", "radau", "dop853")),
+        step=r.number(sv, "solver", "step", 1e-3, positive=True),
+        rho_inf=r.number(sv, "solver", "rho_inf", 0.8, nonneg=True),
+        newton_tol=r.number(sv, "solver", "newton_tol", 1e-8, positive=True),
+        rtol=r.number(sv, "solver", "rtol", 1e-8, positive=True),
+        atol=r.number(sv, "solver", "atol", 1e-10, positive=True),
+    )
+    if solver.rho_inf > 1.0:
+        r.fail("solver.rho_inf", f"must be in [0, 1], got {solver.rho_inf:g}")
+
+    ini = r.table(data.get("initial", {}), "initial", SCHEMA_KEYS["initial"])
+    statics = r.string(ini, "initial", "statics", "positions", ("positions", "rope-length", "none"))
+
+    names: dict[str, str] = {}
+    bodies = []
+    for i, b in enumerate(r.array_of_tables(data, "bodies")):
+        path = f"bodies[{i}]"
+        r.table(b, path, SCHEMA_KEYS["bodies"])
+        name = _unique_name(r, b, path, names)
+        free = b.get("free", ["z"])
+        if not isinstance(free, list) or not all(a in AXES for a in free) or len(set(free)) != len(free):
+            r.fail(f"{path}.free", f"must be a list of distinct axes from {AXES}, got {free!r}")
+        bodies.append(Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
+                           position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
+                           free=tuple(a for a in AXES if a in free),
+                           damping=r.number(b, path, "damping", 0.0, nonneg=True)))
+    body_names = {b.name for b in bodies}
+
+    sheaves = []
+    for i, s in enumerate(r.array_of_tables(data, "sheaves")):
+        path = f"sheaves[{i}]"
+        r.table(s, path, SCHEMA_KEYS["sheaves"])
+        name = _unique_name(r, s, path, names)
+        body = r.string(s, path, "body", None)
+        if body == "ground":
+            body = None
+        if body is not None and body not in body_names:
+            r.fail(f"{path}.body", f"unknown body {body!r}; bodies: {', '.join(sorted(body_names)) or 'none'}")
+        kind = r.string(s, path, "kind", "idler", ("idler", "traction", "drum"))
+        if kind == "drum" and body is not None:
+            r.fail(f"{path}.body", "a drum must be fixed to the ground")
+        sheaves.append(Sheave(name=name, center=r.vector(s, path, "center", required=True),
+                              radius=r.number(s, path, "radius", positive=True, required=True),
+                              body=body, inertia=r.number(s, path, "inertia", 0.0, nonneg=True),
+                              axis=r.vector(s, path, "axis", default=(0.0, -1.0, 0.0), unit=True),
+                              kind=kind, stored=r.number(s, path, "stored", 0.0, nonneg=True)))
+    sheave_names = {s.name: s for s in sheaves}
+    if model in ("axial-1d", "planar"):
+        for i, s in enumerate(sheaves):
+            if abs(abs(s.axis[1]) - 1.0) > 1e-9:
+                r.fail(f"sheaves[{i}].axis", f"model {model!r} needs sheave axes along y, got {list(s.axis)}")
+
+    ropes = []
+    used_sheaves: dict[str, str] = {}
+    rope_list = r.array_of_tables(data, "ropes")
+    if not rope_list:
+        r.fail("ropes", "a scene needs at least one [[ropes]] table")
+    for i, rp in enumerate(rope_list):
+        path = f"ropes[{i}]"
+        r.table(rp, path, SCHEMA_KEYS["ropes"])
+        name = _unique_name(r, rp, path, names)
+        route_raw = rp.get("route")
+        if not isinstance(route_raw, list) or len(route_raw) < 2 or not all(isinstance(x, dict) for x in route_raw):
+            r.fail(f"{path}.route", "must be a list of at least two inline tables (anchor, sheaves..., anchor)")
+        stops = []
+        for k, st in enumerate(route_raw):
+            sp = f"{path}.route[{k}]"
+            r.table(st, sp, SCHEMA_KEYS["route"])
+            end = k in (0, len(route_raw) - 1)
+            if "sheave" in st:
+                sh = r.string(st, sp, "sheave")
+                if sh not in sheave_names:
+                    r.fail(f"{sp}.sheave", f"unknown sheave {sh!r}; sheaves: {', '.join(sorted(sheave_names)) or 'none'}")
+                if sh in used_sheaves:
+                    r.fail(f"{sp}.sheave", f"sheave {sh!r} is already used at {used_sheaves[sh]}")
+                used_sheaves[sh] = sp
+                if "anchor" in st or "at" in st:
+                    r.fail(sp, "a route stop is either a sheave or an anchor, not both")
+                if sheave_names[sh].kind == "drum":
+                    if k != 0:
+                        r.fail(f"{sp}.sheave", f"drum {sh!r} must be the first stop of the route "
+                                               "(the rope end is fixed on the drum)")
+                elif end:
+                    r.fail(f"{sp}", "the route must start and end at an anchor (or a drum)")
+                stops.append(RouteStop(sheave=sh, wrap=r.string(st, sp, "wrap", "ccw", ("ccw", "cw"))))
+            else:
+                if not end:
+                    r.fail(sp, "only the first and last route stops may be anchors; give 'sheave = ...'")
+                anchor = r.string(st, sp, "anchor", required=True)
+                if anchor != "ground" and anchor not in body_names:
+                    r.fail(f"{sp}.anchor", f"must be 'ground' or a body name, got {anchor!r}")
+                stops.append(RouteStop(anchor=anchor, at=r.vector(st, sp, "at", required=True),
+                                       hitch_stiffness=r.number(st, sp, "hitch_stiffness", 0.0, nonneg=True),
+                                       hitch_damping=r.number(st, sp, "hitch_damping", 0.0, nonneg=True)))
+        length = r.number(rp, path, "length", None, positive=True) if "length" in rp else None
+        ropes.append(Rope(name=name, EA=r.number(rp, path, "EA", positive=True, required=True),
+                          rhoA=r.number(rp, path, "rhoA", positive=True, required=True),
+                          route=tuple(stops), count=r.integer(rp, path, "count", 1),
+                          damping=r.number(rp, path, "damping", 0.0, nonneg=True),
+                          tension_only=r.boolean(rp, path, "tension_only", False), length=length,
+                          elements_per_span=r.integer(rp, path, "elements_per_span", 1),
+                          wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1"))))
+        if statics == "rope-length" and length is None:
+            r.fail(f"{path}.length", "missing: initial.statics = 'rope-length' needs each rope's unstretched length")
+
+    dv = r.table(data.get("drive", {}), "drive", SCHEMA_KEYS["drive"])
+    kind = r.string(dv, "drive", "kind", "none", ("none", "speed", "torque", "external"))
+    dsheave = r.string(dv, "drive", "sheave", None)
+    if kind != "none":
+        if dsheave is None:
+            r.fail("drive", f"missing required key 'sheave' (drive kind {kind!r} acts on a sheave)")
+        if dsheave not in sheave_names:
+            r.fail("drive.sheave", f"unknown sheave {dsheave!r}")
+        if sheave_names[dsheave].kind == "idler":
+            r.fail("drive.sheave", f"sheave {dsheave!r} is an idler; drive a 'traction' sheave or a 'drum'")
+        if dsheave not in used_sheaves:
+            r.fail("drive.sheave", f"sheave {dsheave!r} is not on any rope route")
+    profile = r.string(dv, "drive", "profile", "s-curve", ("s-curve", "table"))
+    drive = Drive(kind=kind, sheave=dsheave, roping=r.number(dv, "drive", "roping", 1.0, positive=True),
+                  profile=profile, distance=r.number(dv, "drive", "distance", 0.0),
+                  v_max=r.number(dv, "drive", "v_max", 1.0, positive=True),
+                  a_max=r.number(dv, "drive", "a_max", 0.8, positive=True),
+                  jerk=r.number(dv, "drive", "jerk", 1.0, positive=True),
+                  t_start=r.number(dv, "drive", "t_start", 0.0, nonneg=True),
+                  table=r.pairs(dv, "drive", "table"), torque=r.pairs(dv, "drive", "torque"),
+                  motor_inertia=r.number(dv, "drive", "motor_inertia", 0.0, nonneg=True))
+    if kind == "speed" and profile == "table" and not drive.table:
+        r.fail("drive.table", "missing: drive.profile = 'table' needs a [[t, v], ...] speed table")
+    if kind == "torque" and not drive.torque:
+        r.fail("drive.torque", "missing: drive.kind = 'torque' needs a [[t, tau], ...] torque table")
+
+    extra = {k: data[k] for k in EXTRA_SECTIONS if k in data}
+    return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
+                 bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
+                 solver=solver, statics=statics, t_end=t_end, output_step=output_step, source=source,
+                 description=r.string(sc, "scene", "description", ""), extra=extra)
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene TOML file."""
+    path = Path(path)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read scene file ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{path}: not UTF-8 text ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{path}: invalid TOML: {exc}") from None
+    return parse_scene(data, str(path))
+
+
+def loads_scene(text: str, source: str = "<string>") -> Scene:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: invalid TOML: {exc}") from None
+    return parse_scene(data, source)

@@ -1,0 +1,213 @@
+"""Assembly of the reduced equations M(q) qdd = Q(q, qdot, t, u) and the outputs (compiled).
+
+Element matrices live in p-space (node positions and material coordinates); p = B q + c with B
+sparse (CSR), so M = B^T M_p B and Q = B^T Q_p are accumulated element by element through the few
+non-zeros of each B row. q-level terms: body/sheave/wrap inertia (M0), body and wrap gravity (F0),
+hitch springs and guide damping, rope stored on drums (variable mass, method §2.5), motor torque.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import njit
+from .elements.linear import end_tension, linear_element
+from .profiles import profile_eval
+
+ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _interp(table, t):
+    n = table.shape[1]
+    if n == 0:
+        return 0.0
+    if t <= table[0, 0]:
+        return table[1, 0]
+    if t >= table[0, n - 1]:
+        return table[1, n - 1]
+    k = 0
+    while table[0, k + 1] < t:
+        k += 1
+    f = (t - table[0, k]) / (table[0, k + 1] - table[0, k])
+    return table[1, k] + f * (table[1, k + 1] - table[1, k])
+
+
+@njit(cache=True)
+def drive_torque(K, t, u):
+    if K.drive_kind == 2:
+        return _interp(K.torque_table, t)
+    if K.drive_kind == 3:
+        return u[0]
+    return 0.0
+
+
+@njit(cache=True)
+def gather(K, c, q, v, ie, qe, ve):
+    """Element coordinates and velocities from q, v through the CSR rows of B."""
+    for a in range(K.el_idx.shape[1]):
+        row = K.el_idx[ie, a]
+        x = c[row]
+        xd = 0.0
+        for z in range(K.B_ptr[row], K.B_ptr[row + 1]):
+            x += K.B_val[z] * q[K.B_idx[z]]
+            xd += K.B_val[z] * v[K.B_idx[z]]
+        qe[a] = x
+        ve[a] = xd
+
+
+@njit(cache=True)
+def assemble(K, c, q, v, t, u, M, Q):
+    """M (nq x nq) and Q (nq) at (q, v, t). Returns the smallest element stretch indicator:
+    -1 if an element has non-positive material length (vanishing span), else 0."""
+    nq = K.nq
+    nd = K.nd
+    ne = 2 * nd + 2
+    for i in range(nq):
+        Q[i] = K.F0[i]
+        for j in range(nq):
+            M[i, j] = K.M0[i, j]
+    qe = np.empty(ne)
+    ve = np.empty(ne)
+    Me = np.empty((ne, ne))
+    Qe = np.empty(ne)
+    status = 0
+    for ie in range(K.el_idx.shape[0]):
+        gather(K, c, q, v, ie, qe, ve)
+        res = linear_element(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                             K.el_g[ie], K.el_C[ie], qe, ve, Me, Qe)
+        if res[2] < 0.0:
+            status = -1
+            continue
+        for a in range(ne):
+            ra = K.el_idx[ie, a]
+            for za in range(K.B_ptr[ra], K.B_ptr[ra + 1]):
+                ia = K.B_idx[za]
+                ba = K.B_val[za]
+                Q[ia] += ba * Qe[a]
+                for b in range(ne):
+                    mab = Me[a, b]
+                    if mab == 0.0:
+                        continue
+                    rb = K.el_idx[ie, b]
+                    for zb in range(K.B_ptr[rb], K.B_ptr[rb + 1]):
+                        M[ia, K.B_idx[zb]] += ba * K.B_val[zb] * mab
+    for k in range(K.spr_dof.shape[0]):
+        j = K.spr_dof[k]
+        Q[j] -= K.spr_k[k] * q[j] + K.spr_c[k] * v[j]
+    for k in range(K.drum_dof.shape[0]):
+        # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (method §2.5, variable mass)
+        # drums start the route: the stored rope is s in [0, sigma]
+        j = K.drum_dof[k]
+        M[j, j] += K.drum_rhoA[k] * q[j]
+        Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
+    if K.mot_dof >= 0 and K.drive_kind >= 2:
+        Q[K.mot_dof] -= drive_torque(K, t, u) / K.mot_R
+    return status
+
+
+@njit(cache=True)
+def outputs(K, c, q, v, qdd, q_ref, t, u, y):
+    """Fill y with the outputs listed in K.out_* (see model.py)."""
+    nd = K.nd
+    ne = 2 * nd + 2
+    qe = np.empty(ne)
+    ve = np.empty(ne)
+    ae = np.empty(ne)
+    Me = np.empty((ne, ne))
+    Qe = np.empty(ne)
+    zero = np.zeros(K.nq)
+    n = K.out_kind.shape[0]
+    for k in range(n):
+        kind = K.out_kind[k]
+        i = K.out_i[k]
+        s = K.out_scale[k]
+        if kind == 0:
+            y[k] = q[i] * s
+        elif kind == 6:
+            y[k] = (q[i] - q_ref[i]) * s
+        elif kind == 1:
+            y[k] = v[i] * s
+        elif kind == 2:
+            y[k] = qdd[i] * s
+        elif kind == 3:
+            gather(K, c, qdd, zero, i, ae, ve)  # ae = B qdd + c; c removed below
+            for a in range(ne):
+                ae[a] -= c[K.el_idx[i, a]]
+            gather(K, c, q, v, i, qe, ve)
+            linear_element(nd, K.el_rhoA[i], K.el_EA[i], K.el_nu[i], K.el_tonly[i] != 0,
+                           K.el_g[i], K.el_C[i], qe, ve, Me, Qe)
+            y[k] = end_tension(nd, K.el_rhoA[i], qe, ve, ae, Me, Qe, K.out_j[k])
+    for k in range(n):
+        kind = K.out_kind[k]
+        if kind == 4:
+            a = y[K.out_i[k]]
+            b = y[K.out_j[k]]
+            hi = max(a, b)
+            lo = min(a, b)
+            y[k] = hi / lo if lo > 0.0 else math.inf
+        elif kind == 5:
+            if K.drive_kind == 1:
+                # reaction of the prescribed sheave coordinate: tau = -R (M qdd - Q)_sigma
+                M = np.empty((K.nq, K.nq))
+                Q = np.empty(K.nq)
+                assemble(K, c, q, v, t, u, M, Q)
+                j = K.out_i[k]
+                r = -Q[j]
+                for m in range(K.nq):
+                    r += M[j, m] * qdd[m]
+                y[k] = -K.out_scale[k] * r
+            else:
+                y[k] = drive_torque(K, t, u)
+
+
+@njit(cache=True)
+def energy(K, c, q, v):
+    """(kinetic, gravity potential, strain energy) of the whole system."""
+    nq = K.nq
+    nd = K.nd
+    ne = 2 * nd + 2
+    M = np.empty((nq, nq))
+    Q = np.empty(nq)
+    u = np.zeros(1)
+    assemble(K, c, q, v, 0.0, u, M, Q)
+    T = 0.0
+    for i in range(nq):
+        for j in range(nq):
+            T += 0.5 * v[i] * M[i, j] * v[j]
+    Vg = 0.0
+    U = 0.0
+    for i in range(nq):
+        Vg -= K.F0[i] * q[i]
+    qe = np.empty(ne)
+    ve = np.empty(ne)
+    Me = np.empty((ne, ne))
+    Qe = np.empty(ne)
+    zero = np.zeros(nq)
+    for ie in range(K.el_idx.shape[0]):
+        gather(K, c, q, zero, ie, qe, ve)
+        l = qe[2 * nd + 1] - qe[2 * nd]
+        res = linear_element(nd, K.el_rhoA[ie], K.el_EA[ie], 0.0, K.el_tonly[ie] != 0,
+                             K.el_g[ie], K.el_C[ie], qe, ve, Me, Qe)
+        U += l * res[3]
+        Vg += res[4] - l * res[3]
+    for k in range(K.spr_dof.shape[0]):
+        j = K.spr_dof[k]
+        U += 0.5 * K.spr_k[k] * q[j] * q[j]
+    return T, Vg, U
+
+
+@njit(cache=True)
+def set_prescribed(K, q_ref, t, q, v, qdd):
+    """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile))."""
+    if K.presc.shape[0] == 0:
+        return
+    x, xd, xdd = profile_eval(K.profile, t)
+    x0 = K.profile[1, 0]
+    for k in range(K.presc.shape[0]):
+        j = K.presc[k]
+        gsc = K.presc_gain[k]
+        q[j] = q_ref[j] + gsc * (x - x0)
+        v[j] = gsc * xd
+        qdd[j] = gsc * xdd
