@@ -1,0 +1,273 @@
+"""Build reeve_fmu FMUs with pythonfmu, vendor the package, stamp and validate them.
+
+`build_fmu(entry_script, dest_dir, project_files, resources)` produces an FMI 2.0 co-simulation FMU:
+
+    modelDescription.xml                    from the entry's ReeveSlave subclass (validated by fmpy)
+    binaries/{linux64,win64}/<Model>.*      pythonfmu's prebuilt loader (needs a Python host or LD_PRELOAD)
+    resources/<entry>.py, slavemodule.txt   the entry module (its name must be unique per FMU)
+    resources/pythonfmu/                    embedded pythonfmu
+    resources/reeve_fmu.py                  bootstrap shim (reeve_fmu/fmu/_bootstrap.py, see there)
+    resources/reeve_fmu_vendor/reeve_fmu/   the package sources (no caches)
+    resources/reeve_fmu_stamp.json          version, sha256 of the package sources, entry/resource hashes
+    resources/requirements.txt              what the *importing* interpreter needs (numpy, scipy, numba)
+    resources/<your resources>              e.g. the scene TOML
+
+Capabilities: canGetAndSetFMUstate and canSerializeFMUstate are declared (ReeveSlave implements them
+honestly); canInterpolateInputs is refused (pythonfmu's fmi2SetRealInputDerivatives is a stub).
+
+`fmu_is_stale(fmu_path, entry_script=None, resources=None)` tells a CLI whether to rebuild: missing or
+unstamped FMU, different package source hash, different pythonfmu version, or (when given) a changed
+entry script or resource.
+"""
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import os
+import shutil
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Iterable, Mapping, Optional, Union
+
+from . import _bootstrap
+from ._bootstrap import PACKAGE, STAMP_NAME, VENDOR_DIR, copy_package, package_files, package_hash
+
+__all__ = ["build_fmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
+           "FmuBuildError", "DEFAULT_REQUIREMENTS"]
+
+DEFAULT_REQUIREMENTS = (
+    "numpy>=1.24",
+    "scipy>=1.10",
+    "numba>=0.59  # optional: without numba the kernels run as plain Python (identical, ~100x slower)",
+)
+
+_RESERVED = {PACKAGE, f"{PACKAGE}.py", VENDOR_DIR, STAMP_NAME, "requirements.txt", "pythonfmu",
+             "slavemodule.txt"}
+_GENERIC_ENTRY_NAMES = {"model", "slave", "fmu", "plant", "drive", "main", "entry", "module", "test",
+                        "sim", "simulation", "controller", PACKAGE, "pythonfmu", "fmpy"}
+
+
+class FmuBuildError(RuntimeError):
+    """Build or validation failed; `.problems` lists fmpy's findings (if any)."""
+
+    def __init__(self, msg: str, problems: Optional[list] = None):
+        self.problems = list(problems or [])
+        if self.problems:
+            msg += "\n" + "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(msg)
+
+
+def package_dir() -> Path:
+    """Directory of the reeve_fmu package imported in this process (what gets vendored)."""
+    import reeve_fmu
+
+    return Path(reeve_fmu.__file__).resolve().parent
+
+
+def current_package_hash() -> str:
+    """sha256 of the current package sources on disk (same definition as the FMU stamp)."""
+    return package_hash(str(package_dir()))
+
+
+def _sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _resource_bytes(value: Union[bytes, str, os.PathLike]) -> bytes:
+    if isinstance(value, (bytes, bytearray)):
+        return bytes(value)
+    return Path(value).read_bytes()
+
+
+def _check_entry_name(entry: Path) -> str:
+    stem = entry.stem
+    if not stem.isidentifier():
+        raise FmuBuildError(f"entry module name {stem!r} is not a Python identifier")
+    if stem in _GENERIC_ENTRY_NAMES or stem in getattr(sys, "stdlib_module_names", ()):
+        raise FmuBuildError(
+            f"entry module name {stem!r} is too generic: pythonfmu imports it by name, and a second "
+            f"FMU with the same module name in one process silently runs the first one's code "
+            f"(fmi.md §5.2). Use a unique name such as 'reeve_<model>_slave'.")
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec(stem)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.origin and Path(spec.origin).resolve() != entry:
+        raise FmuBuildError(f"entry module name {stem!r} collides with the importable module "
+                            f"{spec.origin}; rename the entry script")
+    return stem
+
+
+def _stage_resources(staging: Path, resources: Mapping[str, Union[bytes, str, os.PathLike]]):
+    """Write resources below `staging/user`; return (top-level paths to pass, {name: sha256})."""
+    top: dict[str, Path] = {}
+    hashes: dict[str, str] = {}
+    root = staging / "user"
+    for name, value in resources.items():
+        rel = Path(str(name).replace("\\", "/"))
+        if rel.is_absolute() or ".." in rel.parts or not rel.parts:
+            raise FmuBuildError(f"resource name {name!r} must be a relative path without '..'")
+        if rel.parts[0] in _RESERVED:
+            raise FmuBuildError(f"resource name {name!r} clashes with a reserved resources entry")
+        data = _resource_bytes(value)
+        target = root / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+        top[rel.parts[0]] = root / rel.parts[0]
+        hashes[rel.as_posix()] = _sha256_bytes(data)
+    return list(top.values()), hashes
+
+
+def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
+              project_files: Iterable[Union[str, Path]] = (),
+              resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
+              validate: bool = True, requirements: Iterable[str] = DEFAULT_REQUIREMENTS,
+              **options) -> Path:
+    """Build the FMU of `entry_script` into `dest_dir` and return its path.
+
+    entry_script   file defining exactly one deepest ReeveSlave subclass; its module name must be
+                   unique among FMUs (it is imported by name at instantiate).
+    project_files  extra files/directories copied into resources/ (the reeve_fmu package itself is
+                   always vendored; passing it here is accepted and ignored).
+    resources      {relative name: bytes or path} written into resources/ (e.g. {"scene.toml": p}).
+                   At run time: Path(self.resources) / name.
+    options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
+
+    Raises FmuBuildError (the FMU is deleted) if pythonfmu fails or `fmpy validate` finds problems.
+    """
+    from pythonfmu import __version__ as pythonfmu_version
+    from pythonfmu.builder import FmuBuilder
+
+    entry = Path(entry_script).resolve()
+    if not entry.is_file() or entry.suffix != ".py":
+        raise FmuBuildError(f"entry script {entry} does not exist or is not a .py file")
+    stem = _check_entry_name(entry)
+    if options.get("canInterpolateInputs"):
+        raise FmuBuildError("canInterpolateInputs=True is not supported: pythonfmu 0.7.0's "
+                            "fmi2SetRealInputDerivatives is a stub returning fmi2Error")
+    opts = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
+    opts.update(options)
+
+    pkg = package_dir()
+    dest_dir = Path(dest_dir)
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix="reeve_fmu_build_"))
+    saved_path = list(sys.path)
+    saved_mod = sys.modules.pop(stem, None)
+    try:
+        # 1. vendored package + shim + stamp + requirements
+        vendor = staging / VENDOR_DIR
+        copy_package(str(pkg), str(vendor / PACKAGE))
+        digest = package_hash(str(vendor / PACKAGE))
+        if digest != package_hash(str(pkg)):  # pragma: no cover - sources changed during the copy
+            raise FmuBuildError("reeve_fmu sources changed while building; retry")
+        shutil.copy2(_bootstrap.__file__, staging / f"{PACKAGE}.py")
+        extra: list[Path] = []
+        res_hashes: dict[str, str] = {}
+        if resources:
+            extra, res_hashes = _stage_resources(staging, resources)
+        import reeve_fmu
+
+        stamp = {
+            "format": 1,
+            "package": PACKAGE,
+            "version": getattr(reeve_fmu, "__version__", None),
+            "sha256": digest,
+            "files": len(package_files(str(pkg))),
+            "entry": {"name": entry.name, "sha256": _sha256_bytes(entry.read_bytes())},
+            "resources": res_hashes,
+            "pythonfmu": pythonfmu_version,
+            "python": sys.version.split()[0],
+            "built_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        }
+        (staging / STAMP_NAME).write_text(json.dumps(stamp, indent=1) + "\n")
+        (staging / "requirements.txt").write_text("\n".join(requirements) + "\n")
+
+        files = [vendor, staging / f"{PACKAGE}.py", staging / STAMP_NAME,
+                 staging / "requirements.txt", *extra]
+        for pf in project_files:
+            pf = Path(pf).resolve()
+            if pf == pkg:
+                continue  # already vendored (as reeve_fmu_vendor/reeve_fmu + shim)
+            if not pf.exists():
+                raise FmuBuildError(f"project file {pf} does not exist")
+            if pf.name in _RESERVED or pf.name == entry.name:
+                raise FmuBuildError(f"project file {pf} clashes with a reserved resources entry")
+            files.append(pf)
+
+        # 2. pythonfmu build (imports and instantiates the slave class in this interpreter)
+        try:
+            fmu_path = FmuBuilder.build_FMU(entry, dest=dest_dir, project_files=files, **opts)
+        except FmuBuildError:
+            raise
+        except Exception as exc:
+            raise FmuBuildError(f"pythonfmu failed to build {entry.name}: {exc!r}") from exc
+        fmu_path = Path(fmu_path)
+    finally:
+        sys.path[:] = saved_path
+        sys.modules.pop(stem, None)
+        if saved_mod is not None:
+            sys.modules[stem] = saved_mod
+        shutil.rmtree(staging, ignore_errors=True)
+
+    # 3. validation gate
+    if validate:
+        from fmpy.validation import validate_fmu
+
+        problems = validate_fmu(str(fmu_path))
+        if problems:
+            try:
+                fmu_path.unlink()
+            except OSError:  # pragma: no cover
+                pass
+            raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in {fmu_path.name}",
+                                problems)
+    return fmu_path
+
+
+def read_stamp(fmu_path: Union[str, Path]) -> Optional[dict]:
+    """The FMU's resources/reeve_fmu_stamp.json, or None if missing/unreadable."""
+    try:
+        with zipfile.ZipFile(fmu_path) as zf:
+            return json.loads(zf.read(f"resources/{STAMP_NAME}").decode("utf-8"))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None
+
+
+def fmu_is_stale(fmu_path: Union[str, Path], entry_script: Optional[Union[str, Path]] = None,
+                 resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None) -> bool:
+    """True if `fmu_path` must be rebuilt to match the current sources.
+
+    Stale when: the file is missing or has no stamp; the package source hash differs from the current
+    sources; it was built with another pythonfmu version; or (if given) the entry script or any of
+    `resources` differ from what the FMU carries.
+    """
+    stamp = read_stamp(fmu_path)
+    if stamp is None:
+        return True
+    if stamp.get("sha256") != current_package_hash():
+        return True
+    try:
+        from pythonfmu import __version__ as pythonfmu_version
+    except Exception:  # pragma: no cover
+        pythonfmu_version = None
+    if stamp.get("pythonfmu") != pythonfmu_version:
+        return True
+    if entry_script is not None:
+        entry = Path(entry_script)
+        e = stamp.get("entry") or {}
+        if e.get("name") != entry.name or e.get("sha256") != _sha256_bytes(entry.read_bytes()):
+            return True
+    if resources:
+        have = stamp.get("resources") or {}
+        for name, value in resources.items():
+            key = Path(str(name).replace("\\", "/")).as_posix()
+            if have.get(key) != _sha256_bytes(_resource_bytes(value)):
+                return True
+    return False
+

@@ -1,0 +1,438 @@
+"""Helpers for tests and masters: FMU jobs in fresh subprocesses, and a thin fmpy FMU2Slave wrapper.
+
+Why subprocesses (fmi.md §5.2): pythonfmu FMUs share the host interpreter, so an FMU's entry module,
+its embedded packages and pythonfmu itself land in the host's `sys.modules`; two FMUs with the same
+module names silently run each other's code, and rarely the process aborts at exit with heap
+corruption. So every FMU-loading job runs in its own interpreter and is judged by its result file
+*and* its exit code.
+
+`run_in_subprocess(job, *args, timeout=...)`
+    job = "package.module:function" or "/path/to/file.py:function" -> function(*args)
+          any other string -> Python source executed with `ARGS` bound; it must set `result`.
+    args and result travel as JSON (NaN/Inf allowed). Returns the result. Raises
+    SubprocessJobError with the child's traceback/stdout/stderr when the job raised, timed out, died
+    before writing its result, or exited non-zero. A single retry is made only when the result file
+    was written completely and the process then died from a signal (exit-time abort, e.g. SIGABRT
+    from `free(): corrupted ...` or SIGSEGV during interpreter shutdown); the retry's outcome counts.
+
+`SlaveHandle` (context manager)
+    h = SlaveHandle.open(fmu_path, "plant")           # extract, instantiate(loggingOn=True)
+    h.setup(start_time=0.0, start_values={"cabin.mass": 500.0})   # setup/enter/set/exit init
+    h.set("motor.tau", 1500.0); status = h.step(1e-3); x = h.get("cabin.position")
+    s = h.get_state(); blob = h.serialize_state(s); h.set_state(h.deserialize_state(blob))
+    h.messages  -> [LogMessage(status, category, message)] collected from the FMU logger
+    h.close()   -> terminate, freeInstance, remove the extracted directory
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+from ctypes import byref
+from pathlib import Path
+from typing import Any, Iterable, NamedTuple, Optional, Sequence, Union
+
+__all__ = ["run_in_subprocess", "SubprocessJobError", "SlaveHandle", "LogMessage", "STATUS_NAMES",
+           "last_run_info"]
+
+STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
+
+_FUNC_SPEC = re.compile(r"^(?:[A-Za-z_][\w.]*|.+\.py):[A-Za-z_]\w*$", re.S)
+
+_CHILD = r"""
+import json, os, sys, traceback
+result_path, spec, args_path = sys.argv[1:4]
+
+def _write(obj):
+    tmp = result_path + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump(obj, fh, allow_nan=True)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, result_path)
+
+try:
+    with open(args_path) as fh:
+        args = json.load(fh)
+    if spec.startswith("code:"):
+        ns = {"__name__": "__reeve_job__", "ARGS": args}
+        exec(compile(spec[5:], "<reeve job>", "exec"), ns)
+        if "result" not in ns:
+            raise RuntimeError("job code did not set the variable 'result'")
+        res = ns["result"]
+    else:
+        target, func = spec.rsplit(":", 1)
+        if target.endswith(".py"):
+            import importlib.util
+            name = "__reeve_job_" + os.path.splitext(os.path.basename(target))[0]
+            sp = importlib.util.spec_from_file_location(name, target)
+            mod = importlib.util.module_from_spec(sp)
+            sys.modules[name] = mod
+            sp.loader.exec_module(mod)
+        else:
+            import importlib
+            mod = importlib.import_module(target)
+        res = getattr(mod, func)(*args)
+    payload = {"status": "ok", "result": res}
+    try:
+        json.dumps(payload, allow_nan=True)
+    except Exception as exc:
+        raise TypeError(f"job result is not JSON-serialisable: {exc}") from exc
+    _write(payload)
+except BaseException:
+    _write({"status": "error", "error": traceback.format_exc()})
+    sys.stdout.flush(); sys.stderr.flush()
+    os._exit(1)
+sys.stdout.flush(); sys.stderr.flush()
+"""
+
+#: diagnostics of the most recent run_in_subprocess call (attempts, return codes, retried?)
+last_run_info: dict = {}
+
+
+class SubprocessJobError(RuntimeError):
+    def __init__(self, msg: str, *, returncode=None, stdout="", stderr="", child_traceback=None):
+        self.returncode = returncode
+        self.stdout = stdout
+        self.stderr = stderr
+        self.child_traceback = child_traceback
+        parts = [msg]
+        if child_traceback:
+            parts.append("--- child traceback ---\n" + child_traceback.rstrip())
+        if stdout and stdout.strip():
+            parts.append("--- child stdout (tail) ---\n" + stdout[-4000:].rstrip())
+        if stderr and stderr.strip():
+            parts.append("--- child stderr (tail) ---\n" + stderr[-4000:].rstrip())
+        super().__init__("\n".join(parts))
+
+
+def _json_default(o):
+    if isinstance(o, os.PathLike):
+        return os.fspath(o)
+    raise TypeError(f"job argument {o!r} is not JSON-serialisable")
+
+
+def _repo_root() -> str:
+    return str(Path(__file__).resolve().parents[2])
+
+
+def _exit_time_abort(rc: int) -> bool:
+    """Death by signal (negative rc) or the shell-style 128+signal codes of abort/segv/bus error."""
+    if rc < 0:
+        return True
+    return rc in (128 + signal.SIGABRT, 128 + signal.SIGSEGV, 128 + signal.SIGBUS)
+
+
+def _run_once(spec: str, args_path: str, workdir: str, timeout: float, env: dict, cwd, python):
+    result_path = os.path.join(workdir, "result.json")
+    for p in (result_path, result_path + ".tmp"):
+        if os.path.exists(p):
+            os.unlink(p)
+    proc = subprocess.Popen([python, "-c", _CHILD, result_path, spec, args_path], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            errors="replace", start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # the child's own session/process group
+        except OSError:
+            proc.kill()
+        out, err = proc.communicate()
+        raise SubprocessJobError(f"job timed out after {timeout} s", returncode=proc.returncode,
+                                 stdout=out, stderr=err)
+    payload = None
+    if os.path.exists(result_path):
+        try:
+            with open(result_path) as fh:
+                payload = json.load(fh)
+        except ValueError:
+            payload = None
+    return proc.returncode, payload, out, err
+
+
+def run_in_subprocess(func_path_or_code: str, *args, timeout: float = 120.0,
+                      env: Optional[dict] = None, cwd: Union[str, Path, None] = None,
+                      python: Optional[str] = None, retry_exit_abort: bool = True) -> Any:
+    """Run an FMU-loading job in a fresh interpreter and return its JSON result (see module doc)."""
+    if _FUNC_SPEC.match(func_path_or_code.strip()) and "\n" not in func_path_or_code.strip():
+        spec = func_path_or_code.strip()
+    else:
+        spec = "code:" + func_path_or_code
+    child_env = dict(os.environ if env is None else env)
+    root = _repo_root()
+    pp = child_env.get("PYTHONPATH", "")
+    child_env["PYTHONPATH"] = root + (os.pathsep + pp if pp else "")
+    child_env.setdefault("PYTHONFAULTHANDLER", "1")
+    python = python or sys.executable
+    attempts = []
+    with tempfile.TemporaryDirectory(prefix="reeve_job_") as workdir:
+        args_path = os.path.join(workdir, "args.json")
+        with open(args_path, "w") as fh:
+            json.dump(list(args), fh, allow_nan=True, default=_json_default)
+        for attempt in (1, 2):
+            rc, payload, out, err = _run_once(spec, args_path, workdir, timeout, child_env,
+                                              cwd, python)
+            attempts.append({"returncode": rc, "status": (payload or {}).get("status")})
+            last_run_info.clear()
+            last_run_info.update(attempts=list(attempts), retried=attempt > 1)
+            if payload is not None and payload.get("status") == "error":
+                raise SubprocessJobError("job raised an exception", returncode=rc, stdout=out,
+                                         stderr=err, child_traceback=payload.get("error"))
+            if payload is None:
+                raise SubprocessJobError(
+                    f"job died without writing its result (exit code {rc})", returncode=rc,
+                    stdout=out, stderr=err)
+            if rc == 0:
+                return payload["result"]
+            if attempt == 1 and retry_exit_abort and _exit_time_abort(rc):
+                continue  # result written, then the interpreter aborted at exit: retry once
+            raise SubprocessJobError(
+                f"job wrote its result but exited with code {rc}"
+                + (" (again, after one retry)" if attempt > 1 else ""),
+                returncode=rc, stdout=out, stderr=err)
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+# ==================================================================================================
+# fmpy FMU2Slave wrapper
+# ==================================================================================================
+class LogMessage(NamedTuple):
+    status: int
+    category: str
+    message: str
+    instance: str
+
+    @property
+    def status_name(self) -> str:
+        return STATUS_NAMES[self.status] if 0 <= self.status < len(STATUS_NAMES) else str(self.status)
+
+    def __str__(self):
+        return f"[{self.status_name.upper()}] {self.message}"
+
+
+class SlaveHandle:
+    """One FMU2Slave instance with name-based access, collected log messages and cleanup."""
+
+    def __init__(self, fmu_path: Union[str, Path], instance_name: str = "instance", *,
+                 logging_on: bool = True, echo: bool = False, unzip_dir: Union[str, Path, None] = None):
+        from fmpy import extract, read_model_description
+
+        self.path = Path(fmu_path)
+        self.instance_name = instance_name
+        self.md = read_model_description(str(self.path))
+        self._owns_dir = unzip_dir is None
+        self.unzip_dir = str(unzip_dir) if unzip_dir is not None else str(extract(str(self.path)))
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self._vr = {v.name: (v.type, v.valueReference) for v in self.md.modelVariables}
+        self.messages: list[LogMessage] = []
+        self.echo = echo
+        self.time: Optional[float] = None
+        self._fmu = None
+        self._instantiated = False
+        self._initialized = False
+        self._terminated = False
+        self._closed = False
+        self._logging_on = logging_on
+
+    # -- construction -------------------------------------------------------------------------
+    @classmethod
+    def open(cls, fmu_path, instance_name: str = "instance", *, logging_on: bool = True,
+             echo: bool = False, unzip_dir=None) -> "SlaveHandle":
+        h = cls(fmu_path, instance_name, logging_on=logging_on, echo=echo, unzip_dir=unzip_dir)
+        try:
+            h.instantiate()
+        except BaseException:
+            h.close()
+            raise
+        return h
+
+    def _make_callbacks(self):
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy.fmi1 import calloc, free
+
+        def _logger(component, instance, status, category, message):
+            try:
+                msg = LogMessage(int(status),
+                                 category.decode("utf-8", "replace") if category else "",
+                                 message.decode("utf-8", "replace") if message else "",
+                                 instance.decode("utf-8", "replace") if instance else "")
+                self.messages.append(msg)
+                if self.echo:
+                    print(str(msg), file=sys.stderr)
+            except Exception:  # pragma: no cover - never raise into C
+                pass
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(_logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:
+            from fmpy.logging import addLoggerProxy  # formats the printf-style message in C
+
+            addLoggerProxy(byref(cb))
+        except Exception:  # pragma: no cover
+            pass
+        self._cb_keepalive = (_logger, cb)
+        return cb
+
+    def instantiate(self):
+        from fmpy.fmi2 import FMU2Slave
+
+        self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip_dir,
+                              modelIdentifier=self.md.coSimulation.modelIdentifier,
+                              instanceName=self.instance_name)
+        self._fmu.instantiate(callbacks=self._make_callbacks(), loggingOn=self._logging_on)
+        self._instantiated = True
+
+    @property
+    def fmu(self):
+        """The underlying fmpy FMU2Slave."""
+        return self._fmu
+
+    def setup(self, start_time: float = 0.0, stop_time: Optional[float] = None,
+              tolerance: Optional[float] = None, start_values: Optional[dict] = None,
+              initialize: bool = True) -> None:
+        """setupExperiment, enterInitializationMode, set start values, exitInitializationMode."""
+        f = self._fmu
+        f.setupExperiment(tolerance=tolerance, startTime=start_time, stopTime=stop_time)
+        f.enterInitializationMode()
+        if start_values:
+            self.set_many(start_values)
+        if initialize:
+            f.exitInitializationMode()
+            self._initialized = True
+        self.time = start_time
+
+    # -- variables ------------------------------------------------------------------------------
+    def vr(self, name: str) -> int:
+        return self._vr[name][1]
+
+    def set(self, name: str, value) -> None:
+        typ, vr = self._vr[name]
+        f = self._fmu
+        if typ == "Real":
+            f.setReal([vr], [float(value)])
+        elif typ == "Integer" or typ == "Enumeration":
+            f.setInteger([vr], [int(value)])
+        elif typ == "Boolean":
+            f.setBoolean([vr], [bool(value)])
+        else:
+            f.setString([vr], [str(value)])
+
+    def set_many(self, values: dict) -> None:
+        for name, value in values.items():
+            self.set(name, value)
+
+    def get(self, name: str):
+        typ, vr = self._vr[name]
+        f = self._fmu
+        if typ == "Real":
+            return f.getReal([vr])[0]
+        if typ == "Integer" or typ == "Enumeration":
+            return f.getInteger([vr])[0]
+        if typ == "Boolean":
+            return bool(f.getBoolean([vr])[0])
+        v = f.getString([vr])[0]
+        return v.decode("utf-8") if isinstance(v, bytes) else v
+
+    def get_many(self, names: Sequence[str]) -> list:
+        reals = [n for n in names if self._vr[n][0] == "Real"]
+        out = {}
+        if reals:
+            out.update(zip(reals, self._fmu.getReal([self._vr[n][1] for n in reals])))
+        for n in names:
+            if n not in out:
+                out[n] = self.get(n)
+        return [out[n] for n in names]
+
+    def get_dict(self, names: Optional[Iterable[str]] = None) -> dict:
+        names = list(self._vr) if names is None else list(names)
+        return dict(zip(names, self.get_many(names)))
+
+    # -- stepping -------------------------------------------------------------------------------
+    def do_step(self, t: float, dt: float) -> int:
+        """fmi2DoStep; returns the status code (0 ok, 1 warning, 2 discard, 3 error, 4 fatal)."""
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
+        except FMICallException as e:
+            return int(e.status)
+        return 0
+
+    def step(self, dt: float) -> int:
+        """do_step from the handle's current time; advances the time only on success."""
+        t = 0.0 if self.time is None else self.time
+        status = self.do_step(t, dt)
+        if status <= 1:
+            self.time = t + dt
+        return status
+
+    # -- state ----------------------------------------------------------------------------------
+    def get_state(self):
+        return self._fmu.getFMUstate()
+
+    def set_state(self, state, time: Optional[float] = None) -> None:
+        self._fmu.setFMUstate(state)
+        if time is not None:
+            self.time = time
+
+    def free_state(self, state) -> None:
+        self._fmu.freeFMUstate(state)
+
+    def serialize_state(self, state) -> bytes:
+        return self._fmu.serializeFMUstate(state)
+
+    def deserialize_state(self, blob: bytes):
+        return self._fmu.deSerializeFMUstate(blob)
+
+    def reset(self) -> None:
+        self._fmu.reset()
+        self._initialized = False
+        self._terminated = False
+        self.time = None
+
+    # -- messages -------------------------------------------------------------------------------
+    def errors(self, min_status: int = 3) -> list:
+        return [m for m in self.messages if m.status >= min_status]
+
+    def log_text(self) -> str:
+        return "\n".join(str(m) for m in self.messages)
+
+    # -- teardown -------------------------------------------------------------------------------
+    def terminate(self) -> None:
+        if self._instantiated and not self._terminated:
+            self._terminated = True
+            self._fmu.terminate()
+
+    def close(self) -> None:
+        """terminate (if initialized) + freeInstance + remove the extracted directory. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._instantiated:
+                try:
+                    if self._initialized and not self._terminated:
+                        self.terminate()
+                finally:
+                    self._instantiated = False
+                    self._fmu.freeInstance()
+        finally:
+            if self._owns_dir and self.unzip_dir:
+                shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+    def __enter__(self) -> "SlaveHandle":
+        if not self._instantiated and not self._closed:
+            self.instantiate()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
