@@ -19,8 +19,9 @@ get/set/serialize FMU state rewinds it bit-identically.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 import math
+import numbers
 from typing import Sequence
 
 import numpy as np
@@ -121,13 +122,13 @@ class DriveParams:
         """Raise ValueError naming the first bad parameter."""
         def pos(name, allow_inf=False):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or math.isnan(v) or v <= 0 \
+            if not isinstance(v, numbers.Real) or isinstance(v, bool) or math.isnan(v) or v <= 0 \
                     or (math.isinf(v) and not allow_inf):
                 raise ValueError(f"DriveParams.{name} must be a positive number, got {v!r}")
 
         def nonneg(name, allow_inf=False):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or math.isnan(v) or v < 0 \
+            if not isinstance(v, numbers.Real) or isinstance(v, bool) or math.isnan(v) or v < 0 \
                     or (math.isinf(v) and not allow_inf):
                 raise ValueError(f"DriveParams.{name} must be a number >= 0, got {v!r}")
 
@@ -141,15 +142,15 @@ class DriveParams:
         if self.level not in (1, 2):
             raise ValueError(f"DriveParams.level must be 1 or 2, got {self.level!r}")
         lands = list(self.landings)
-        if len(lands) < 1 or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in lands):
+        if len(lands) < 1 or not all(isinstance(x, numbers.Real) and math.isfinite(x) for x in lands):
             raise ValueError(f"DriveParams.landings must be a non-empty list of finite positions, got {self.landings!r}")
-        if not (isinstance(self.start_landing, int) and 0 <= self.start_landing < len(lands)):
+        if not (isinstance(self.start_landing, numbers.Integral) and 0 <= self.start_landing < len(lands)):
             raise ValueError(f"DriveParams.start_landing must be an index into landings (0..{len(lands) - 1}), "
                              f"got {self.start_landing!r}")
         for m in self.moves:
-            if not (isinstance(m, (int, np.integer)) and 0 <= m < len(lands)):
+            if not (isinstance(m, numbers.Integral) and 0 <= m < len(lands)):
                 raise ValueError(f"DriveParams.moves must hold landing indices 0..{len(lands) - 1}, got {m!r}")
-        if isinstance(self.pretorque, (int, float)):
+        if isinstance(self.pretorque, numbers.Real):
             if not math.isfinite(self.pretorque):
                 raise ValueError(f"DriveParams.pretorque must be finite, got {self.pretorque!r}")
         else:
@@ -160,7 +161,7 @@ class DriveParams:
         if any(abs(p) > self.T_max for p in self._pretorques()):
             raise ValueError(f"DriveParams.pretorque exceeds T_max = {self.T_max} N m")
         if self.level == 2:
-            if not (isinstance(self.pole_pairs, (int, np.integer)) and self.pole_pairs > 0):
+            if not (isinstance(self.pole_pairs, numbers.Integral) and self.pole_pairs > 0):
                 raise ValueError(f"DriveParams.pole_pairs must be a positive integer, got {self.pole_pairs!r}")
             for n in ("psi", "Rs", "Ld", "Lq", "V_dc", "Ts_current"):
                 pos(n)
@@ -173,7 +174,7 @@ class DriveParams:
                 pos("Ti_current", allow_inf=True)
 
     def _pretorques(self) -> list[float]:
-        if isinstance(self.pretorque, (int, float)):
+        if isinstance(self.pretorque, numbers.Real):
             return [float(self.pretorque)] * len(list(self.landings))
         return [float(p) for p in self.pretorque]
 
