@@ -98,6 +98,43 @@ def test_model_description_units_structure_and_resources(toy):
     assert initial == outputs
 
 
+def test_plain_fmpy_simulate_fmu_runs_the_fmu(toy):
+    r = job("simulate", toy["fmu"], cache=toy["cache"])
+    assert r["errors"] == [] and r["steps"] == 100 and r["n"] == 101
+    assert math.isfinite(r["x_end"])
+
+
+def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
+    """In-process: these fail before any FMU binary is loaded."""
+    from reeve_fmu.fmu.build import FmuBuildError, build_fmu
+
+    generic = tmp_path / "model.py"
+    generic.write_text("x = 1\n")
+    with pytest.raises(FmuBuildError, match="too generic"):
+        build_fmu(generic, tmp_path / "out")
+    body = ("from reeve_fmu.fmu.slave import ReeveSlave\n"
+            "class {cls}(ReeveSlave):\n"
+            "    def define(self):\n"
+            "        self.add_real('u', 'input', unit='N', start=0.0)\n"
+            "        {line}\n"
+            "    def step(self, t, dt):\n"
+            "        return True\n")
+    cases = {
+        "reeve_badunit_probe": ("self.add_real('y', 'output', unit='furlong')", "unknown unit 'furlong'"),
+        "reeve_baddep_probe": ("self.add_real('y', 'output', unit='N', dependencies=['nope'])",
+                               "dependency 'nope' is not an input"),
+        "reeve_badint_probe": ("self.add_integer('n', 'output', 'continuous')",
+                               "cannot be continuous"),
+    }
+    for stem, (line, err) in cases.items():
+        src = tmp_path / f"{stem}.py"
+        src.write_text(body.format(cls=stem.title().replace("_", ""), line=line))
+        with pytest.raises(FmuBuildError, match=err):
+            build_fmu(src, tmp_path / "out")
+        assert stem not in sys.modules and str(tmp_path) not in sys.path
+    assert not list((tmp_path / "out").glob("*.fmu"))
+
+
 # ------------------------------------------------------------------------------------------------
 # FMU state
 # ------------------------------------------------------------------------------------------------
@@ -197,6 +234,20 @@ def test_invalid_inputs_and_calls_are_rejected_with_reason(toy):
     assert r["fixed_step"] == 2 and r["fixed_value"] == 500.0 and r["after_fixed"] == 0
     assert r["ok_end"] == 0 and r["msgs"]["end"] == []      # no logging in normal steps
     assert all(s == 3 for k, ms in r["msgs"].items() for s, _ in ms)
+
+
+def test_instantiate_failure_reports_the_cause(toy, tmp_path):
+    broken = tmp_path / "ReeveToySlave.fmu"
+    with zipfile.ZipFile(toy["fmu"]) as zin, zipfile.ZipFile(broken, "w") as zout:
+        for item in zin.infolist():
+            data = zin.read(item.filename)
+            if item.filename == "resources/reeve_toy_slave.py":
+                data = b"import reeve_missing_dependency_xyz\n" + data
+            zout.writestr(item, data)
+    r = job("broken_import", str(broken), cache=toy["cache"])
+    assert r["raised"] is True
+    assert "Failed to instantiate" in r["text"]
+    assert "No module named 'reeve_missing_dependency_xyz'" in r["text"]
 
 
 def test_reset_returns_to_initial_behaviour(toy):

@@ -206,7 +206,8 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
         except FmuBuildError:
             raise
         except Exception as exc:
-            raise FmuBuildError(f"pythonfmu failed to build {entry.name}: {exc!r}") from exc
+            raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
+                                f"{type(exc).__name__}: {exc}") from exc
         fmu_path = Path(fmu_path)
     finally:
         sys.path[:] = saved_path

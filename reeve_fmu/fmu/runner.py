@@ -288,7 +288,14 @@ class SlaveHandle:
         self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip_dir,
                               modelIdentifier=self.md.coSimulation.modelIdentifier,
                               instanceName=self.instance_name)
-        self._fmu.instantiate(callbacks=self._make_callbacks(), loggingOn=self._logging_on)
+        try:
+            self._fmu.instantiate(callbacks=self._make_callbacks(), loggingOn=self._logging_on)
+        except Exception as exc:
+            # fmpy only says "Failed to instantiate model"; the cause is in the FMU's log
+            raise RuntimeError(f"fmi2Instantiate of {self.path.name} ({self.instance_name!r}) "
+                               f"failed: {exc}\n" + (self.log_text() or
+                                                     "(no log messages; use logging_on=True)")
+                               ) from exc
         self._instantiated = True
 
     @property

@@ -49,6 +49,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import traceback
 from typing import Any, Callable, Iterable, Optional
 from xml.etree.ElementTree import Element, SubElement
@@ -168,7 +169,9 @@ def canonical_state(obj, path="state"):
     t = type(obj)
     if t is float or t is int or t is bool or t is str or obj is None:
         return obj
-    if t is dict:
+    if t is list and all(type(v) is float for v in obj):
+        return obj[:]  # fast path: ndarray.tolist() of floats
+    if isinstance(obj, dict):
         out = {}
         for k, v in obj.items():
             if type(k) is not str:
@@ -238,6 +241,7 @@ class ReeveSlave(Fmi2Slave):
         self._get = {k: {} for k in _KINDS}   # kind -> {vr: getter}
         self._set = {k: {} for k in _KINDS}   # kind -> {vr: spec} (settable variables only)
         self._user_setters: dict[str, Callable] = {}
+        self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
         self._mode = "instantiated"
         self._initialized = False
         self.start_time: Optional[float] = None
@@ -415,6 +419,12 @@ class ReeveSlave(Fmi2Slave):
     def vr(self, name: str) -> int:
         return self._by_name[name].vr
 
+    def resource_path(self, name: str) -> str:
+        """Absolute path of a file shipped with build_fmu(resources={name: ...})."""
+        if not self.resources:
+            raise FileNotFoundError(f"{name}: this instance has no resources directory")
+        return os.path.join(self.resources, *name.split("/"))
+
     # ------------------------------------------------------------------ logging
     def log(self, msg: str, status: Fmi2Status = Fmi2Status.ok, category: Optional[str] = None,
             debug=None):
@@ -476,7 +486,7 @@ class ReeveSlave(Fmi2Slave):
                 self._pending.append(f"enterInitializationMode called in state {self._mode!r}")
                 self._error(self._pending[-1])
                 return
-            self._mode = "init"
+            self._set_mode("init")
         except Exception:  # pragma: no cover
             self._error("enter_initialization_mode failed:\n" + traceback.format_exc())
 
@@ -491,7 +501,7 @@ class ReeveSlave(Fmi2Slave):
                 de = self.default_experiment
                 self.start_time = float(de.start_time) if de is not None and de.start_time is not None else 0.0
             self.time = self.start_time
-            self._mode = "step"
+            self._set_mode("step")
             if self._fault is not None:
                 self._error("cannot initialize, the instance is faulty:\n" + self._fault)
                 return
@@ -506,7 +516,7 @@ class ReeveSlave(Fmi2Slave):
 
     def terminate(self):
         try:
-            self._mode = "terminated"
+            self._set_mode("terminated")
             self.on_terminate()
         except Exception:
             self._error("terminate failed:\n" + traceback.format_exc())
@@ -572,6 +582,18 @@ class ReeveSlave(Fmi2Slave):
         return False
 
     # ------------------------------------------------------------------ getters / setters
+    def _set_mode(self, mode: str) -> None:
+        self._mode = mode
+        fast = {}
+        if mode == "step":
+            for vr, spec in self._set["Real"].items():
+                if spec.causality == Fmi2Causality.input and spec.name not in self._user_setters:
+                    # +-DBL_MAX (not inf) so that +-inf falls through to the checked path
+                    fast[vr] = (spec.name,
+                                -sys.float_info.max if spec.min is None else float(spec.min),
+                                sys.float_info.max if spec.max is None else float(spec.max))
+        self._fast_real = fast
+
     def _get_values(self, kind, vrs, conv, bad):
         g = self._get[kind]
         try:
@@ -621,6 +643,25 @@ class ReeveSlave(Fmi2Slave):
         return f"{spec.name} ({spec.causality.name}) can only be set before initialization ends"
 
     def set_real(self, vrs, values):
+        try:
+            # fast path: plain Real inputs (no user setter) in step mode, finite and within bounds
+            fast = self._fast_real
+            vals = self.values
+            for vr, x in zip(vrs, values):
+                f = fast.get(vr)
+                if f is None or type(x) is not float or not (f[1] <= x <= f[2]):
+                    break  # NaN fails the comparison too
+                vals[f[0]] = x
+            else:
+                if self._bad_inputs:
+                    for vr in vrs:
+                        self._bad_inputs.pop(self._specs[vr].name, None)
+                return
+            self._set_real_checked(vrs, values)
+        except Exception:
+            self._call_error("set_real failed:\n" + traceback.format_exc())
+
+    def _set_real_checked(self, vrs, values):
         try:
             table = self._set["Real"]
             bad = self._bad_inputs
@@ -727,7 +768,7 @@ class ReeveSlave(Fmi2Slave):
             self.time = state["time"]
             self.start_time = state["start_time"]
             self.stop_time = state["stop_time"]
-            self._mode = state["mode"]
+            self._set_mode(state["mode"])
             self._bad_inputs = dict(state["bad_inputs"])
             self._pending.clear()
             self._dirty = None
@@ -774,7 +815,6 @@ class ReeveSlave(Fmi2Slave):
         Only called at build time: raises if define() failed, so a broken entry never builds."""
         if self._fault is not None:
             raise RuntimeError(self._fault)
-        self.__dict__.pop("default_experiment", None)
         root = super().to_xml(model_options)
         if self.description:
             root.set("description", self.description)

@@ -292,3 +292,33 @@ def host_imported_other(snap_dir, work_dir, fmu):
         st = h.step(DT)
         return {"status": st, "msgs": [(m.status, m.message) for m in h.messages],
                 "pkg_file": reeve_fmu.__file__}
+
+
+# ---------------------------------------------------------------------------------------------- fmpy
+def simulate(fmu):
+    """Plain fmpy.simulate_fmu (its own loop, validation and logger) on the FMU."""
+    import numpy as np
+    from fmpy import simulate_fmu
+
+    msgs = []
+
+    def logger(*args):
+        msgs.append(args[-1].decode() if isinstance(args[-1], bytes) else str(args[-1]))
+
+    inp = np.array([(0.0, 1600.0), (0.05, 1600.0), (0.05, 1400.0), (0.1, 1400.0)],
+                   dtype=[("time", "f8"), ("motor.tau", "f8")])
+    res = simulate_fmu(fmu, stop_time=0.1, output_interval=1e-3, input=inp,
+                       output=["cabin.position", "steps"], start_values={"rope.c": 2500.0},
+                       debug_logging=True, logger=logger)
+    return {"n": len(res), "steps": int(res["steps"][-1]), "x_end": float(res["cabin.position"][-1]),
+            "errors": [m for m in msgs if "rror" in m]}
+
+
+def broken_import(fmu):
+    """An FMU whose entry fails to import: the cause must reach the caller, no crash."""
+    r = _runner()
+    try:
+        r.SlaveHandle.open(fmu, "broken")
+    except RuntimeError as exc:
+        return {"raised": True, "text": str(exc)}
+    return {"raised": False, "text": ""}
