@@ -125,14 +125,22 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
                                "dependency 'nope' is not an input"),
         "reeve_badint_probe": ("self.add_integer('n', 'output', 'continuous')",
                                "cannot be continuous"),
+        # passes our checks, caught by the fmpy validation gate
+        "reeve_badname_probe": ("self.add_real('bad name!', 'output', unit='N')",
+                                "not a legal variable name"),
     }
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "ReeveBadnameProbe.fmu").write_bytes(b"previous good build")
     for stem, (line, err) in cases.items():
         src = tmp_path / f"{stem}.py"
         src.write_text(body.format(cls=stem.title().replace("_", ""), line=line))
         with pytest.raises(FmuBuildError, match=err):
-            build_fmu(src, tmp_path / "out")
+            build_fmu(src, out)
         assert stem not in sys.modules and str(tmp_path) not in sys.path
-    assert not list((tmp_path / "out").glob("*.fmu"))
+    # failed builds leave nothing behind and never clobber an existing FMU
+    assert [p.name for p in out.iterdir()] == ["ReeveBadnameProbe.fmu"]
+    assert (out / "ReeveBadnameProbe.fmu").read_bytes() == b"previous good build"
 
 
 # ------------------------------------------------------------------------------------------------

@@ -138,7 +138,8 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                    At run time: Path(self.resources) / name.
     options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
 
-    Raises FmuBuildError (the FMU is deleted) if pythonfmu fails or `fmpy validate` finds problems.
+    Raises FmuBuildError if pythonfmu fails or `fmpy validate` finds problems; an existing FMU at
+    the destination is then left untouched (the new one replaces it atomically only when valid).
     """
     from pythonfmu import __version__ as pythonfmu_version
     from pythonfmu.builder import FmuBuilder
@@ -157,6 +158,9 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
     dest_dir = Path(dest_dir)
     dest_dir.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix="reeve_fmu_build_"))
+    # the FMU is written into a private directory next to its destination and only moved into
+    # place (atomic rename) after validation: a failed build never clobbers a good FMU
+    out_tmp = Path(tempfile.mkdtemp(prefix=".reeve_fmu_out_", dir=dest_dir))
     saved_path = list(sys.path)
     saved_mod = sys.modules.pop(stem, None)
     try:
@@ -202,33 +206,31 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
 
         # 2. pythonfmu build (imports and instantiates the slave class in this interpreter)
         try:
-            fmu_path = FmuBuilder.build_FMU(entry, dest=dest_dir, project_files=files, **opts)
+            fmu_path = FmuBuilder.build_FMU(entry, dest=out_tmp, project_files=files, **opts)
         except FmuBuildError:
             raise
         except Exception as exc:
             raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
                                 f"{type(exc).__name__}: {exc}") from exc
-        fmu_path = Path(fmu_path)
+        built = Path(fmu_path)
+        # 3. validation gate
+        if validate:
+            from fmpy.validation import validate_fmu
+
+            problems = validate_fmu(str(built))
+            if problems:
+                raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in "
+                                    f"{built.name}", problems)
+        final = dest_dir / built.name
+        os.replace(built, final)
     finally:
         sys.path[:] = saved_path
         sys.modules.pop(stem, None)
         if saved_mod is not None:
             sys.modules[stem] = saved_mod
         shutil.rmtree(staging, ignore_errors=True)
-
-    # 3. validation gate
-    if validate:
-        from fmpy.validation import validate_fmu
-
-        problems = validate_fmu(str(fmu_path))
-        if problems:
-            try:
-                fmu_path.unlink()
-            except OSError:  # pragma: no cover
-                pass
-            raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in {fmu_path.name}",
-                                problems)
-    return fmu_path
+        shutil.rmtree(out_tmp, ignore_errors=True)
+    return final
 
 
 def read_stamp(fmu_path: Union[str, Path]) -> Optional[dict]:

@@ -261,7 +261,7 @@ class ReeveSlave(Fmi2Slave):
                 pass
         try:
             self.define()
-        except Exception:
+        except BaseException:
             self._fault = "define() failed:\n" + traceback.format_exc()
             self.log(self._fault, Fmi2Status.error)
         try:
@@ -394,9 +394,11 @@ class ReeveSlave(Fmi2Slave):
         settable = (caus in (Fmi2Causality.input, Fmi2Causality.parameter)
                     or (ini in (Fmi2Initial.exact, Fmi2Initial.approx)
                         and var != Fmi2Variability.constant))
-        if kw.get("setter") is not None or settable:
+        if kw.get("setter") is not None and not settable:
+            raise ValueError(f"{name}: setter= only makes sense for inputs, parameters and "
+                             f"variables with initial exact/approx")
+        if settable:
             user_setter = kw.get("setter")
-
             if user_setter is not None:
                 self._user_setters[name] = user_setter
 
@@ -508,7 +510,7 @@ class ReeveSlave(Fmi2Slave):
             try:
                 self.initialize()
                 self._initialized = True
-            except Exception:
+            except BaseException:
                 self._fault = "initialize() failed:\n" + traceback.format_exc()
                 self._error(self._fault)
         except Exception:  # pragma: no cover
@@ -542,7 +544,7 @@ class ReeveSlave(Fmi2Slave):
             n_log = len(self.log_queue)
             try:
                 ok = self.step(t, dt)
-            except Exception:
+            except BaseException:  # incl. SystemExit/KeyboardInterrupt: never into pythonfmu's C++
                 self._dirty = (f"step(t={t!r}, dt={dt!r}) raised:\n" + traceback.format_exc())
                 self._error(self._dirty)
                 return False
