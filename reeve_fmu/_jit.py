@@ -23,6 +23,9 @@ except ImportError:  # pragma: no cover - exercised only without numba
 def njit(*args, **kwargs):
     """numba.njit when available, otherwise the identity decorator."""
     if _numba is not None:
+        # numpy error model: float division by zero gives inf/nan instead of a branch + exception
+        # on every division (measurably faster in the element kernels); callers check finiteness.
+        kwargs.setdefault("error_model", "numpy")
         return _numba.njit(*args, **kwargs)
     if len(args) == 1 and callable(args[0]) and not kwargs:
         return args[0]

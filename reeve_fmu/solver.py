@@ -23,7 +23,7 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .system import assemble, energy, outputs, set_prescribed
+from .system import assemble, assemble_ws, energy, outputs, outputs_ws, set_prescribed
 
 
 class SolverError(RuntimeError):
@@ -88,9 +88,11 @@ def lu_solve(LU, piv, b):
 
 
 # --------------------------------------------------------------------------------- generalized-alpha
-@njit(cache=True)
-def _residual(K, c, q, v, qdd, t, u, M, Q, r):
-    st = assemble(K, c, q, v, t, u, M, Q)
+REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
+
+@njit(cache=True, inline="always")
+def _residual(K, c, q, v, qdd, t, u, M, Q, r, ws):
+    st = assemble_ws(K, c, q, v, t, u, M, Q, ws[0], ws[1], ws[2], ws[3])
     nq = K.nq
     for fi in range(K.free.shape[0]):
         i = K.free[fi]
@@ -101,7 +103,7 @@ def _residual(K, c, q, v, qdd, t, u, M, Q, r):
     return st
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
     for fi in range(K.free.shape[0]):
         i = K.free[fi]
@@ -133,6 +135,9 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
     ao = np.empty(nq)
     qddo = np.empty(nq)
     y = np.empty(K.out_kind.shape[0])
+    n_el = K.el_idx.shape[0]
+    ne = K.el_idx.shape[1]
+    ws = (np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     t = t0
@@ -154,7 +159,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
             _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
             if info[0] != h or attempt > 0:
                 # finite-difference Newton matrix d r / d qdd_free (q, v follow through Newmark)
-                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r0)
+                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r0, ws)
                 if st < 0:
                     info[4] = 2
                     q[:] = qo
@@ -169,7 +174,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     qdd[j] += dx
                     q[j] += bq * dx
                     v[j] += gv * dx
-                    _residual(K, c, q, v, qdd, t1, u, M, Q, r)
+                    _residual(K, c, q, v, qdd, t1, u, M, Q, r, ws)
                     for fi in range(nf):
                         jac[fi, fj] = (r[fi] - r0[fi]) / dx
                     qdd[j] -= dx
@@ -182,7 +187,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     continue
                 info[0] = h
             for it in range(maxit):
-                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r)
+                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r, ws)
                 if st < 0:
                     info[4] = 2
                     q[:] = qo
@@ -211,8 +216,8 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                 # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
                 if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
                     converged = True
-                    if it >= 4:
-                        info[0] = 0.0  # slow: refresh the Newton matrix next step
+                    if it >= REFRESH_AFTER:
+                        info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
                     break
             if converged:
                 break
@@ -230,7 +235,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
         t = t1
         info[1] += 1
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs(K, c, q, v, qdd, q_ref, t, u, y)
+            outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, ws[0], ws[1], ws[2], ws[3], False)
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]

@@ -12,13 +12,13 @@ import math
 import numpy as np
 
 from ._jit import njit
-from .elements.linear import end_tension, linear_element
+from .elements.linear import end_tension, linear_element, linear_element_at
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp(table, t):
     n = table.shape[1]
     if n == 0:
@@ -34,7 +34,7 @@ def _interp(table, t):
     return table[1, k] + f * (table[1, k + 1] - table[1, k])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def drive_torque(K, t, u):
     if K.drive_kind == 2:
         return _interp(K.torque_table, t)
@@ -43,9 +43,9 @@ def drive_torque(K, t, u):
     return 0.0
 
 
-@njit(cache=True)
-def gather(K, c, q, v, ie, qe, ve):
-    """Element coordinates and velocities from q, v through the CSR rows of B."""
+@njit(cache=True, inline="always")
+def gather(K, c, q, v, ie, QE, VE):
+    """Element coordinates QE[ie] and velocities VE[ie] from q, v through the CSR rows of B."""
     for a in range(K.el_idx.shape[1]):
         row = K.el_idx[ie, a]
         x = c[row]
@@ -53,14 +53,29 @@ def gather(K, c, q, v, ie, qe, ve):
         for z in range(K.B_ptr[row], K.B_ptr[row + 1]):
             x += K.B_val[z] * q[K.B_idx[z]]
             xd += K.B_val[z] * v[K.B_idx[z]]
-        qe[a] = x
-        ve[a] = xd
+        QE[ie, a] = x
+        VE[ie, a] = xd
+
+
+def workspace(K):
+    """Preallocated element arrays for assemble_ws (per element: coordinates, velocities, Me, Qe)."""
+    n_el, ne = K.el_idx.shape
+    return (np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
 
 
 @njit(cache=True)
 def assemble(K, c, q, v, t, u, M, Q):
-    """M (nq x nq) and Q (nq) at (q, v, t). Returns the smallest element stretch indicator:
-    -1 if an element has non-positive material length (vanishing span), else 0."""
+    """M (nq x nq) and Q (nq) at (q, v, t); see assemble_ws."""
+    n_el = K.el_idx.shape[0]
+    ne = K.el_idx.shape[1]
+    return assemble_ws(K, c, q, v, t, u, M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)),
+                       np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
+
+
+@njit(cache=True)
+def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
+    """M (nq x nq) and Q (nq) at (q, v, t), keeping every element's qe, ve, Me, Qe in the workspace.
+    Returns -1 if an element has non-positive material length (vanishing span), else 0."""
     nq = K.nq
     nd = K.nd
     ne = 2 * nd + 2
@@ -68,15 +83,11 @@ def assemble(K, c, q, v, t, u, M, Q):
         Q[i] = K.F0[i]
         for j in range(nq):
             M[i, j] = K.M0[i, j]
-    qe = np.empty(ne)
-    ve = np.empty(ne)
-    Me = np.empty((ne, ne))
-    Qe = np.empty(ne)
     status = 0
     for ie in range(K.el_idx.shape[0]):
-        gather(K, c, q, v, ie, qe, ve)
-        res = linear_element(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                             K.el_g[ie], K.el_C[ie], qe, ve, Me, Qe)
+        gather(K, c, q, v, ie, QE, VE)
+        res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                                K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
         if res[2] < 0.0:
             status = -1
             continue
@@ -85,9 +96,9 @@ def assemble(K, c, q, v, t, u, M, Q):
             for za in range(K.B_ptr[ra], K.B_ptr[ra + 1]):
                 ia = K.B_idx[za]
                 ba = K.B_val[za]
-                Q[ia] += ba * Qe[a]
+                Q[ia] += ba * QEs[ie, a]
                 for b in range(ne):
-                    mab = Me[a, b]
+                    mab = MEs[ie, a, b]
                     if mab == 0.0:
                         continue
                     rb = K.el_idx[ie, b]
@@ -110,14 +121,23 @@ def assemble(K, c, q, v, t, u, M, Q):
 @njit(cache=True)
 def outputs(K, c, q, v, qdd, q_ref, t, u, y):
     """Fill y with the outputs listed in K.out_* (see model.py)."""
+    n_el = K.el_idx.shape[0]
+    ne = K.el_idx.shape[1]
+    outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, np.empty((K.nq, K.nq)), np.empty(K.nq),
+               np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
+               True)
+
+
+@njit(cache=True)
+def outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, QE, VE, MEs, QEs, fresh):
+    """outputs() from one assembly pass whose element arrays serve every tension output. With
+    fresh = False the workspace of the last Newton residual is used as it is: that residual was
+    evaluated within the Newton tolerance of (q, v), which saves an assembly per output step."""
     nd = K.nd
     ne = 2 * nd + 2
-    qe = np.empty(ne)
-    ve = np.empty(ne)
     ae = np.empty(ne)
-    Me = np.empty((ne, ne))
-    Qe = np.empty(ne)
-    zero = np.zeros(K.nq)
+    if fresh:
+        assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs)
     n = K.out_kind.shape[0]
     for k in range(n):
         kind = K.out_kind[k]
@@ -132,13 +152,13 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
         elif kind == 2:
             y[k] = qdd[i] * s
         elif kind == 3:
-            gather(K, c, qdd, zero, i, ae, ve)  # ae = B qdd + c; c removed below
-            for a in range(ne):
-                ae[a] -= c[K.el_idx[i, a]]
-            gather(K, c, q, v, i, qe, ve)
-            linear_element(nd, K.el_rhoA[i], K.el_EA[i], K.el_nu[i], K.el_tonly[i] != 0,
-                           K.el_g[i], K.el_C[i], qe, ve, Me, Qe)
-            y[k] = end_tension(nd, K.el_rhoA[i], qe, ve, ae, Me, Qe, K.out_j[k])
+            for a in range(ne):   # element accelerations B qdd
+                row = K.el_idx[i, a]
+                x = 0.0
+                for z in range(K.B_ptr[row], K.B_ptr[row + 1]):
+                    x += K.B_val[z] * qdd[K.B_idx[z]]
+                ae[a] = x
+            y[k] = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
     for k in range(n):
         kind = K.out_kind[k]
         if kind == 4:
@@ -150,9 +170,6 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
         elif kind == 5:
             if K.drive_kind == 1:
                 # reaction of the prescribed sheave coordinate: tau = -R (M qdd - Q)_sigma
-                M = np.empty((K.nq, K.nq))
-                Q = np.empty(K.nq)
-                assemble(K, c, q, v, t, u, M, Q)
                 j = K.out_i[k]
                 r = -Q[j]
                 for m in range(K.nq):
@@ -180,16 +197,17 @@ def energy(K, c, q, v):
     U = 0.0
     for i in range(nq):
         Vg -= K.F0[i] * q[i]
-    qe = np.empty(ne)
-    ve = np.empty(ne)
-    Me = np.empty((ne, ne))
-    Qe = np.empty(ne)
+    n_el = K.el_idx.shape[0]
+    QE = np.empty((n_el, ne))
+    VE = np.empty((n_el, ne))
+    MEs = np.empty((n_el, ne, ne))
+    QEs = np.empty((n_el, ne))
     zero = np.zeros(nq)
-    for ie in range(K.el_idx.shape[0]):
-        gather(K, c, q, zero, ie, qe, ve)
-        l = qe[2 * nd + 1] - qe[2 * nd]
-        res = linear_element(nd, K.el_rhoA[ie], K.el_EA[ie], 0.0, K.el_tonly[ie] != 0,
-                             K.el_g[ie], K.el_C[ie], qe, ve, Me, Qe)
+    for ie in range(n_el):
+        gather(K, c, q, zero, ie, QE, VE)
+        l = QE[ie, 2 * nd + 1] - QE[ie, 2 * nd]
+        res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], 0.0, K.el_tonly[ie] != 0,
+                                K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
         U += l * res[3]
         Vg += res[4] - l * res[3]
     for k in range(K.spr_dof.shape[0]):
@@ -198,7 +216,7 @@ def energy(K, c, q, v):
     return T, Vg, U
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def set_prescribed(K, q_ref, t, q, v, qdd):
     """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile))."""
     if K.presc.shape[0] == 0:

@@ -21,25 +21,26 @@ import numpy as np
 from .._jit import njit
 
 
-@njit(cache=True)
-def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
-    """Fill Me (ne x ne) and Qe (ne) for one element; return (N_elastic, N_damping, lambda, w, V).
+@njit(cache=True, inline="always")
+def linear_element_at(nd, rhoA, EA, nu, tonly, G, C, QE, VE, MEs, QEs, ie):
+    """Fill MEs[ie] (ne x ne) and QEs[ie] (ne) for element ie from QE[ie], VE[ie] (indexing, not slicing:
+    views cost reference counting in the hot loop); return (N_elastic, N_damping, lambda, w, V).
 
-    g: gravity in local coordinates (nd); C: g.r_perp for 1D lines (0 otherwise); ne = 2 nd + 2.
+    G[ie]: gravity in local coordinates (nd); C: g.r_perp for 1D lines (0 otherwise); ne = 2 nd + 2.
     V is the element's potential energy (gravity + strain). Raises nothing: a non-positive material
     length returns lambda = -1 so the caller can stop with a clear event.
     """
     i1 = 2 * nd
     i2 = 2 * nd + 1
-    l = qe[i2] - qe[i1]
+    l = QE[ie, i2] - QE[ie, i1]
     if not l > 0.0:
         return 0.0, 0.0, -1.0, 0.0, 0.0
-    sd1 = ve[i1]
-    sd2 = ve[i2]
+    sd1 = VE[ie, i1]
+    sd2 = VE[ie, i2]
     ldot = sd2 - sd1
     dist2 = 0.0
     for k in range(nd):
-        dk = qe[nd + k] - qe[k]
+        dk = QE[ie, nd + k] - QE[ie, k]
         dist2 += dk * dk
     dist = math.sqrt(dist2)
     lam = dist / l
@@ -49,26 +50,26 @@ def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
     m = rhoA * l
     for a in range(2 * nd + 2):
         for b in range(2 * nd + 2):
-            Me[a, b] = 0.0
+            MEs[ie, a, b] = 0.0
     dd = lam * lam  # d.d
     for k in range(nd):
-        dk = (qe[nd + k] - qe[k]) * inv_l
-        Me[k, k] = m / 3.0
-        Me[nd + k, nd + k] = m / 3.0
-        Me[k, nd + k] = m / 6.0
-        Me[nd + k, k] = m / 6.0
-        Me[k, i1] = -m * dk / 3.0
-        Me[k, i2] = -m * dk / 6.0
-        Me[nd + k, i1] = -m * dk / 6.0
-        Me[nd + k, i2] = -m * dk / 3.0
-        Me[i1, k] = Me[k, i1]
-        Me[i2, k] = Me[k, i2]
-        Me[i1, nd + k] = Me[nd + k, i1]
-        Me[i2, nd + k] = Me[nd + k, i2]
-    Me[i1, i1] = m * dd / 3.0
-    Me[i2, i2] = m * dd / 3.0
-    Me[i1, i2] = m * dd / 6.0
-    Me[i2, i1] = m * dd / 6.0
+        dk = (QE[ie, nd + k] - QE[ie, k]) * inv_l
+        MEs[ie, k, k] = m / 3.0
+        MEs[ie, nd + k, nd + k] = m / 3.0
+        MEs[ie, k, nd + k] = m / 6.0
+        MEs[ie, nd + k, k] = m / 6.0
+        MEs[ie, k, i1] = -m * dk / 3.0
+        MEs[ie, k, i2] = -m * dk / 6.0
+        MEs[ie, nd + k, i1] = -m * dk / 6.0
+        MEs[ie, nd + k, i2] = -m * dk / 3.0
+        MEs[ie, i1, k] = MEs[ie, k, i1]
+        MEs[ie, i2, k] = MEs[ie, k, i2]
+        MEs[ie, i1, nd + k] = MEs[ie, nd + k, i1]
+        MEs[ie, i2, nd + k] = MEs[ie, nd + k, i2]
+    MEs[ie, i1, i1] = m * dd / 3.0
+    MEs[ie, i2, i2] = m * dd / 3.0
+    MEs[ie, i1, i2] = m * dd / 6.0
+    MEs[ie, i2, i1] = m * dd / 6.0
 
     # --- quadratic-velocity vector, Lagrange form -------------------------------------------
     c3 = m / 3.0
@@ -82,22 +83,22 @@ def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
     gm = C       # g . (r1 + r2)/2 (+ C)
     rel = 0.0    # t . (rdot2 - rdot1)
     for k in range(nd):
-        dk = (qe[nd + k] - qe[k]) * inv_l
-        ddk = (ve[nd + k] - ve[k] - dk * ldot) * inv_l
-        rAk = ve[k] - dk * sd1
-        rBk = ve[nd + k] - dk * sd2
+        dk = (QE[ie, nd + k] - QE[ie, k]) * inv_l
+        ddk = (VE[ie, nd + k] - VE[ie, k] - dk * ldot) * inv_l
+        rAk = VE[ie, k] - dk * sd1
+        rBk = VE[ie, nd + k] - dk * sd2
         d_dd += dk * ddk
         d_rA += dk * rAk
         d_rB += dk * rBk
         rA2 += rAk * rAk
         rB2 += rBk * rBk
-        Qe[k] = c3 * ddk * w1 + rhoA * rAk * sd1 + 0.5 * m * g[k]
-        Qe[nd + k] = c3 * ddk * w2 - rhoA * rBk * sd2 + 0.5 * m * g[k]
-        gm += 0.5 * g[k] * (qe[k] + qe[nd + k])
+        QEs[ie, k] = c3 * ddk * w1 + rhoA * rAk * sd1 + 0.5 * m * G[ie, k]
+        QEs[ie, nd + k] = c3 * ddk * w2 - rhoA * rBk * sd2 + 0.5 * m * G[ie, k]
+        gm += 0.5 * G[ie, k] * (QE[ie, k] + QE[ie, nd + k])
         if dist > 0.0:
-            rel += (qe[nd + k] - qe[k]) / dist * (ve[nd + k] - ve[k])
-    Qe[i1] = -c3 * d_dd * w1 + rhoA * (-sd1 * d_rA - 0.5 * rA2) - rhoA * gm
-    Qe[i2] = -c3 * d_dd * w2 + rhoA * (sd2 * d_rB + 0.5 * rB2) + rhoA * gm
+            rel += (QE[ie, nd + k] - QE[ie, k]) / dist * (VE[ie, nd + k] - VE[ie, k])
+    QEs[ie, i1] = -c3 * d_dd * w1 + rhoA * (-sd1 * d_rA - 0.5 * rA2) - rhoA * gm
+    QEs[ie, i2] = -c3 * d_dd * w2 + rhoA * (sd2 * d_rB + 0.5 * rB2) + rhoA * gm
 
     # --- axial elastic and Kelvin-Voigt forces ----------------------------------------------
     eps = lam - 1.0
@@ -115,42 +116,56 @@ def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
     Ntot = N + Nd
     if dist > 0.0:
         for k in range(nd):
-            tk = (qe[nd + k] - qe[k]) / dist
-            Qe[k] += Ntot * tk
-            Qe[nd + k] -= Ntot * tk
+            tk = (QE[ie, nd + k] - QE[ie, k]) / dist
+            QEs[ie, k] += Ntot * tk
+            QEs[ie, nd + k] -= Ntot * tk
     esh = N * lam - w + Nd * lam   # Eshelby (configurational) force, + damping part
-    Qe[i1] -= esh
-    Qe[i2] += esh
+    QEs[ie, i1] -= esh
+    QEs[ie, i2] += esh
     V = l * w - m * gm
     return N, Nd, lam, w, V
 
 
 @njit(cache=True)
-def end_tension(nd, rhoA, qe, ve, ae, Me, Qe, end):
+def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
+    """One element from plain arrays (tests, tools); see linear_element_at."""
+    ne = 2 * nd + 2
+    QE = qe.reshape((1, ne)).copy()
+    VE = ve.reshape((1, ne)).copy()
+    MEs = np.empty((1, ne, ne))
+    QEs = np.empty((1, ne))
+    res = linear_element_at(nd, rhoA, EA, nu, tonly, g.reshape((1, nd)), C, QE, VE, MEs, QEs, 0)
+    Me[:, :] = MEs[0]
+    Qe[:] = QEs[0]
+    return res
+
+
+@njit(cache=True, inline="always")
+def end_tension(nd, rhoA, QE, VE, ae, MEs, QEs, ie, end):
     """Rope force at an element end (end = 0: node 1, 1: node 2), from the element's consistent nodal
     force minus inertia and minus the convective momentum flux rhoA rdot s_dot (which the support
     takes, not the rope). Exact static end tensions for a hanging span, see tests."""
     i1 = 2 * nd
     i2 = 2 * nd + 1
-    l = qe[i2] - qe[i1]
+    l = QE[ie, i2] - QE[ie, i1]
     dist2 = 0.0
     for k in range(nd):
-        dk = qe[nd + k] - qe[k]
+        dk = QE[ie, nd + k] - QE[ie, k]
         dist2 += dk * dk
     dist = math.sqrt(dist2)
     if dist <= 0.0 or l <= 0.0:
         return 0.0
     ne = 2 * nd + 2
     off = 0 if end == 0 else nd
-    sdot = ve[i1] if end == 0 else ve[i2]
+    sdot = VE[ie, i1] if end == 0 else VE[ie, i2]
     T = 0.0
     for k in range(nd):
-        tk = (qe[nd + k] - qe[k]) / dist
-        f = Qe[off + k]
+        tk = (QE[ie, nd + k] - QE[ie, k]) / dist
+        f = QEs[ie, off + k]
         for b in range(ne):
-            f -= Me[off + k, b] * ae[b]
-        dk = (qe[nd + k] - qe[k]) / l
-        rdot_mat = ve[off + k] - dk * sdot
+            f -= MEs[ie, off + k, b] * ae[b]
+        dk = (QE[ie, nd + k] - QE[ie, k]) / l
+        rdot_mat = VE[ie, off + k] - dk * sdot
         if end == 0:
             f -= rhoA * rdot_mat * sdot
             T += tk * f
