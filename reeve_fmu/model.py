@@ -40,12 +40,14 @@ Kernel = namedtuple("Kernel", [
     "spr_dof", "spr_k", "spr_c",
     "drum_dof", "drum_rhoA", "drum_sign",
     "mot_dof", "mot_R", "drive_kind", "torque_table",
+    "brake_T", "brake_wreg", "brake_tau",
     "free", "presc", "presc_gain", "profile",
     "out_kind", "out_i", "out_j", "out_scale",
 ])
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
-OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL = range(7)
+OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE = range(8)
+INFO_SIZE = 8   # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z, -]
 
 
 @dataclass
@@ -58,10 +60,10 @@ class State:
     qdd: np.ndarray      # accelerations
     c: np.ndarray        # constant part of p = B q + c (holds the rope lengths)
     q_ref: np.ndarray    # q at t0 (angle zero, prescribed-motion offsets)
-    u: np.ndarray        # inputs held over the step (motor torque, brake command)
+    u: np.ndarray        # inputs held over the step: [motor torque, brake command (1 = release)]
     jac: np.ndarray      # LU factors of the Newton matrix (reused across steps)
     piv: np.ndarray      # LU pivots
-    info: np.ndarray     # [h of jac (0 = none), steps, newton iterations, jacobian updates, status]
+    info: np.ndarray     # see INFO_SIZE: solver counters, status and the brake engagement
 
     def copy(self) -> "State":
         return State(self.t, *(getattr(self, f).copy() for f in
@@ -465,6 +467,9 @@ def _build(scene: Scene) -> Model:
         out("motor.angle", OUT_QREL, mot_dof, 0, -1.0 / mot_R)
         out("motor.speed", OUT_V, mot_dof, 0, -1.0 / mot_R)
         out("motor.torque", OUT_TORQUE, mot_dof, 0, mot_R)
+    if scene.brake.torque > 0 and dv.kind in ("torque", "external"):
+        out("brake.torque", OUT_BRAKE, mot_dof, 0, mot_R)
+        out("brake.engaged", OUT_BRAKE, mot_dof, 1, 1.0)
 
     K = Kernel(
         nd=nd, nq=nq,
@@ -479,6 +484,9 @@ def _build(scene: Scene) -> Model:
         drum_dof=np.array([d[0] for d in drums], np.int64), drum_rhoA=np.array([d[1] for d in drums], float),
         drum_sign=np.array([d[2] for d in drums], float),
         mot_dof=mot_dof, mot_R=float(mot_R), drive_kind=drive_kind, torque_table=torque_table,
+        brake_T=float(scene.brake.torque) if dv.kind in ("torque", "external") else 0.0,
+        brake_wreg=float(scene.brake.stick_angle),
+        brake_tau=float(scene.brake.engage_time),
         free=np.array(free, np.int64), presc=np.array(presc, np.int64),
         presc_gain=np.array(presc_gain, float), profile=profile.arrays,
         out_kind=np.array(ok, np.int64), out_i=np.array(oi, np.int64), out_j=np.array(oj, np.int64),
@@ -504,7 +512,7 @@ def _build(scene: Scene) -> Model:
     else:
         unknowns = [("q", j) for j in eqs]
 
-    inputs = ("motor.torque",) if dv.kind == "external" else ()
+    inputs = ("motor.torque", "brake.command") if dv.kind == "external" else ()
     return Model(scene=scene, nd=nd, K=K, q_names=tuple(q_names), q_kind=tuple(q_kind),
                  q0=np.array(q0, float), B=B, Bpar=Bpar, c0=c0, par0=par0,
                  output_names=tuple(out_names), input_names=inputs, sheave_dof=sheave_dof,
@@ -529,6 +537,10 @@ def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     par = model.par0 if par is None else np.asarray(par, float)
     c = model.c0 + model.Bpar @ par
     nf = len(model.K.free)
+    info = np.zeros(INFO_SIZE)
+    brake = model.scene.brake
+    info[5] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
+    u = np.zeros(2)
+    u[1] = 0.0 if info[5] > 0 else 1.0
     return State(t=float(t), q=q, v=np.zeros(nq), a=np.zeros(nq), qdd=np.zeros(nq), c=c,
-                 q_ref=q.copy(), u=np.zeros(max(len(model.input_names), 1)),
-                 jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=np.zeros(5))
+                 q_ref=q.copy(), u=u, jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=info)

@@ -87,6 +87,18 @@ class Drive:
 
 
 @dataclass(frozen=True)
+class Brake:
+    """Spring-applied machine brake on the driven sheave (domain.md §2.4), elasto-plastic friction:
+    a stiff torsional spring (deflection z) whose torque is clipped at the capacity e*T; when it is
+    clipped the brake slips at the full torque. It holds a load without creep and stays piecewise
+    linear for Newton. e in [0, 1] follows the command with a first-order lag."""
+    torque: float = 0.0              # N m, total (all circuits)
+    stick_angle: float = 1e-4        # rad, spring deflection at full torque (stiffness T/angle)
+    engage_time: float = 0.02        # s, lag of the engagement
+    initially_applied: bool = True
+
+
+@dataclass(frozen=True)
 class Solver:
     method: str = "gen-alpha"        # gen-alpha | radau | dop853
     step: float = 1e-3               # s, internal step (gen-alpha)
@@ -106,6 +118,7 @@ class Scene:
     ropes: tuple
     drive: Drive
     solver: Solver
+    brake: Brake = Brake()
     statics: str = "positions"       # positions | rope-length | none
     t_end: float = 10.0              # s, default simulation end
     output_step: float = 1e-3        # s
@@ -128,9 +141,10 @@ SCHEMA_KEYS = {
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
               "table", "torque", "motor_inertia"},
+    "brake": {"torque", "stick_angle", "engage_time", "initially_applied"},
 }
-TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive"}
-EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "buffers", "brake", "traction"}
+TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive", "brake"}
+EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "buffers", "traction"}
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -392,10 +406,18 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     if kind == "torque" and not drive.torque:
         r.fail("drive.torque", "missing: drive.kind = 'torque' needs a [[t, tau], ...] torque table")
 
+    bk = r.table(data.get("brake", {}), "brake", SCHEMA_KEYS["brake"])
+    brake = Brake(torque=r.number(bk, "brake", "torque", 0.0, nonneg=True),
+                  stick_angle=r.number(bk, "brake", "stick_angle", 1e-4, positive=True),
+                  engage_time=r.number(bk, "brake", "engage_time", 0.02, positive=True),
+                  initially_applied=r.boolean(bk, "brake", "initially_applied", True))
+    if brake.torque > 0 and kind == "none":
+        r.fail("brake", "a brake acts on the driven sheave: give a [drive] with kind and sheave")
+
     extra = {k: data[k] for k in EXTRA_SECTIONS if k in data}
     return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
                  bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
-                 solver=solver, statics=statics, t_end=t_end, output_step=output_step, source=source,
+                 solver=solver, brake=brake, statics=statics, t_end=t_end, output_step=output_step, source=source,
                  description=r.string(sc, "scene", "description", ""), extra=extra)
 
 

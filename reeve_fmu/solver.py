@@ -23,7 +23,8 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .system import assemble, assemble_ws, energy, outputs, outputs_ws, set_prescribed
+from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
+                     set_prescribed)
 
 
 class SolverError(RuntimeError):
@@ -140,10 +141,21 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
     ws = (np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
+    # kernel inputs: [motor torque, brake engagement]; the engagement follows the command
+    # (u[1] = 1: release) with a first-order lag, integrated exactly over each step
+    ue = np.empty(4)
+    ue[0] = u[0]
+    target = 0.0 if u[1] >= 0.5 else 1.0
+    decay = math.exp(-h / K.brake_tau) if K.brake_tau > 0.0 else 0.0
     t = t0
     row = 0
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
+        e_old = info[5]
+        info[5] = target + (info[5] - target) * decay
+        ue[1] = info[5]
+        ue[2] = info[6]
+        ue[3] = q[K.mot_dof] if K.mot_dof >= 0 else 0.0
         qo[:] = q
         vo[:] = v
         ao[:] = a
@@ -152,16 +164,19 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
         for k in range(K.presc.shape[0]):
             a[K.presc[k]] = qdd[K.presc[k]]
         converged = False
-        for attempt in range(3):
-            # predictor: constant acceleration
-            for fi in range(nf):
-                qdd[K.free[fi]] = qddo[K.free[fi]]
-            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        for attempt in range(4):
+            if attempt == 0 or attempt == 3:
+                # predictor: constant acceleration (retries 1-2 go on from the last iterate with a
+                # Newton matrix rebuilt there: that crosses kinks such as brake stick -> slip)
+                for fi in range(nf):
+                    qdd[K.free[fi]] = qddo[K.free[fi]]
+                _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
             if info[0] != h or attempt > 0:
                 # finite-difference Newton matrix d r / d qdd_free (q, v follow through Newmark)
-                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r0, ws)
+                st = _residual(K, c, q, v, qdd, t1, ue, M, Q, r0, ws)
                 if st < 0:
                     info[4] = 2
+                    info[5] = e_old
                     q[:] = qo
                     v[:] = vo
                     a[:] = ao
@@ -169,12 +184,12 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     return 2, t, step
                 for fj in range(nf):
                     j = K.free[fj]
-                    dq = 1e-8 * (1.0 + abs(q[j]))
+                    dq = 1e-10 * (1.0 + abs(q[j]))   # small: the velocity change must stay inside stiff bands (brake)
                     dx = dq / bq
                     qdd[j] += dx
                     q[j] += bq * dx
                     v[j] += gv * dx
-                    _residual(K, c, q, v, qdd, t1, u, M, Q, r, ws)
+                    _residual(K, c, q, v, qdd, t1, ue, M, Q, r, ws)
                     for fi in range(nf):
                         jac[fi, fj] = (r[fi] - r0[fi]) / dx
                     qdd[j] -= dx
@@ -187,9 +202,10 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     continue
                 info[0] = h
             for it in range(maxit):
-                st = _residual(K, c, q, v, qdd, t1, u, M, Q, r, ws)
+                st = _residual(K, c, q, v, qdd, t1, ue, M, Q, r, ws)
                 if st < 0:
                     info[4] = 2
+                    info[5] = e_old
                     q[:] = qo
                     v[:] = vo
                     a[:] = ao
@@ -226,6 +242,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
             v[:] = vo
             a[:] = ao
             qdd[:] = qddo
+            info[5] = e_old
             bad = False
             for i in range(nq):
                 if not (qdd[i] == qdd[i]):
@@ -234,8 +251,10 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
             return int(info[4]), t, step
         t = t1
         info[1] += 1
+        if K.brake_T > 0.0:
+            info[6] = brake_deflection(K, q, ue)
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, ws[0], ws[1], ws[2], ws[3], False)
+            outputs_ws(K, c, q, v, qdd, q_ref, t, ue, y, M, Q, ws[0], ws[1], ws[2], ws[3], False)
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]
@@ -298,6 +317,15 @@ class Simulator:
         if mode != "none":
             st = self._statics(st, mode)
         st.q_ref[:] = st.q
+        K = m.K
+        if K.brake_T > 0.0 and st.info[5] > 0.0:
+            # the applied brake carries the static load: preload its spring (no start transient)
+            M = np.empty((m.nq, m.nq))
+            Q = np.empty(m.nq)
+            assemble(K, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
+            tau_hold = Q[K.mot_dof] * K.mot_R          # brake torque needed (Q_sigma = -tau/R)
+            zmax = st.info[5] * K.brake_wreg
+            st.info[6] = float(np.clip(-tau_hold / (K.brake_T / K.brake_wreg), -zmax, zmax))
         self._consistent_acceleration(st)
         return st
 
@@ -316,7 +344,7 @@ class Simulator:
         M = np.empty((nq, nq))
         Q = np.empty(nq)
         zero = np.zeros(nq)
-        u = np.zeros(max(len(m.input_names), 1))
+        u = self.kernel_inputs(st)
 
         def resid(x):
             qq, pp = q.copy(), par.copy()
@@ -373,7 +401,7 @@ class Simulator:
         M = np.empty((m.nq, m.nq))
         Q = np.empty(m.nq)
         set_prescribed(K, st.q_ref, st.t, st.q, st.v, st.qdd)
-        assemble(K, st.c, st.q, st.v, st.t, st.u, M, Q)
+        assemble(K, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
         f, p = K.free, K.presc
         rhs = Q[f] - M[np.ix_(f, p)] @ st.qdd[p]
         st.qdd[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)
@@ -384,7 +412,10 @@ class Simulator:
         """Advance st (in place) to t_end with inputs u held constant. With out_dt, return a Result
         sampled every out_dt (the step is shortened to divide out_dt). Raises SolverError."""
         if u is not None:
-            st.u[:len(u)] = u
+            u = np.asarray(u, float)
+            if u.shape[0] > st.u.shape[0] or not np.all(np.isfinite(u)):
+                raise ValueError(f"inputs must be {st.u.shape[0]} finite numbers, got {u.tolist()}")
+            st.u[:u.shape[0]] = u
         span = t_end - st.t
         if span <= 0:
             if span < -1e-12:
@@ -430,7 +461,7 @@ class Simulator:
             q[f] = y[:len(f)]
             v[f] = y[len(f):]
             set_prescribed(K, st.q_ref, t, q, v, qdd)
-            if assemble(K, st.c, q, v, t, st.u, M, Q) < 0:
+            if assemble(K, st.c, q, v, t, self.kernel_inputs(st), M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
             return np.concatenate([v[f], acc])
@@ -470,9 +501,20 @@ class Simulator:
         self._consistent_acceleration(st)
 
     # ------------------------------------------------------------------ queries
+    @staticmethod
+    def kernel_inputs(st: State) -> np.ndarray:
+        """[motor torque, brake engagement, brake deflection, sigma of the brake at step start]."""
+        return np.array([st.u[0], st.info[5], st.info[6], 0.0])
+
+    def _kernel_inputs_at(self, st: State) -> np.ndarray:
+        ue = self.kernel_inputs(st)
+        if self.model.K.mot_dof >= 0:
+            ue[3] = st.q[self.model.K.mot_dof]
+        return ue
+
     def outputs(self, st: State) -> np.ndarray:
         y = np.empty(len(self.model.output_names))
-        outputs(self.model.K, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, st.u, y)
+        outputs(self.model.K, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self._kernel_inputs_at(st), y)
         return y
 
     def energy(self, st: State):

@@ -35,6 +35,30 @@ def _interp(table, t):
 
 
 @njit(cache=True, inline="always")
+def brake_deflection(K, q, u):
+    """Elasto-plastic brake: spring deflection z (rad) after moving from the step's start angle,
+    clipped at the capacity. Kernel inputs u = [motor torque, engagement e, z at step start,
+    sigma at step start]."""
+    zmax = u[1] * K.brake_wreg
+    z = u[2] - (q[K.mot_dof] - u[3]) / K.mot_R
+    if z > zmax:
+        return zmax
+    if z < -zmax:
+        return -zmax
+    return z
+
+
+@njit(cache=True, inline="always")
+def brake_torque(K, q, v, u):
+    """Brake torque on the sheave angle (positive = drives the rope along the route)."""
+    if u[1] <= 0.0:
+        return 0.0
+    z = brake_deflection(K, q, u)
+    k = K.brake_T / K.brake_wreg
+    return -k * z
+
+
+@njit(cache=True, inline="always")
 def drive_torque(K, t, u):
     if K.drive_kind == 2:
         return _interp(K.torque_table, t)
@@ -115,6 +139,8 @@ def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] -= drive_torque(K, t, u) / K.mot_R
+    if K.brake_T > 0.0 and K.mot_dof >= 0:
+        Q[K.mot_dof] -= brake_torque(K, q, v, u) / K.mot_R
     return status
 
 
@@ -177,6 +203,8 @@ def outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, QE, VE, MEs, QEs, fresh):
                 y[k] = -K.out_scale[k] * r
             else:
                 y[k] = drive_torque(K, t, u)
+        elif kind == 7:
+            y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[1]
 
 
 @njit(cache=True)

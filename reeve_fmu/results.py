@@ -1,0 +1,57 @@
+"""Writing results: CSV with the documented output names, and overview plots."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def write_csv(path, time, columns: dict):
+    """CSV with a `time` column first, then the named columns (SI units, '%.10g')."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = list(columns)
+    data = np.column_stack([np.asarray(time, float)] + [np.asarray(columns[n], float) for n in names])
+    header = ",".join(["time"] + names)
+    np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
+    return path
+
+
+def read_csv(path) -> dict:
+    data = np.genfromtxt(path, delimiter=",", names=True, deletechars="", dtype=float)
+    return {n: np.asarray(data[n]) for n in data.dtype.names}
+
+
+def plot_overview(path, time, columns: dict, title: str = ""):
+    """Body motion, sheave tensions and traction ratio, motor torque: one PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = [
+        ("position [m]", [n for n in columns if ".position" in n]),
+        ("velocity [m/s]", [n for n in columns if ".velocity" in n]),
+        ("acceleration [m/s²]", [n for n in columns if ".acceleration" in n]),
+        ("rope tension [N]", [n for n in columns if ".tension_" in n and not n.startswith(tuple(
+            r for r in []))]),
+        ("traction ratio [-]", [n for n in columns if n.endswith(".traction_ratio")]),
+        ("motor torque [N·m]", [n for n in columns if n == "motor.torque"]),
+    ]
+    groups = [(lab, names) for lab, names in groups if names]
+    fig, axes = plt.subplots(len(groups), 1, figsize=(10, 2.3 * len(groups)), sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, (lab, names) in zip(axes, groups):
+        for n in names:
+            y = np.asarray(columns[n], float)
+            ax.plot(time, np.where(np.isfinite(y), y, np.nan), lw=0.9, label=n)
+        ax.set_ylabel(lab)
+        ax.grid(True, alpha=0.3)
+        if len(names) <= 8:
+            ax.legend(fontsize=7, loc="best")
+    axes[-1].set_xlabel("time [s]")
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
