@@ -1,0 +1,32 @@
+"""`reeve-fmu simulate` writes the documented columns; bad input exits 2 with the file and key."""
+from pathlib import Path
+
+import numpy as np
+
+from reeve_fmu.cli import main
+from reeve_fmu.results import read_csv
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_simulate_writes_csv_and_png(tmp_path):
+    rc = main(["simulate", str(ROOT / "scenes" / "elevator_2to1.toml"), "--t-end", "1.0", "--dt", "0.01",
+               "--out", str(tmp_path)])
+    assert rc == 0
+    cols = read_csv(tmp_path / "results.csv")
+    for name in ("time", "car.position", "car.velocity", "car.acceleration", "counterweight.position",
+                 "traction.angle", "traction.speed", "traction.tension_in", "traction.tension_out",
+                 "traction.traction_ratio", "motor.torque"):
+        assert name in cols, name
+    assert len(cols["time"]) == 101
+    assert np.allclose(np.diff(cols["time"]), 0.01)
+    assert (tmp_path / "results.png").stat().st_size > 10_000
+
+
+def test_simulate_bad_scene_exit_code(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((ROOT / "scenes" / "hanging_rope.toml").read_text().replace("EA = 2.9e6", "EA = 0"))
+    rc = main(["simulate", str(bad), "--out", str(tmp_path)])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "[ropes[0].EA]" in err and "must be > 0" in err
