@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from ._jit import njit
-from .elements.linear import end_tension, linear_element, linear_element_at
+from .elements.linear import end_tension, linear_element, linear_element_1d_at, linear_element_at
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
@@ -110,8 +110,12 @@ def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
     status = 0
     for ie in range(K.el_idx.shape[0]):
         gather(K, c, q, v, ie, QE, VE)
-        res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                                K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
+        if nd == 1:
+            res = linear_element_1d_at(K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                                       K.el_g[ie, 0], K.el_C[ie], QE, VE, MEs, QEs, ie)
+        else:
+            res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                                    K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
         if res[2] < 0.0:
             status = -1
             continue
@@ -123,8 +127,6 @@ def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
                 Q[ia] += ba * QEs[ie, a]
                 for b in range(ne):
                     mab = MEs[ie, a, b]
-                    if mab == 0.0:
-                        continue
                     rb = K.el_idx[ie, b]
                     for zb in range(K.B_ptr[rb], K.B_ptr[rb + 1]):
                         M[ia, K.B_idx[zb]] += ba * K.B_val[zb] * mab

@@ -126,6 +126,69 @@ def linear_element_at(nd, rhoA, EA, nu, tonly, G, C, QE, VE, MEs, QEs, ie):
     return N, Nd, lam, w, V
 
 
+@njit(cache=True, inline="always")
+def linear_element_1d_at(rhoA, EA, nu, tonly, g, C, QE, VE, MEs, QEs, ie):
+    """linear_element_at for nd = 1 in scalar form (same formulas, no loops): the 1D model is the
+    workhorse of trip simulations, and this path is about twice as fast."""
+    x1 = QE[ie, 0]
+    x2 = QE[ie, 1]
+    l = QE[ie, 3] - QE[ie, 2]
+    if not l > 0.0:
+        return 0.0, 0.0, -1.0, 0.0, 0.0
+    v1 = VE[ie, 0]
+    v2 = VE[ie, 1]
+    sd1 = VE[ie, 2]
+    sd2 = VE[ie, 3]
+    inv_l = 1.0 / l
+    D = x2 - x1
+    dist = abs(D)
+    t = 1.0 if D > 0.0 else (-1.0 if D < 0.0 else 0.0)
+    d = D * inv_l
+    lam = dist * inv_l
+    m = rhoA * l
+    m3 = m / 3.0
+    m6 = m / 6.0
+    MEs[ie, 0, 0] = m3
+    MEs[ie, 1, 1] = m3
+    MEs[ie, 0, 1] = m6
+    MEs[ie, 1, 0] = m6
+    MEs[ie, 0, 2] = MEs[ie, 2, 0] = -m3 * d
+    MEs[ie, 0, 3] = MEs[ie, 3, 0] = -m6 * d
+    MEs[ie, 1, 2] = MEs[ie, 2, 1] = -m6 * d
+    MEs[ie, 1, 3] = MEs[ie, 3, 1] = -m3 * d
+    MEs[ie, 2, 2] = MEs[ie, 3, 3] = m3 * d * d
+    MEs[ie, 2, 3] = MEs[ie, 3, 2] = m6 * d * d
+    ldot = sd2 - sd1
+    dd = (v2 - v1 - d * ldot) * inv_l
+    rA = v1 - d * sd1
+    rB = v2 - d * sd2
+    w1 = 2.0 * sd1 + sd2
+    w2 = sd1 + 2.0 * sd2
+    gm = C + 0.5 * g * (x1 + x2)
+    q0 = m3 * dd * w1 + rhoA * rA * sd1 + 0.5 * m * g
+    q1 = m3 * dd * w2 - rhoA * rB * sd2 + 0.5 * m * g
+    q2 = -m3 * d * dd * w1 + rhoA * (-sd1 * d * rA - 0.5 * rA * rA) - rhoA * gm
+    q3 = -m3 * d * dd * w2 + rhoA * (sd2 * d * rB + 0.5 * rB * rB) + rhoA * gm
+    eps = lam - 1.0
+    if tonly and eps <= 0.0:
+        N = 0.0
+        w = 0.0
+        Nd = 0.0
+    else:
+        N = EA * eps
+        w = 0.5 * EA * eps * eps
+        Nd = EA * nu * (t * (v2 - v1) - lam * ldot) * inv_l
+        if tonly and N + Nd < 0.0:
+            Nd = -N
+    Nt = (N + Nd) * t
+    esh = N * lam - w + Nd * lam
+    QEs[ie, 0] = q0 + Nt
+    QEs[ie, 1] = q1 - Nt
+    QEs[ie, 2] = q2 - esh
+    QEs[ie, 3] = q3 + esh
+    return N, Nd, lam, w, l * w - m * gm
+
+
 @njit(cache=True)
 def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
     """One element from plain arrays (tests, tools); see linear_element_at."""
