@@ -35,7 +35,7 @@ from .scene import AXES, Scene, SceneError
 Kernel = namedtuple("Kernel", [
     "nd", "nq",
     "B_ptr", "B_idx", "B_val",
-    "el_idx", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
+    "el_idx", "el_map", "el_coef", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
     "M0", "F0",
     "spr_dof", "spr_k", "spr_c",
     "drum_dof", "drum_rhoA", "drum_sign",
@@ -99,6 +99,7 @@ class Model:
     input_names: tuple
     sheave_dof: dict         # sheave name -> q index
     body_dofs: dict          # body name -> {axis: q index}
+    KJ: object               # the same arrays for the compiled kernels (kernel.py)
     ropes: tuple             # per rope: dict(name, s_nodes, wraps, drums) for bookkeeping
     statics_unknowns: tuple  # ('q', i) or ('par', j)
     statics_equations: tuple # q indices
@@ -398,6 +399,17 @@ def _build(scene: Scene) -> Model:
             el_g[ie] = g
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in elements]
 
+    # fixed-width element -> q maps (every p row of B has at most a few non-zeros): the hot gather
+    # and scatter loops then have a constant trip count instead of CSR indirection
+    width = max(1, max((int(np.count_nonzero(B[row])) for row in el_idx.ravel()), default=1))
+    el_map = np.zeros(el_idx.shape + (width,), np.int64)
+    el_coef = np.zeros(el_idx.shape + (width,))
+    for ie in range(el_idx.shape[0]):
+        for a in range(el_idx.shape[1]):
+            nz = np.nonzero(B[el_idx[ie, a]])[0]
+            el_map[ie, a, :len(nz)] = nz
+            el_coef[ie, a, :len(nz)] = B[el_idx[ie, a], nz]
+
     # CSR of B
     ptr, idx, val = [0], [], []
     for row in range(n_p):
@@ -474,7 +486,7 @@ def _build(scene: Scene) -> Model:
     K = Kernel(
         nd=nd, nq=nq,
         B_ptr=np.array(ptr, np.int64), B_idx=np.array(idx, np.int64), B_val=np.array(val, float),
-        el_idx=el_idx, el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
+        el_idx=el_idx, el_map=el_map, el_coef=el_coef, el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
         el_EA=np.array([r.EA * r.count for r in rope_of_el], float),
         el_nu=np.array([r.damping for r in rope_of_el], float),
         el_tonly=np.array([int(r.tension_only) for r in rope_of_el], np.int64),
@@ -513,7 +525,8 @@ def _build(scene: Scene) -> Model:
         unknowns = [("q", j) for j in eqs]
 
     inputs = ("motor.torque", "brake.command") if dv.kind == "external" else ()
-    return Model(scene=scene, nd=nd, K=K, q_names=tuple(q_names), q_kind=tuple(q_kind),
+    from .kernel import compiled_kernel   # kernel.py builds on this module's Kernel
+    return Model(scene=scene, nd=nd, K=K, KJ=compiled_kernel(K), q_names=tuple(q_names), q_kind=tuple(q_kind),
                  q0=np.array(q0, float), B=B, Bpar=Bpar, c0=c0, par0=par0,
                  output_names=tuple(out_names), input_names=inputs, sheave_dof=sheave_dof,
                  body_dofs=body_dofs, ropes=tuple(rope_info), statics_unknowns=tuple(unknowns),

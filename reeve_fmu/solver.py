@@ -322,7 +322,7 @@ class Simulator:
             # the applied brake carries the static load: preload its spring (no start transient)
             M = np.empty((m.nq, m.nq))
             Q = np.empty(m.nq)
-            assemble(K, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
+            assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
             tau_hold = Q[K.mot_dof] * K.mot_R          # brake torque needed (Q_sigma = -tau/R)
             zmax = st.info[5] * K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / (K.brake_T / K.brake_wreg), -zmax, zmax))
@@ -354,7 +354,7 @@ class Simulator:
                 else:
                     pp[i] = xi
             c = m.c0 + m.Bpar @ pp
-            status = assemble(K, c, qq, zero, st.t, u, M, Q)
+            status = assemble(m.KJ, c, qq, zero, st.t, u, M, Q)
             if status < 0:
                 return None, qq, pp, c
             return Q[eqs].copy(), qq, pp, c
@@ -400,8 +400,8 @@ class Simulator:
         K = m.K
         M = np.empty((m.nq, m.nq))
         Q = np.empty(m.nq)
-        set_prescribed(K, st.q_ref, st.t, st.q, st.v, st.qdd)
-        assemble(K, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
+        set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
+        assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
         f, p = K.free, K.presc
         rhs = Q[f] - M[np.ix_(f, p)] @ st.qdd[p]
         st.qdd[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)
@@ -436,7 +436,7 @@ class Simulator:
             h = span / n
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
-        status, t, done = integrate(self.model.K, st.c, st.q_ref, st.q, st.v, st.a, st.qdd, t0, h, n,
+        status, t, done = integrate(self.model.KJ, st.c, st.q_ref, st.q, st.v, st.a, st.qdd, t0, h, n,
                                     st.u, st.jac, st.piv, st.info, self.params, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
@@ -460,8 +460,8 @@ class Simulator:
             qdd = np.zeros(nq)
             q[f] = y[:len(f)]
             v[f] = y[len(f):]
-            set_prescribed(K, st.q_ref, t, q, v, qdd)
-            if assemble(K, st.c, q, v, t, self.kernel_inputs(st), M, Q) < 0:
+            set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
+            if assemble(m.KJ, st.c, q, v, t, self.kernel_inputs(st), M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
             return np.concatenate([v[f], acc])
@@ -514,12 +514,12 @@ class Simulator:
 
     def outputs(self, st: State) -> np.ndarray:
         y = np.empty(len(self.model.output_names))
-        outputs(self.model.K, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self._kernel_inputs_at(st), y)
+        outputs(self.model.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self._kernel_inputs_at(st), y)
         return y
 
     def energy(self, st: State):
         """(kinetic, gravity, strain) energy [J]."""
-        return energy(self.model.K, st.c, st.q, st.v)
+        return energy(self.model.KJ, st.c, st.q, st.v)
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,
             progress=None) -> Result:

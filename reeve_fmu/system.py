@@ -69,14 +69,19 @@ def drive_torque(K, t, u):
 
 @njit(cache=True, inline="always")
 def gather(K, c, q, v, ie, QE, VE):
-    """Element coordinates QE[ie] and velocities VE[ie] from q, v through the CSR rows of B."""
-    for a in range(K.el_idx.shape[1]):
-        row = K.el_idx[ie, a]
-        x = c[row]
+    """Element coordinates QE[ie] and velocities VE[ie] from q, v (p = B q + c)."""
+    el_map = K.el_map
+    el_coef = K.el_coef
+    el_idx = K.el_idx
+    W = el_map.shape[2]
+    for a in range(el_idx.shape[1]):
+        x = c[el_idx[ie, a]]
         xd = 0.0
-        for z in range(K.B_ptr[row], K.B_ptr[row + 1]):
-            x += K.B_val[z] * q[K.B_idx[z]]
-            xd += K.B_val[z] * v[K.B_idx[z]]
+        for w in range(W):
+            j = el_map[ie, a, w]
+            b = el_coef[ie, a, w]
+            x += b * q[j]
+            xd += b * v[j]
         QE[ie, a] = x
         VE[ie, a] = xd
 
@@ -99,37 +104,49 @@ def assemble(K, c, q, v, t, u, M, Q):
 @njit(cache=True)
 def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
     """M (nq x nq) and Q (nq) at (q, v, t), keeping every element's qe, ve, Me, Qe in the workspace.
-    Returns -1 if an element has non-positive material length (vanishing span), else 0."""
+    Returns -1 if an element has non-positive material length (vanishing span), else 0.
+    Kernel fields are read into locals once: attribute access inside the loops measurably costs."""
     nq = K.nq
     nd = K.nd
     ne = 2 * nd + 2
+    F0 = K.F0
+    M0 = K.M0
+    el_map = K.el_map
+    el_coef = K.el_coef
+    rhoA = K.el_rhoA
+    EA = K.el_EA
+    nu = K.el_nu
+    tonly = K.el_tonly
+    G = K.el_g
+    C = K.el_C
+    W = el_map.shape[2]
     for i in range(nq):
-        Q[i] = K.F0[i]
+        Q[i] = F0[i]
         for j in range(nq):
-            M[i, j] = K.M0[i, j]
+            M[i, j] = M0[i, j]
     status = 0
-    for ie in range(K.el_idx.shape[0]):
+    for ie in range(el_map.shape[0]):
         gather(K, c, q, v, ie, QE, VE)
         if nd == 1:
-            res = linear_element_1d_at(K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                                       K.el_g[ie, 0], K.el_C[ie], QE, VE, MEs, QEs, ie)
+            res = linear_element_1d_at(rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G[ie, 0], C[ie],
+                                       QE, VE, MEs, QEs, ie)
         else:
-            res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                                    K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
+            res = linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
+                                    QE, VE, MEs, QEs, ie)
         if res[2] < 0.0:
             status = -1
             continue
         for a in range(ne):
-            ra = K.el_idx[ie, a]
-            for za in range(K.B_ptr[ra], K.B_ptr[ra + 1]):
-                ia = K.B_idx[za]
-                ba = K.B_val[za]
+            for wa in range(W):
+                ba = el_coef[ie, a, wa]
+                if ba == 0.0:
+                    continue
+                ia = el_map[ie, a, wa]
                 Q[ia] += ba * QEs[ie, a]
                 for b in range(ne):
-                    mab = MEs[ie, a, b]
-                    rb = K.el_idx[ie, b]
-                    for zb in range(K.B_ptr[rb], K.B_ptr[rb + 1]):
-                        M[ia, K.B_idx[zb]] += ba * K.B_val[zb] * mab
+                    mab = ba * MEs[ie, a, b]
+                    for wb in range(W):
+                        M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     for k in range(K.spr_dof.shape[0]):
         j = K.spr_dof[k]
         Q[j] -= K.spr_k[k] * q[j] + K.spr_c[k] * v[j]
@@ -181,10 +198,9 @@ def outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, QE, VE, MEs, QEs, fresh):
             y[k] = qdd[i] * s
         elif kind == 3:
             for a in range(ne):   # element accelerations B qdd
-                row = K.el_idx[i, a]
                 x = 0.0
-                for z in range(K.B_ptr[row], K.B_ptr[row + 1]):
-                    x += K.B_val[z] * qdd[K.B_idx[z]]
+                for w in range(K.el_map.shape[2]):
+                    x += K.el_coef[i, a, w] * qdd[K.el_map[i, a, w]]
                 ae[a] = x
             y[k] = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
     for k in range(n):
