@@ -10,8 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from collections import namedtuple
+
 from ._jit import JIT
 from .model import Kernel
+
+# Work arrays of one assembly: the q-space M and Q and every element's coordinates, velocities,
+# mass matrix and force vector. Bundled for the same reason as the kernel (one refcount per call).
+Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs"])
 
 if JIT:
     from numba import njit
@@ -68,6 +74,40 @@ if JIT:
         ("out_scale", types.float64[::1]),
     ])
 
+    @structref.register
+    class WorkType(types.StructRef):
+        def preprocess_fields(self, fields):
+            return tuple((name, types.unliteral(t)) for name, t in fields)
+
+    class WorkRef(structref.StructRefProxy):
+        """Python handle of a Work StructRef."""
+
+    structref.define_boxing(WorkType, WorkRef)
+
+    WORK_TYPE = WorkType([
+        ("M", types.float64[:, ::1]),
+        ("Q", types.float64[::1]),
+        ("QE", types.float64[:, ::1]),
+        ("VE", types.float64[:, ::1]),
+        ("MEs", types.float64[:, :, ::1]),
+        ("QEs", types.float64[:, ::1]),
+    ])
+
+    @njit(cache=True)
+    def new_work(M, Q, QE, VE, MEs, QEs):
+        w = structref.new(WORK_TYPE)
+        w.M = M
+        w.Q = Q
+        w.QE = QE
+        w.VE = VE
+        w.MEs = MEs
+        w.QEs = QEs
+        return w
+else:
+    def new_work(M, Q, QE, VE, MEs, QEs):
+        return Work(M, Q, QE, VE, MEs, QEs)
+
+if JIT:
     @njit(cache=True)
     def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale):
         k = structref.new(KERNEL_TYPE)

@@ -24,7 +24,7 @@ import numpy as np
 from ._jit import njit
 from .model import Model, State, new_state
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
-                     set_prescribed)
+                     set_prescribed, workspace)
 
 
 class SolverError(RuntimeError):
@@ -67,7 +67,7 @@ def lu_factor(A, piv):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lu_solve(LU, piv, b):
     n = LU.shape[0]
     for k in range(n):
@@ -92,8 +92,10 @@ def lu_solve(LU, piv, b):
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
 
 @njit(cache=True, inline="always")
-def _residual(K, c, q, v, qdd, t, u, M, Q, r, ws):
-    st = assemble_ws(K, c, q, v, t, u, M, Q, ws[0], ws[1], ws[2], ws[3])
+def _residual(K, W, c, q, v, qdd, t, u, r):
+    st = assemble_ws(K, W, c, q, v, t, u)
+    M = W.M
+    Q = W.Q
     nq = K.nq
     for fi in range(K.free.shape[0]):
         i = K.free[fi]
@@ -127,8 +129,6 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
     maxit = int(params[5])
     nq = K.nq
     nf = K.free.shape[0]
-    M = np.empty((nq, nq))
-    Q = np.empty(nq)
     r = np.empty(nf)
     r0 = np.empty(nf)
     qo = np.empty(nq)
@@ -136,9 +136,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
     ao = np.empty(nq)
     qddo = np.empty(nq)
     y = np.empty(K.out_kind.shape[0])
-    n_el = K.el_idx.shape[0]
-    ne = K.el_idx.shape[1]
-    ws = (np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
+    W = workspace(K)
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     # kernel inputs: [motor torque, brake engagement]; the engagement follows the command
@@ -173,7 +171,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                 _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
             if info[0] != h or attempt > 0:
                 # finite-difference Newton matrix d r / d qdd_free (q, v follow through Newmark)
-                st = _residual(K, c, q, v, qdd, t1, ue, M, Q, r0, ws)
+                st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
                 if st < 0:
                     info[4] = 2
                     info[5] = e_old
@@ -189,7 +187,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     qdd[j] += dx
                     q[j] += bq * dx
                     v[j] += gv * dx
-                    _residual(K, c, q, v, qdd, t1, ue, M, Q, r, ws)
+                    _residual(K, W, c, q, v, qdd, t1, ue, r)
                     for fi in range(nf):
                         jac[fi, fj] = (r[fi] - r0[fi]) / dx
                     qdd[j] -= dx
@@ -202,7 +200,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     continue
                 info[0] = h
             for it in range(maxit):
-                st = _residual(K, c, q, v, qdd, t1, ue, M, Q, r, ws)
+                st = _residual(K, W, c, q, v, qdd, t1, ue, r)
                 if st < 0:
                     info[4] = 2
                     info[5] = e_old
@@ -254,7 +252,7 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
         if K.brake_T > 0.0:
             info[6] = brake_deflection(K, q, ue)
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs_ws(K, c, q, v, qdd, q_ref, t, ue, y, M, Q, ws[0], ws[1], ws[2], ws[3], False)
+            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False)
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]

@@ -13,6 +13,7 @@ import numpy as np
 
 from ._jit import njit
 from .elements.linear import end_tension, linear_element, linear_element_1d_at, linear_element_at
+from .kernel import new_work
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
@@ -86,10 +87,13 @@ def gather(K, c, q, v, ie, QE, VE):
         VE[ie, a] = xd
 
 
+@njit(cache=True)
 def workspace(K):
-    """Preallocated element arrays for assemble_ws (per element: coordinates, velocities, Me, Qe)."""
-    n_el, ne = K.el_idx.shape
-    return (np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
+    """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work)."""
+    n_el = K.el_idx.shape[0]
+    ne = K.el_idx.shape[1]
+    return new_work(np.empty((K.nq, K.nq)), np.empty(K.nq), np.empty((n_el, ne)), np.empty((n_el, ne)),
+                    np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
 
 
 @njit(cache=True)
@@ -97,18 +101,25 @@ def assemble(K, c, q, v, t, u, M, Q):
     """M (nq x nq) and Q (nq) at (q, v, t); see assemble_ws."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    return assemble_ws(K, c, q, v, t, u, M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)),
-                       np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
+    W = new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)),
+                 np.empty((n_el, ne)))
+    return assemble_ws(K, W, c, q, v, t, u)
 
 
 @njit(cache=True)
-def assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs):
-    """M (nq x nq) and Q (nq) at (q, v, t), keeping every element's qe, ve, Me, Qe in the workspace.
+def assemble_ws(K, W, c, q, v, t, u):
+    """W.M (nq x nq) and W.Q (nq) at (q, v, t), keeping every element's qe, ve, Me, Qe in W.
     Returns -1 if an element has non-positive material length (vanishing span), else 0.
     Kernel fields are read into locals once: attribute access inside the loops measurably costs."""
     nq = K.nq
     nd = K.nd
     ne = 2 * nd + 2
+    M = W.M
+    Q = W.Q
+    QE = W.QE
+    VE = W.VE
+    MEs = W.MEs
+    QEs = W.QEs
     F0 = K.F0
     M0 = K.M0
     el_map = K.el_map
@@ -168,13 +179,11 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
     """Fill y with the outputs listed in K.out_* (see model.py)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, np.empty((K.nq, K.nq)), np.empty(K.nq),
-               np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
-               True)
+    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, True)
 
 
 @njit(cache=True)
-def outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, QE, VE, MEs, QEs, fresh):
+def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
     """outputs() from one assembly pass whose element arrays serve every tension output. With
     fresh = False the workspace of the last Newton residual is used as it is: that residual was
     evaluated within the Newton tolerance of (q, v), which saves an assembly per output step."""
@@ -182,7 +191,13 @@ def outputs_ws(K, c, q, v, qdd, q_ref, t, u, y, M, Q, QE, VE, MEs, QEs, fresh):
     ne = 2 * nd + 2
     ae = np.empty(ne)
     if fresh:
-        assemble_ws(K, c, q, v, t, u, M, Q, QE, VE, MEs, QEs)
+        assemble_ws(K, W, c, q, v, t, u)
+    M = W.M
+    Q = W.Q
+    QE = W.QE
+    VE = W.VE
+    MEs = W.MEs
+    QEs = W.QEs
     n = K.out_kind.shape[0]
     for k in range(n):
         kind = K.out_kind[k]
