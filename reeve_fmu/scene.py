@@ -76,7 +76,7 @@ class Drive:
     sheave: str | None = None
     roping: float = 1.0              # load speed = rim speed / roping (speed profiles are load speeds)
     profile: str = "s-curve"         # s-curve | table (kind = speed)
-    distance: float = 0.0            # m, S-curve travel of the load (sign = direction, + = up)
+    distance: float = 0.0            # m, S-curve travel; + runs the rope in the route direction
     v_max: float = 1.0
     a_max: float = 0.8
     jerk: float = 1.0
