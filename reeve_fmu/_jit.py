@@ -20,6 +20,54 @@ except ImportError:  # pragma: no cover - exercised only without numba
     JIT = False
 
 
+def source_hash() -> str:
+    """sha256[:16] over every .py file of the package (relative path + bytes)."""
+    import hashlib
+    from pathlib import Path
+    pkg = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for p in sorted(pkg.rglob("*.py")):
+        if "__pycache__" in p.parts:
+            continue
+        h.update(p.relative_to(pkg).as_posix().encode())
+        h.update(b"\0")
+        h.update(p.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _cache_dir():
+    """numba keys a cached function only on its own file's timestamp: after an edit (or a partial
+    upgrade) of a module whose functions are inlined elsewhere, the dependents' stale machine code
+    would be loaded silently. The cache therefore lives in a directory keyed by the hash of all
+    package sources: any change to any module starts a fresh cache. Older directories are pruned
+    (the newest 4 are kept). NUMBA_CACHE_DIR set by the user wins."""
+    from pathlib import Path
+    import shutil
+    base = Path(os.environ.get("REEVE_FMU_CACHE_DIR") or Path.home() / ".cache" / "reeve_fmu") / "numba"
+    target = base / source_hash()
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        probe = target / ".write-test"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError:
+        return None
+    try:
+        old = sorted((d for d in base.iterdir() if d.is_dir() and d != target), key=lambda d: d.stat().st_mtime)
+        for d in old[:-3]:
+            shutil.rmtree(d, ignore_errors=True)
+        os.utime(target)
+    except OSError:
+        pass
+    return str(target)
+
+
+if _numba is not None and not os.environ.get("NUMBA_CACHE_DIR"):
+    _dir = _cache_dir()
+    if _dir is not None:
+        _numba.config.CACHE_DIR = _dir
+
+
 def njit(*args, **kwargs):
     """numba.njit when available, otherwise the identity decorator."""
     if _numba is not None:

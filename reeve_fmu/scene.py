@@ -89,9 +89,9 @@ class Drive:
 @dataclass(frozen=True)
 class Brake:
     """Spring-applied machine brake on the driven sheave (domain.md §2.4), elasto-plastic friction:
-    a stiff torsional spring (deflection z) whose torque is clipped at the capacity e*T; when it is
-    clipped the brake slips at the full torque. It holds a load without creep and stays piecewise
-    linear for Newton. e in [0, 1] follows the command with a first-order lag."""
+    a stiff torsional spring (deflection z, stiffness e*T/stick_angle) whose deflection saturates
+    smoothly at stick_angle, where the brake slips at the capacity e*T. It holds a load below 90 % of
+    the capacity without creep. e in [0, 1] follows the command with a first-order lag."""
     torque: float = 0.0              # N m, total (all circuits)
     stick_angle: float = 1e-4        # rad, spring deflection at full torque (stiffness T/angle)
     engage_time: float = 0.02        # s, lag of the engagement

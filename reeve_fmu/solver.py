@@ -200,6 +200,26 @@ def integrate(K, c, q_ref, q, v, a, qdd, t0, h, nsteps, u, jac, piv, info, param
                     continue
                 info[0] = h
             for it in range(maxit):
+                if attempt > 0 and it > 0:
+                    # retries are full Newton: the matrix is rebuilt at every iterate, which crosses
+                    # regime changes (brake stick -> slip, slack -> taut) where a kept matrix stalls
+                    _residual(K, W, c, q, v, qdd, t1, ue, r0)
+                    for fj in range(nf):
+                        j = K.free[fj]
+                        dq = 1e-10 * (1.0 + abs(q[j]))
+                        dx = dq / bq
+                        qdd[j] += dx
+                        q[j] += bq * dx
+                        v[j] += gv * dx
+                        _residual(K, W, c, q, v, qdd, t1, ue, r)
+                        for fi in range(nf):
+                            jac[fi, fj] = (r[fi] - r0[fi]) / dx
+                        qdd[j] -= dx
+                        q[j] -= bq * dx
+                        v[j] -= gv * dx
+                    if not lu_factor(jac, piv):
+                        break
+                    info[3] += 1
                 st = _residual(K, W, c, q, v, qdd, t1, ue, r)
                 if st < 0:
                     info[4] = 2
@@ -322,8 +342,8 @@ class Simulator:
             Q = np.empty(m.nq)
             assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
             tau_hold = Q[K.mot_dof] * K.mot_R          # brake torque needed (Q_sigma = -tau/R)
-            zmax = st.info[5] * K.brake_wreg
-            st.info[6] = float(np.clip(-tau_hold / (K.brake_T / K.brake_wreg), -zmax, zmax))
+            k = st.info[5] * K.brake_T / K.brake_wreg
+            st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
         return st
 

@@ -37,26 +37,25 @@ def _interp(table, t):
 
 @njit(cache=True, inline="always")
 def brake_deflection(K, q, u):
-    """Elasto-plastic brake: spring deflection z (rad) after moving from the step's start angle,
-    clipped at the capacity. Kernel inputs u = [motor torque, engagement e, z at step start,
-    sigma at step start]."""
-    zmax = u[1] * K.brake_wreg
+    """Elasto-plastic brake: effective spring deflection z (rad) after the sheave turned from the
+    step's start angle. Linear (holding without creep) up to 90 % of the band zmax = stick_angle,
+    then a C1 tanh saturation at zmax, so Newton sees no kink at stick -> slip. Kernel inputs
+    u = [motor torque, engagement e, z at step start, sigma at step start]."""
+    zmax = K.brake_wreg
     z = u[2] - (q[K.mot_dof] - u[3]) / K.mot_R
-    if z > zmax:
-        return zmax
-    if z < -zmax:
-        return -zmax
-    return z
+    a = 0.9 * zmax
+    az = abs(z)
+    if az <= a:
+        return z
+    sat = a + (zmax - a) * math.tanh((az - a) / (zmax - a))
+    return sat if z > 0.0 else -sat
 
 
 @njit(cache=True, inline="always")
 def brake_torque(K, q, v, u):
-    """Brake torque on the sheave angle (positive = drives the rope along the route)."""
-    if u[1] <= 0.0:
-        return 0.0
-    z = brake_deflection(K, q, u)
-    k = K.brake_T / K.brake_wreg
-    return -k * z
+    """Brake torque on the sheave angle (positive = drives the rope along the route). Stiffness and
+    capacity both scale with the engagement e (lining pressure): -e (T/zmax) z."""
+    return -u[1] * (K.brake_T / K.brake_wreg) * brake_deflection(K, q, u)
 
 
 @njit(cache=True, inline="always")
