@@ -93,6 +93,40 @@ if JIT:
         ("QEs", types.float64[:, ::1]),
     ])
 
+    @structref.register
+    class StateArraysType(types.StructRef):
+        def preprocess_fields(self, fields):
+            return tuple((name, types.unliteral(t)) for name, t in fields)
+
+    class StateArraysRef(structref.StructRefProxy):
+        """Python handle of a State's arrays bundle."""
+
+    structref.define_boxing(StateArraysType, StateArraysRef)
+
+    STATE_TYPE = StateArraysType([
+        ("c", types.float64[::1]), ("q_ref", types.float64[::1]), ("q", types.float64[::1]),
+        ("v", types.float64[::1]), ("a", types.float64[::1]), ("qdd", types.float64[::1]),
+        ("u", types.float64[::1]), ("jac", types.float64[:, ::1]), ("piv", types.int64[::1]),
+        ("info", types.float64[::1]),
+    ])
+
+    @njit(cache=True)
+    def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
+        """The State's arrays (same buffers) in one object: the step call then passes 8 arguments
+        instead of 17 (numba's dispatcher types every argument on every call)."""
+        s = structref.new(STATE_TYPE)
+        s.c = c
+        s.q_ref = q_ref
+        s.q = q
+        s.v = v
+        s.a = a
+        s.qdd = qdd
+        s.u = u
+        s.jac = jac
+        s.piv = piv
+        s.info = info
+        return s
+
     @njit(cache=True)
     def new_work(M, Q, QE, VE, MEs, QEs):
         w = structref.new(WORK_TYPE)
@@ -104,8 +138,13 @@ if JIT:
         w.QEs = QEs
         return w
 else:
+    StateArrays = namedtuple("StateArrays", ["c", "q_ref", "q", "v", "a", "qdd", "u", "jac", "piv", "info"])
+
     def new_work(M, Q, QE, VE, MEs, QEs):
         return Work(M, Q, QE, VE, MEs, QEs)
+
+    def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
+        return StateArrays(c, q_ref, q, v, a, qdd, u, jac, piv, info)
 
 if JIT:
     @njit(cache=True)

@@ -65,6 +65,17 @@ class State:
     piv: np.ndarray      # LU pivots
     info: np.ndarray     # see INFO_SIZE: solver counters, status and the brake engagement
 
+    def arrays(self):
+        """The arrays bundled for the compiled step (kernel.new_state_arrays), built once per State:
+        the bundle references these same buffers, so in-place updates are shared."""
+        ref = self.__dict__.get("_arrays")
+        if ref is None:
+            from .kernel import new_state_arrays
+            ref = new_state_arrays(self.c, self.q_ref, self.q, self.v, self.a, self.qdd, self.u,
+                                   self.jac, self.piv, self.info)
+            self.__dict__["_arrays"] = ref
+        return ref
+
     def copy(self) -> "State":
         return State(self.t, *(getattr(self, f).copy() for f in
                                ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info")))

@@ -1,0 +1,102 @@
+"""The reeving plant as a torque-driven co-simulation component.
+
+`Plant` turns a scene into the model the plant FMU, the monolithic reference run and the CAN bridge
+all step: the scene's drive becomes an external motor-torque input on the driven sheave, the brake
+command is a second input, and everything else is the core engine (Model/State/Simulator). Its state is
+exactly the engine State, so saving and restoring it (FMU get/set/serialize) is copying arrays.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+
+import numpy as np
+
+from .model import State, build_model
+from .scene import Body, Rope, Scene, SceneError, load_scene
+from .solver import SolverError, Simulator
+
+# plant parameters a user may tune (name -> (unit, description)); all change the compiled model
+PARAMETERS = {
+    "car.load": ("kg", "payload in the car, added to the car body's mass"),
+    "rope.EA": ("N", "axial stiffness per rope (all ropes of the scene)"),
+    "rope.damping": ("s", "Kelvin-Voigt time constant of the ropes"),
+    "brake.torque": ("N.m", "total static torque of the machine brake"),
+    "motor.inertia": ("kg.m2", "rotor + sheave + brake discs"),
+}
+
+
+def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = None,
+                rope_damping: float | None = None, brake_torque: float | None = None,
+                motor_inertia: float | None = None, car_body: str = "car") -> Scene:
+    """The scene with an external motor-torque drive and the given parameter overrides."""
+    if scene.drive.sheave is None:
+        raise SceneError(f"{scene.source}: [drive.sheave] a plant needs a driven sheave")
+    for name, value in (("car.load", car_load), ("rope.EA", rope_EA), ("rope.damping", rope_damping),
+                        ("brake.torque", brake_torque), ("motor.inertia", motor_inertia)):
+        if value is not None and (not math.isfinite(value) or value < 0):
+            raise ValueError(f"parameter {name} must be a finite number >= 0, got {value}")
+    if rope_EA is not None and rope_EA <= 0:
+        raise ValueError(f"parameter rope.EA must be > 0, got {rope_EA}")
+    bodies = list(scene.bodies)
+    if car_load:
+        idx = [i for i, b in enumerate(bodies) if b.name == car_body]
+        if not idx:
+            raise SceneError(f"{scene.source}: no body named {car_body!r} to carry car.load")
+        b = bodies[idx[0]]
+        bodies[idx[0]] = replace(b, mass=b.mass + car_load)
+    ropes = [replace(r, EA=r.EA if rope_EA is None else rope_EA,
+                     damping=r.damping if rope_damping is None else rope_damping) for r in scene.ropes]
+    drive = replace(scene.drive, kind="external",
+                    motor_inertia=scene.drive.motor_inertia if motor_inertia is None else motor_inertia)
+    brake = scene.brake if brake_torque is None else replace(scene.brake, torque=brake_torque)
+    return replace(scene, bodies=tuple(bodies), ropes=tuple(ropes), drive=drive, brake=brake)
+
+
+class Plant:
+    """Torque in, outputs out. `step(dt, torque, brake_command)` advances by dt with the inputs
+    held; outputs are the engine's output names (`car.position`, `traction.tension_in`, ...)."""
+
+    def __init__(self, scene: Scene | str, **params):
+        if not isinstance(scene, Scene):
+            scene = load_scene(scene)
+        self.scene = plant_scene(scene, **params)
+        self.model = build_model(self.scene)
+        self.sim = Simulator(self.model)
+        self.output_names = self.model.output_names
+        self.state: State = self.sim.initial_state()
+        self._y = self.sim.outputs(self.state)
+
+    @property
+    def t(self) -> float:
+        return self.state.t
+
+    def step(self, dt: float, torque: float, brake_command: float) -> np.ndarray:
+        """Advance by dt (> 0) with motor torque [N m] and brake command (1 = release, 0 = apply)
+        held; returns the outputs. Raises ValueError for bad inputs, SolverError if the solver
+        stops (the state is then left at the last good step)."""
+        if not (dt > 0.0 and math.isfinite(dt)):
+            raise ValueError(f"communication step must be a finite number > 0, got {dt}")
+        if not math.isfinite(torque):
+            raise ValueError(f"motor.torque must be finite, got {torque}")
+        if not math.isfinite(brake_command):
+            raise ValueError(f"brake.command must be finite, got {brake_command}")
+        self._y = self.sim.step(self.state, self.state.t + dt, float(torque), float(brake_command)).copy()
+        return self._y
+
+    def outputs(self) -> dict:
+        return dict(zip(self.output_names, self._y.tolist()))
+
+    def output(self, name: str) -> float:
+        return float(self._y[self.output_names.index(name)])
+
+    def energy(self):
+        return self.sim.energy(self.state)
+
+    # FMU state: builtin types, bit-exact
+    def get_state(self) -> dict:
+        return {"state": self.state.to_dict(), "y": self._y.tolist()}
+
+    def set_state(self, d: dict):
+        self.state = State.from_dict(d["state"])
+        self._y = np.array(d["y"], float)
