@@ -87,6 +87,22 @@ def _cfg_bench(p):
     p.add_argument("--out", default="bench", help="output directory")
 
 
+def _cfg_crane(p):
+    p.add_argument("scene", help="crane scene TOML (e.g. scenes/crane_8fall.toml)")
+    p.add_argument("--out", default="results/crane", help="output directory")
+    p.add_argument("--heights", type=int, default=None, help="number of hoist heights (default: scene)")
+
+
+def _cfg_hil(p):
+    p.add_argument("--bus", choices=("virtual", "udp_multicast"), default="virtual")
+    p.add_argument("--controller", choices=("builtin", "external"), default="builtin")
+    p.add_argument("--realtime", action="store_true", help="pace SYNC to the wall clock")
+    p.add_argument("--inject", action="append", default=[], metavar="FAULT",
+                   help="loss=P | delay=MS | controller-dies-at=T (repeatable)")
+    p.add_argument("--out", default="results/hil", help="output directory")
+    p.add_argument("--t-end", type=float, default=None, help="stop after T seconds of trip")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="reeve-fmu", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -94,6 +110,8 @@ def main(argv=None) -> int:
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
     _lazy(sub, "build", "demo", "cli_build", "build the plant and electric-drive FMUs into fmus/", _cfg_build)
     _lazy(sub, "bench", "bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
+    _lazy(sub, "crane", "crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
+    _lazy(sub, "hil", "hil", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
     args = ap.parse_args(argv)
     from .scene import SceneError
     from .solver import SolverError
