@@ -72,6 +72,12 @@ if JIT:
         ("out_i", types.int64[::1]),
         ("out_j", types.int64[::1]),
         ("out_scale", types.float64[::1]),
+        ("l_min", types.float64),
+        ("buf_dof", types.int64[::1]),
+        ("buf_z", types.float64[::1]),
+        ("buf_sign", types.float64[::1]),
+        ("buf_k", types.float64[::1]),
+        ("buf_c", types.float64[::1]),
     ])
 
     @structref.register
@@ -148,7 +154,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -187,6 +193,12 @@ if JIT:
         k.out_i = out_i
         k.out_j = out_j
         k.out_scale = out_scale
+        k.l_min = l_min
+        k.buf_dof = buf_dof
+        k.buf_z = buf_z
+        k.buf_sign = buf_sign
+        k.buf_k = buf_k
+        k.buf_c = buf_c
         return k
 
 
@@ -198,7 +210,7 @@ def compiled_kernel(K: Kernel):
     for name, value in zip(K._fields, K):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
-        elif name in ("nd", "nq", "mot_dof", "drive_kind"):
+        elif name in ("nd", "nq", "mot_dof", "drive_kind"):  # int fields; all others float
             value = int(value)
         else:
             value = float(value)

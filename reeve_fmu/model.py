@@ -43,10 +43,11 @@ Kernel = namedtuple("Kernel", [
     "brake_T", "brake_wreg", "brake_tau",
     "free", "presc", "presc_gain", "profile",
     "out_kind", "out_i", "out_j", "out_scale",
+    "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
 ])
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
-OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE = range(8)
+OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER = range(9)
 INFO_SIZE = 8   # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z, -]
 
 
@@ -490,6 +491,8 @@ def _build(scene: Scene) -> Model:
         out("motor.angle", OUT_QREL, mot_dof, 0, -1.0 / mot_R)
         out("motor.speed", OUT_V, mot_dof, 0, -1.0 / mot_R)
         out("motor.torque", OUT_TORQUE, mot_dof, 0, mot_R)
+    for ib, bf in enumerate(scene.buffers):
+        out(f"{bf.name}.force", OUT_BUFFER, ib)
     if scene.brake.torque > 0 and dv.kind in ("torque", "external"):
         out("brake.torque", OUT_BRAKE, mot_dof, 0, mot_R)
         out("brake.engaged", OUT_BRAKE, mot_dof, 1, 1.0)
@@ -514,6 +517,12 @@ def _build(scene: Scene) -> Model:
         presc_gain=np.array(presc_gain, float), profile=profile.arrays,
         out_kind=np.array(ok, np.int64), out_i=np.array(oi, np.int64), out_j=np.array(oj, np.int64),
         out_scale=np.array(osc, float),
+        l_min=float(scene.solver.min_span),
+        buf_dof=np.array([body_dofs[b.body][b.axis] for b in scene.buffers], np.int64),
+        buf_z=np.array([b.position for b in scene.buffers], float),
+        buf_sign=np.array([1.0 if b.side == "below" else -1.0 for b in scene.buffers], float),
+        buf_k=np.array([b.stiffness for b in scene.buffers], float),
+        buf_c=np.array([b.damping for b in scene.buffers], float),
     )
 
     # ------------------------------------------------------------------ statics sets

@@ -87,6 +87,19 @@ class Drive:
 
 
 @dataclass(frozen=True)
+class Buffer:
+    """Spring-damper buffer under (or over) a body: a unilateral contact on one free axis.
+    Force k*d + c*d' while the penetration d > 0 and the force is compressive (it never pulls)."""
+    name: str
+    body: str
+    position: float                  # m, body coordinate at first contact
+    stiffness: float                 # N/m
+    damping: float = 0.0             # N s/m
+    axis: str = "z"
+    side: str = "below"              # below: contact when the body coordinate < position
+
+
+@dataclass(frozen=True)
 class Brake:
     """Spring-applied machine brake on the driven sheave (domain.md §2.4), elasto-plastic friction:
     a stiff torsional spring (deflection z, stiffness e*T/stick_angle) whose deflection saturates
@@ -106,6 +119,7 @@ class Solver:
     newton_tol: float = 1e-8         # relative Newton tolerance on accelerations
     rtol: float = 1e-8               # scipy methods
     atol: float = 1e-10
+    min_span: float = 0.01           # m, material length at which a span stops the run (event)
 
 
 @dataclass(frozen=True)
@@ -119,6 +133,7 @@ class Scene:
     drive: Drive
     solver: Solver
     brake: Brake = Brake()
+    buffers: tuple = ()
     statics: str = "positions"       # positions | rope-length | none
     t_end: float = 10.0              # s, default simulation end
     output_step: float = 1e-3        # s
@@ -132,7 +147,7 @@ class Scene:
 
 SCHEMA_KEYS = {
     "scene": {"name", "description", "model", "gravity", "t_end", "output_step"},
-    "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol"},
+    "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
     "bodies": {"name", "mass", "position", "free", "damping"},
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored"},
@@ -142,9 +157,10 @@ SCHEMA_KEYS = {
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
               "table", "torque", "motor_inertia"},
     "brake": {"torque", "stick_angle", "engage_time", "initially_applied"},
+    "buffers": {"name", "body", "position", "stiffness", "damping", "axis", "side"},
 }
-TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive", "brake"}
-EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "buffers", "traction"}
+TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive", "brake", "buffers"}
+EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "traction"}
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -281,6 +297,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         newton_tol=r.number(sv, "solver", "newton_tol", 1e-8, positive=True),
         rtol=r.number(sv, "solver", "rtol", 1e-8, positive=True),
         atol=r.number(sv, "solver", "atol", 1e-10, positive=True),
+        min_span=r.number(sv, "solver", "min_span", 0.01, positive=True),
     )
     if solver.rho_inf > 1.0:
         r.fail("solver.rho_inf", f"must be in [0, 1], got {solver.rho_inf:g}")
@@ -414,10 +431,27 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     if brake.torque > 0 and kind == "none":
         r.fail("brake", "a brake acts on the driven sheave: give a [drive] with kind and sheave")
 
+    buffers = []
+    bodies_by_name = {b.name: b for b in bodies}
+    for i, bf in enumerate(r.array_of_tables(data, "buffers")):
+        path = f"buffers[{i}]"
+        r.table(bf, path, SCHEMA_KEYS["buffers"])
+        name = _unique_name(r, bf, path, names)
+        body = r.string(bf, path, "body", required=True)
+        if body not in bodies_by_name:
+            r.fail(f"{path}.body", f"unknown body {body!r}")
+        axis = r.string(bf, path, "axis", "z", AXES)
+        if axis not in bodies_by_name[body].free:
+            r.fail(f"{path}.axis", f"axis {axis!r} is not a free axis of body {body!r}")
+        buffers.append(Buffer(name=name, body=body, position=r.number(bf, path, "position", required=True),
+                              stiffness=r.number(bf, path, "stiffness", positive=True, required=True),
+                              damping=r.number(bf, path, "damping", 0.0, nonneg=True), axis=axis,
+                              side=r.string(bf, path, "side", "below", ("below", "above"))))
+
     extra = {k: data[k] for k in EXTRA_SECTIONS if k in data}
     return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
                  bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
-                 solver=solver, brake=brake, statics=statics, t_end=t_end, output_step=output_step, source=source,
+                 solver=solver, brake=brake, buffers=tuple(buffers), statics=statics, t_end=t_end, output_step=output_step, source=source,
                  description=r.string(sc, "scene", "description", ""), extra=extra)
 
 

@@ -33,7 +33,7 @@ class SolverError(RuntimeError):
 
 STATUS_TEXT = {
     1: "Newton iteration did not converge",
-    2: "a rope span reached zero material length (vanishing span)",
+    2: "a rope span reached the minimum material length (vanishing span)",
     3: "non-finite value in the state (NaN/Inf)",
 }
 
@@ -116,12 +116,105 @@ def _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
         v[i] = vo[i] + h * ((1.0 - gamma) * ao[i] + gamma * a1)
 
 
+@njit(cache=True, inline="always")
+def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
+    """Finite-difference Newton matrix d r / d qdd_free at the current iterate (q and v follow
+    through the Newmark relations). Returns -1 (vanishing span), 0 (singular) or 1."""
+    nf = K.free.shape[0]
+    st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
+    if st < 0:
+        return st
+    for fj in range(nf):
+        j = K.free[fj]
+        dq = 1e-10 * (1.0 + abs(q[j]))   # small: the velocity change must stay inside stiff bands
+        dx = dq / bq
+        qdd[j] += dx
+        q[j] += bq * dx
+        v[j] += gv * dx
+        _residual(K, W, c, q, v, qdd, t1, ue, r)
+        for fi in range(nf):
+            jac[fi, fj] = (r[fi] - r0[fi]) / dx
+        qdd[j] -= dx
+        q[j] -= bq * dx
+        v[j] -= gv * dx
+    return 1 if lu_factor(jac, piv) else 0
+
+
+@njit(cache=True, inline="always")
+def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, r, r0,
+                 am, af, beta, gamma, tol, maxit):
+    """One generalized-alpha step from (qo, vo, ao, qddo) to t1 = t0 + h. Modified Newton with the
+    kept matrix first; retries are full Newton from the last iterate (crosses regime changes: brake
+    stick -> slip, slack -> taut), the last one from the predictor. Returns 0 (converged),
+    1 (no convergence), 2 (vanishing span; info[7] = element)."""
+    nf = K.free.shape[0]
+    nq = K.nq
+    bq = h * h * beta * (1.0 - af) / (1.0 - am)
+    gv = h * gamma * (1.0 - af) / (1.0 - am)
+    # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
+    set_prescribed(K, q_ref, t1, q, v, qdd)
+    for k in range(K.presc.shape[0]):
+        a[K.presc[k]] = qdd[K.presc[k]]
+    for attempt in range(4):
+        if attempt == 0 or attempt == 3:
+            for fi in range(nf):   # predictor: constant acceleration
+                qdd[K.free[fi]] = qddo[K.free[fi]]
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[0] != h or attempt > 0:
+            ok = _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
+            info[3] += 1
+            if ok < 0:
+                info[7] = -ok - 1
+                return 2
+            if ok == 0:
+                info[0] = 0.0
+                continue
+            info[0] = h
+        for it in range(maxit):
+            if attempt > 0 and it > 0:
+                ok = _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
+                info[3] += 1
+                if ok <= 0:
+                    info[0] = 0.0
+                    break
+            st = _residual(K, W, c, q, v, qdd, t1, ue, r)
+            if st < 0:
+                info[7] = -st - 1
+                return 2
+            lu_solve(jac, piv, r)
+            dmax = 0.0
+            amax = 0.0
+            qmax = 0.0
+            for fi in range(nf):
+                i = K.free[fi]
+                qdd[i] -= r[fi]
+                if abs(r[fi]) > dmax:
+                    dmax = abs(r[fi])
+                if abs(qdd[i]) > amax:
+                    amax = abs(qdd[i])
+                if abs(q[i]) > qmax:
+                    qmax = abs(q[i])
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[2] += 1
+            if not (dmax == dmax) or dmax > 1e300:
+                break
+            # converged: relative acceleration change below tol, or the position change it
+            # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
+            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+                if it >= REFRESH_AFTER:
+                    info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
+                return 0
+    return 1
+
+
 @njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
-    """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. Writes
-    outputs every out_every steps into ybuf rows (out_every = 0: none). S.info = [h of jac, steps,
-    iterations, jacobian builds, status, brake engagement, brake deflection, -].
-    Returns (status, t, steps done)."""
+    """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
+    Newton iteration fails is redone as 4, 16 and 64 substeps (sharp events: slack -> taut, buffer
+    contact, brake engagement). Writes outputs every out_every steps into ybuf rows (0: none).
+    S.info = [h of jac, steps, iterations, jacobian builds, status, brake engagement,
+    brake deflection, element of a vanishing span]. Returns (status, t, steps done); on failure the
+    state is the last good step."""
     c = S.c
     q_ref = S.q_ref
     q = S.q
@@ -146,142 +239,77 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     vo = np.empty(nq)
     ao = np.empty(nq)
     qddo = np.empty(nq)
+    q1 = np.empty(nq)
+    v1 = np.empty(nq)
+    a1 = np.empty(nq)
+    qdd1 = np.empty(nq)
     y = np.empty(K.out_kind.shape[0])
     W = workspace(K)
-    bq = h * h * beta * (1.0 - af) / (1.0 - am)
-    gv = h * gamma * (1.0 - af) / (1.0 - am)
-    # kernel inputs: [motor torque, brake engagement]; the engagement follows the command
-    # (u[1] = 1: release) with a first-order lag, integrated exactly over each step
+    # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
+    # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
     ue = np.empty(4)
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
-    decay = math.exp(-h / K.brake_tau) if K.brake_tau > 0.0 else 0.0
     t = t0
     row = 0
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
-        e_old = info[5]
-        info[5] = target + (info[5] - target) * decay
-        ue[1] = info[5]
-        ue[2] = info[6]
-        ue[3] = q[K.mot_dof] if K.mot_dof >= 0 else 0.0
-        qo[:] = q
-        vo[:] = v
-        ao[:] = a
-        qddo[:] = qdd
-        set_prescribed(K, q_ref, t1, q, v, qdd)
-        for k in range(K.presc.shape[0]):
-            a[K.presc[k]] = qdd[K.presc[k]]
-        converged = False
-        for attempt in range(4):
-            if attempt == 0 or attempt == 3:
-                # predictor: constant acceleration (retries 1-2 go on from the last iterate with a
-                # Newton matrix rebuilt there: that crosses kinks such as brake stick -> slip)
-                for fi in range(nf):
-                    qdd[K.free[fi]] = qddo[K.free[fi]]
-                _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-            if info[0] != h or attempt > 0:
-                # finite-difference Newton matrix d r / d qdd_free (q, v follow through Newmark)
-                st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
-                if st < 0:
-                    info[4] = 2
-                    info[5] = e_old
-                    q[:] = qo
+        # start of the step (kept for a retry with substeps)
+        q1[:] = q
+        v1[:] = v
+        a1[:] = a
+        qdd1[:] = qdd
+        e1 = info[5]
+        z1 = info[6]
+        status = 1
+        for level in range(4):
+            nsub = 1 if level == 0 else 4 ** level
+            hs = h / nsub
+            decay = math.exp(-hs / K.brake_tau) if K.brake_tau > 0.0 else 0.0
+            if level > 0:
+                q[:] = q1
+                v[:] = v1
+                a[:] = a1
+                qdd[:] = qdd1
+                info[5] = e1
+                info[6] = z1
+            for sub in range(nsub):
+                ts = t + (sub + 1) * hs
+                info[5] = target + (info[5] - target) * decay
+                ue[1] = info[5]
+                ue[2] = info[6]
+                ue[3] = q[K.mot_dof] if K.mot_dof >= 0 else 0.0
+                qo[:] = q
+                vo[:] = v
+                ao[:] = a
+                qddo[:] = qdd
+                status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
+                                      piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                if status != 0:
+                    q[:] = qo   # _newton_step leaves its last iterate
                     v[:] = vo
                     a[:] = ao
                     qdd[:] = qddo
-                    return 2, t, step
-                for fj in range(nf):
-                    j = K.free[fj]
-                    dq = 1e-10 * (1.0 + abs(q[j]))   # small: the velocity change must stay inside stiff bands (brake)
-                    dx = dq / bq
-                    qdd[j] += dx
-                    q[j] += bq * dx
-                    v[j] += gv * dx
-                    _residual(K, W, c, q, v, qdd, t1, ue, r)
-                    for fi in range(nf):
-                        jac[fi, fj] = (r[fi] - r0[fi]) / dx
-                    qdd[j] -= dx
-                    q[j] -= bq * dx
-                    v[j] -= gv * dx
-                ok = lu_factor(jac, piv)
-                info[3] += 1
-                if not ok:
-                    info[0] = 0.0
-                    continue
-                info[0] = h
-            for it in range(maxit):
-                if attempt > 0 and it > 0:
-                    # retries are full Newton: the matrix is rebuilt at every iterate, which crosses
-                    # regime changes (brake stick -> slip, slack -> taut) where a kept matrix stalls
-                    _residual(K, W, c, q, v, qdd, t1, ue, r0)
-                    for fj in range(nf):
-                        j = K.free[fj]
-                        dq = 1e-10 * (1.0 + abs(q[j]))
-                        dx = dq / bq
-                        qdd[j] += dx
-                        q[j] += bq * dx
-                        v[j] += gv * dx
-                        _residual(K, W, c, q, v, qdd, t1, ue, r)
-                        for fi in range(nf):
-                            jac[fi, fj] = (r[fi] - r0[fi]) / dx
-                        qdd[j] -= dx
-                        q[j] -= bq * dx
-                        v[j] -= gv * dx
-                    if not lu_factor(jac, piv):
-                        break
-                    info[3] += 1
-                st = _residual(K, W, c, q, v, qdd, t1, ue, r)
-                if st < 0:
-                    info[4] = 2
-                    info[5] = e_old
-                    q[:] = qo
-                    v[:] = vo
-                    a[:] = ao
-                    qdd[:] = qddo
-                    return 2, t, step
-                lu_solve(jac, piv, r)
-                dmax = 0.0
-                amax = 0.0
-                qmax = 0.0
-                for fi in range(nf):
-                    i = K.free[fi]
-                    qdd[i] -= r[fi]
-                    if abs(r[fi]) > dmax:
-                        dmax = abs(r[fi])
-                    if abs(qdd[i]) > amax:
-                        amax = abs(qdd[i])
-                    if abs(q[i]) > qmax:
-                        qmax = abs(q[i])
-                _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-                info[2] += 1
-                if not (dmax == dmax) or dmax > 1e300:
                     break
-                # converged: relative acceleration change below tol, or the position change it
-                # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
-                if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
-                    converged = True
-                    if it >= REFRESH_AFTER:
-                        info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
-                    break
-            if converged:
-                break
-        if not converged:
-            q[:] = qo
-            v[:] = vo
-            a[:] = ao
-            qdd[:] = qddo
-            info[5] = e_old
-            bad = False
-            for i in range(nq):
-                if not (qdd[i] == qdd[i]):
-                    bad = True
-            info[4] = 3 if bad else 1
-            return int(info[4]), t, step
+                if K.brake_T > 0.0:
+                    info[6] = brake_deflection(K, q, ue)
+            if status != 1:
+                break   # converged (0) or a vanishing span (2): substeps do not help
+        if status != 0:
+            q[:] = q1
+            v[:] = v1
+            a[:] = a1
+            qdd[:] = qdd1
+            info[5] = e1
+            info[6] = z1
+            if status == 1:
+                for i in range(nq):
+                    if not (q[i] == q[i]) or not (qdd[i] == qdd[i]):
+                        status = 3
+            info[4] = status
+            return status, t, step
         t = t1
         info[1] += 1
-        if K.brake_T > 0.0:
-            info[6] = brake_deflection(K, q, ue)
         if out_every > 0 and (step + 1) % out_every == 0:
             outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False)
             ybuf[row, 0] = t
@@ -384,6 +412,12 @@ class Simulator:
             unknowns = [("q", j) for j in range(nq) if j not in locked]
         eqs = list(m.statics_equations)
         par = m.par0.copy()
+        KS = m.KJ
+        if np.any(m.K.el_tonly):
+            # tension-only ropes have a kink at zero strain, where the geometric guess starts: solve the
+            # statics with the bilateral law and check below that every span ends up in tension
+            from .kernel import compiled_kernel
+            KS = compiled_kernel(m.K._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
         q = st.q.copy()
         M = np.empty((nq, nq))
         Q = np.empty(nq)
@@ -398,7 +432,7 @@ class Simulator:
                 else:
                     pp[i] = xi
             c = m.c0 + m.Bpar @ pp
-            status = assemble(m.KJ, c, qq, zero, st.t, u, M, Q)
+            status = assemble(KS, c, qq, zero, st.t, u, M, Q)
             if status < 0:
                 return None, qq, pp, c
             return Q[eqs].copy(), qq, pp, c
@@ -408,7 +442,8 @@ class Simulator:
         for it in range(100):
             r, qq, pp, c = resid(x)
             if r is None:
-                raise SolverError(f"{m.scene.source}: initial statics: a span has non-positive length")
+                raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
+                                  f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
             J = np.empty((len(eqs), len(x)))
             for j in range(len(x)):
@@ -437,6 +472,18 @@ class Simulator:
                               f"(residual {np.max(np.abs(r)) if r is not None else float('nan'):.3g} N)")
         st.q[:] = qq
         st.c[:] = c
+        if KS is not m.KJ:
+            p = m.B @ qq + c
+            nd, n_nodes = m.nd, m.info["n_nodes"]
+            for ie, idx in enumerate(m.K.el_idx):
+                if not m.K.el_tonly[ie]:
+                    continue
+                r1, r2 = p[idx[:nd]], p[idx[nd:2 * nd]]
+                l = p[idx[2 * nd + 1]] - p[idx[2 * nd]]
+                if np.linalg.norm(r2 - r1) < l:
+                    ir, k = m.element_span[ie]
+                    raise SolverError(f"{m.scene.source}: initial statics: rope {m.scene.ropes[ir].name!r} "
+                                      f"span {k} would be in compression (a tension-only rope cannot hold)")
         return st
 
     def _consistent_acceleration(self, st: State):
@@ -483,7 +530,7 @@ class Simulator:
         status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
-            raise SolverError(f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}")
+            raise SolverError(self._status_message(status, st))
         st.t = t_end if abs(st.t - t_end) < 1e-9 else st.t
         if out_dt is None:
             return None
@@ -518,9 +565,23 @@ class Simulator:
             status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
         if status != 0:
             st.t = t0 + done * h
-            raise SolverError(f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}")
+            raise SolverError(self._status_message(status, st))
         st.t = t_end
         return buf[0, 1:]
+
+    def _status_message(self, status: int, st: State) -> str:
+        msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"
+        if status == 2:
+            ie = int(st.info[7])
+            ir, k = self.model.element_span[ie]
+            rope = self.model.scene.ropes[ir]
+            stops = rope.route
+
+            def label(stop):
+                return stop.sheave if stop.sheave is not None else f"{stop.anchor} anchor"
+            msg += (f": rope {rope.name!r} span {k} ({label(stops[k])} -> {label(stops[k + 1])}) is shorter "
+                    f"than solver.min_span = {self.model.scene.solver.min_span:g} m")
+        return msg
 
     def _rhs_factory(self, st: State):
         m = self.model

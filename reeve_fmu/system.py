@@ -59,6 +59,18 @@ def brake_torque(K, q, v, u):
 
 
 @njit(cache=True, inline="always")
+def buffer_force(K, q, v, k):
+    """Compressive force of buffer k (>= 0): k d + c d' while the penetration d > 0."""
+    j = K.buf_dof[k]
+    sg = K.buf_sign[k]
+    d = sg * (K.buf_z[k] - q[j])
+    if d <= 0.0:
+        return 0.0
+    f = K.buf_k[k] * d - sg * K.buf_c[k] * v[j]
+    return f if f > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
 def drive_torque(K, t, u):
     if K.drive_kind == 2:
         return _interp(K.torque_table, t)
@@ -143,9 +155,10 @@ def assemble_ws(K, W, c, q, v, t, u):
         else:
             res = linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
                                     QE, VE, MEs, QEs, ie)
-        if res[2] < 0.0:
-            status = -1
-            continue
+        if res[2] < 0.0 or QE[ie, ne - 1] - QE[ie, ne - 2] < K.l_min:
+            status = -1 - ie   # vanishing span: the event names the element
+            if res[2] < 0.0:
+                continue
         for a in range(ne):
             for wa in range(W):
                 ba = el_coef[ie, a, wa]
@@ -160,6 +173,8 @@ def assemble_ws(K, W, c, q, v, t, u):
     for k in range(K.spr_dof.shape[0]):
         j = K.spr_dof[k]
         Q[j] -= K.spr_k[k] * q[j] + K.spr_c[k] * v[j]
+    for k in range(K.buf_dof.shape[0]):
+        Q[K.buf_dof[k]] += K.buf_sign[k] * buffer_force(K, q, v, k)
     for k in range(K.drum_dof.shape[0]):
         # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (method §2.5, variable mass)
         # drums start the route: the stored rope is s in [0, sigma]
@@ -216,7 +231,10 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 for w in range(K.el_map.shape[2]):
                     x += K.el_coef[i, a, w] * qdd[K.el_map[i, a, w]]
                 ae[a] = x
-            y[k] = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
+            T = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
+            # a slack tension-only span carries (almost) nothing: its weight/inertia share would
+            # otherwise show as a negative "tension"
+            y[k] = T if (K.el_tonly[i] == 0 or T > 0.0) else 0.0
     for k in range(n):
         kind = K.out_kind[k]
         if kind == 4:
@@ -237,6 +255,8 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
             y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[1]
+        elif kind == 8:
+            y[k] = buffer_force(K, q, v, K.out_i[k])
 
 
 @njit(cache=True)

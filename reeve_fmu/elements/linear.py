@@ -21,6 +21,33 @@ import numpy as np
 from .._jit import njit
 
 
+
+SLACK_STRAIN = 1e-6   # smoothing width of the tension-only law (strain): ~ N per MN of EA when slack
+
+
+@njit(cache=True, inline="always")
+def axial_law(EA, nu, eps, epsdot, tonly):
+    """Axial force of a rope section: (N elastic, w energy density, N_d damping part).
+
+    Bilateral: N = EA eps, w = EA eps^2/2, N_d = EA nu deps/dt (exact linear law).
+    Tension-only (slack ropes): the kink of max(., 0) makes Newton cycle between the slack and the
+    taut branch, so it is smoothed over SLACK_STRAIN: N = EA sp(eps), sp(x) = (x + sqrt(x^2+d^2))/2,
+    with the matching energy w = EA [eps^2 + eps sqrt(eps^2+d^2) + d^2 asinh(eps/d)]/4 (conservative);
+    the total force N + N_d (damper active only on a taut rope) is smoothly clipped at zero, a rope
+    cannot push."""
+    if not tonly:
+        return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot
+    d = SLACK_STRAIN
+    r = math.sqrt(eps * eps + d * d)
+    N = 0.5 * EA * (eps + r)
+    w = 0.25 * EA * (eps * eps + eps * r + d * d * math.asinh(eps / d))
+    taut = 0.5 * (1.0 + eps / r)
+    f = N + EA * nu * epsdot * taut
+    dF = EA * d
+    F = 0.5 * (f + math.sqrt(f * f + dF * dF))
+    return N, w, F - N
+
+
 @njit(cache=True, inline="always")
 def linear_element_at(nd, rhoA, EA, nu, tonly, G, C, QE, VE, MEs, QEs, ie):
     """Fill MEs[ie] (ne x ne) and QEs[ie] (ne) for element ie from QE[ie], VE[ie] (indexing, not slicing:
@@ -102,17 +129,7 @@ def linear_element_at(nd, rhoA, EA, nu, tonly, G, C, QE, VE, MEs, QEs, ie):
 
     # --- axial elastic and Kelvin-Voigt forces ----------------------------------------------
     eps = lam - 1.0
-    if tonly and eps <= 0.0:
-        N = 0.0
-        w = 0.0
-        Nd = 0.0
-    else:
-        N = EA * eps
-        w = 0.5 * EA * eps * eps
-        epsdot = rel * inv_l - lam * ldot * inv_l
-        Nd = EA * nu * epsdot
-        if tonly and N + Nd < 0.0:
-            Nd = -N  # a rope cannot push: the damper only unloads the spring down to zero
+    N, w, Nd = axial_law(EA, nu, eps, rel * inv_l - lam * ldot * inv_l, tonly)
     Ntot = N + Nd
     if dist > 0.0:
         for k in range(nd):
@@ -170,16 +187,7 @@ def linear_element_1d_at(rhoA, EA, nu, tonly, g, C, QE, VE, MEs, QEs, ie):
     q2 = -m3 * d * dd * w1 + rhoA * (-sd1 * d * rA - 0.5 * rA * rA) - rhoA * gm
     q3 = -m3 * d * dd * w2 + rhoA * (sd2 * d * rB + 0.5 * rB * rB) + rhoA * gm
     eps = lam - 1.0
-    if tonly and eps <= 0.0:
-        N = 0.0
-        w = 0.0
-        Nd = 0.0
-    else:
-        N = EA * eps
-        w = 0.5 * EA * eps * eps
-        Nd = EA * nu * (t * (v2 - v1) - lam * ldot) * inv_l
-        if tonly and N + Nd < 0.0:
-            Nd = -N
+    N, w, Nd = axial_law(EA, nu, eps, (t * (v2 - v1) - lam * ldot) * inv_l, tonly)
     Nt = (N + Nd) * t
     esh = N * lam - w + Nd * lam
     QEs[ie, 0] = q0 + Nt
