@@ -39,8 +39,10 @@ def axial_law(EA, nu, eps, epsdot, tonly):
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot
     d = SLACK_STRAIN
     r = math.sqrt(eps * eps + d * d)
-    N = 0.5 * EA * (eps + r)
-    w = 0.25 * EA * (eps * eps + eps * r + d * d * math.asinh(eps / d))
+    # eps + r without cancellation when slack (eps < 0): (eps + r) = d^2 / (r - eps)
+    sp = eps + r if eps >= 0.0 else d * d / (r - eps)
+    N = 0.5 * EA * sp
+    w = 0.25 * EA * (eps * sp + d * d * math.asinh(eps / d))
     taut = 0.5 * (1.0 + eps / r)
     f = N + EA * nu * epsdot * taut
     dF = EA * d

@@ -89,6 +89,9 @@ except BaseException:
     sys.stdout.flush(); sys.stderr.flush()
     os._exit(1)
 sys.stdout.flush(); sys.stderr.flush()
+# The result is on disk: skip interpreter finalisation, where pythonfmu FMUs occasionally corrupt
+# the heap at exit (fmi.md §5.2, PythonFMU #228; seen here as "corrupted double-linked list").
+os._exit(0)
 """
 
 #: diagnostics of the most recent run_in_subprocess call (attempts, return codes, retried?)
