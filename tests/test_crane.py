@@ -1,0 +1,229 @@
+"""Crane hoist statics with axial-torsion coupling (method.md §1.5, §3.2, §5.3, §7 item 11).
+
+Oracles:
+- the coupling laws are the derivatives of their energy density (S = dw/deps, M = dw/dkappa) and the
+  torsion span's generalized forces are the gradient of its potential (finite differences);
+- with the tangent points frozen in their body frames the crane residual is grad Pi (energy laws);
+- two falls, torque-factor law M = k S d, no torsional stiffness: sin psi = 4 k d h / (a b) and the
+  critical height a b / (4 k d) (closed form, method §5.3);
+- 8 falls (domain.md §4.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
+  (H_crit about 1200 m with S = 0.8 m), 6-strand rope k = 0.08 cabling at about 90 m.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from reeve_fmu.crane import CraneSolver, load_crane, sweep
+from reeve_fmu.elements.torsion import LAWS, coupling_law, torsion_span, transport_angle, transport_angle_grad
+from reeve_fmu.scene import SceneError
+
+ROOT = Path(__file__).resolve().parents[1]
+TWO = ROOT / "scenes" / "crane_two_fall.toml"
+EIGHT = ROOT / "scenes" / "crane_8fall.toml"
+
+
+def _rot(axis, ang):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(ang) * K + (1 - math.cos(ang)) * K @ K
+
+
+# ------------------------------------------------------------------------------------ torsion.py
+@pytest.mark.parametrize("law", ["costello", "feyrer"])
+def test_coupling_law_is_the_derivative_of_w(law):
+    EA, d, k0, k1, GJ0 = 2.28e7, 0.022, 0.03, 0.4, 150.0
+    L = LAWS[law]
+    for eps, kap in [(3e-3, 0.02), (1e-3, -0.3), (5e-3, 1.2)]:
+        w, S, M, E = coupling_law(L, EA, d, k0, k1, GJ0, eps, kap)
+        he, hk = 1e-7, 1e-6
+        dwe = (coupling_law(L, EA, d, k0, k1, GJ0, eps + he, kap)[0] - coupling_law(L, EA, d, k0, k1, GJ0, eps - he, kap)[0]) / (2 * he)
+        dwk = (coupling_law(L, EA, d, k0, k1, GJ0, eps, kap + hk)[0] - coupling_law(L, EA, d, k0, k1, GJ0, eps, kap - hk)[0]) / (2 * hk)
+        assert S == pytest.approx(dwe, rel=1e-7)
+        assert M == pytest.approx(dwk, rel=1e-6, abs=1e-6)
+        # E = d(l w(D/l - 1, Theta/l))/dl at fixed chord D and twist angle Theta
+        l, D, Th = 2.0, 2.0 * (1 + eps), 2.0 * kap
+        U = lambda ll: ll * coupling_law(L, EA, d, k0, k1, GJ0, D / ll - 1, Th / ll)[0]
+        assert E == pytest.approx((U(l + 1e-6) - U(l - 1e-6)) / 2e-6, rel=1e-5, abs=1e-3)
+    # costello = feyrer with k1 = 0; torque factor at zero twist: M = k0 d S
+    a = coupling_law(LAWS["costello"], EA, d, k0, 0.0, GJ0, 2e-3, 0.1)
+    b = coupling_law(LAWS["feyrer"], EA, d, k0, 0.0, GJ0, 2e-3, 0.1)
+    assert np.allclose(a, b, rtol=1e-14)
+    w, S, M, E = coupling_law(L, EA, d, k0, k1, 0.0, 2e-3, 0.0)
+    assert M == pytest.approx(k0 * d * S, rel=1e-12)
+
+
+def test_torque_factor_law():
+    EA, d, k0, k1, GJ0 = 2.28e7, 0.022, 0.08, 0.5, 20.0
+    w, S, M, E = coupling_law(LAWS["torque-factor"], EA, d, k0, k1, GJ0, 3e-3, 0.2)
+    assert S == EA * 3e-3
+    assert M == pytest.approx(d * S * (k0 + k1 * d * 0.2) + GJ0 * 0.2, rel=1e-14)
+    assert E == pytest.approx(0.5 * EA * 9e-6 - S * 1.003, rel=1e-14)   # axial only: s-rows = tension balance
+
+
+def test_transport_angle_follows_frame_rotation_and_branch():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        t = rng.normal(size=3)
+        t /= np.linalg.norm(t)
+        a = rng.normal(size=3)
+        th = rng.uniform(-3.0, 3.0)
+        b = _rot(t, th) @ a * rng.uniform(0.5, 2.0)      # v_B: v_A turned about t (any length)
+        b += rng.normal() * t                             # plus any component along t
+        assert transport_angle(*t, *a, *b, 0.0) == pytest.approx(th, abs=1e-12)
+        assert transport_angle(*t, *a, *b, th + 2 * math.pi) == pytest.approx(th + 2 * math.pi, abs=1e-12)
+        # gradient against central differences
+        gt, ga, gb = np.zeros(3), np.zeros(3), np.zeros(3)
+        D = transport_angle_grad(t, a, b, th, gt, ga, gb)
+        assert D == pytest.approx(th, abs=1e-12)
+        f = lambda tt, aa, bb: transport_angle(*tt, *aa, *bb, th)
+        h = 1e-6
+        for k in range(3):
+            e = np.zeros(3)
+            e[k] = h
+            assert gt[k] == pytest.approx((f(t + e, a, b) - f(t - e, a, b)) / (2 * h), abs=1e-7)
+            assert ga[k] == pytest.approx((f(t, a + e, b) - f(t, a - e, b)) / (2 * h), abs=1e-7)
+            assert gb[k] == pytest.approx((f(t, a, b + e) - f(t, a, b - e)) / (2 * h), abs=1e-7)
+
+
+@pytest.mark.parametrize("law", ["costello", "feyrer"])
+def test_torsion_span_forces_are_the_gradient_of_its_potential(law):
+    """dU/d[rA, rB, sA, sB, phiA, phiB, vA, vB] of the span potential (strain + potential-form
+    gravity) against central differences of the returned V, at random states."""
+    rng = np.random.default_rng(11)
+    EA, rhoA, d, k0, k1, GJ0 = 2.0e6, 2.4, 0.022, 0.05, 0.3, 80.0
+    g = np.array([0.3, -0.2, -9.81])
+    wk = np.zeros(12)
+    for _ in range(4):
+        rA = rng.normal(size=3)
+        D = rng.normal(size=3)
+        D *= rng.uniform(2, 6) / np.linalg.norm(D)
+        rB = rA + D
+        l = np.linalg.norm(D) / rng.uniform(1.001, 1.01)
+        sA = rng.uniform(-5, 5)
+        z = np.concatenate([rA, rB, [sA, sA + l], rng.uniform(-1, 1, 2), rng.normal(size=3), rng.normal(size=3)])
+
+        def V(z):
+            grad = np.zeros(16)
+            return torsion_span(LAWS[law], EA, rhoA, d, k0, k1, GJ0, g, z[0:3], z[3:6], z[6], z[7], z[8], z[9],
+                                z[10:13], z[13:16], 0.0, grad, wk)[5]
+
+        grad = np.zeros(16)
+        torsion_span(LAWS[law], EA, rhoA, d, k0, k1, GJ0, g, z[0:3], z[3:6], z[6], z[7], z[8], z[9],
+                     z[10:13], z[13:16], 0.0, grad, wk)
+        for i in range(16):
+            h = 1e-6
+            e = np.zeros(16)
+            e[i] = h
+            fd = (V(z + e) - V(z - e)) / (2 * h)
+            assert grad[i] == pytest.approx(fd, rel=2e-6, abs=1e-3 * max(1.0, abs(fd)) * 1e-3), i
+
+
+# -------------------------------------------------------------------------------------- crane.py
+@pytest.mark.parametrize("scene,over", [
+    (EIGHT, {}),
+    (EIGHT, {"law": "feyrer", "k1": 0.3, "pose": "full", "cg": [0.02, -0.01, -0.8]}),
+    (TWO, {"law": "costello", "GJ0": 50.0}),
+])
+def test_residual_is_the_gradient_of_the_potential(scene, over):
+    """Tangent points frozen in their body frames (ip[6] = 0): every equation except the height
+    row is dPi/dx_i, at a turned, displaced, twisted state."""
+    m = load_crane(scene, over)
+    m.ip[6] = 0
+    sol = CraneSolver(m)
+    x = sol.guess(12.0)
+    rng = np.random.default_rng(5)
+    x[0:3] += [0.03, -0.02, 0.0]
+    x[3:m.npose] += rng.uniform(-0.3, 0.3, m.npose - 3)
+    x[m.npose:] += rng.uniform(-1e-3, 1e-3, m.nx - m.npose)
+    R = sol.residual(x, 12.0)
+    for i in range(m.nx):
+        if i == m.drum_idx:
+            continue
+        h = 1e-6
+        e = np.zeros(m.nx)
+        e[i] = h
+        fd = (sol.potential(x + e) - sol.potential(x - e)) / (2 * h)
+        assert R[i] == pytest.approx(fd, rel=1e-5, abs=1e-4 * m.weight * 1e-3), m.x_names()[i]
+
+
+def test_two_falls_against_the_closed_form():
+    """Torque-factor law, GJ = 0, rope weight off: sin psi = 4 k d h/(a b) within 1 % at every
+    height reached, cabling at a b/(4 k d) within 1 % with psi -> 90 deg."""
+    a = b = 0.5
+    k, d = 0.08, 0.022
+    Hc = a * b / (4 * k * d)
+    m = load_crane(TWO, {"rope_weight": False, "heights": 120})
+    res = sweep(m)
+    h = res.columns["height"]
+    psi = res.columns["block.yaw"]
+    ok = np.isfinite(psi)
+    assert ok.sum() > 100 and not ok[-1]
+    rel = np.abs(np.sin(psi[ok]) / (4 * k * d * h[ok] / (a * b)) - 1)
+    assert rel.max() < 0.01, rel.max()
+    assert res.critical_height == pytest.approx(Hc, rel=0.01)
+    assert math.degrees(res.critical_yaw) == pytest.approx(90.0, abs=2.0)
+    # the torque is k d S and the two falls share the load
+    S = res.columns["fall1.tension"][ok]
+    assert np.allclose(res.columns["rope.torque"][ok], k * d * S, rtol=1e-9)
+    assert np.allclose(S, m.weight / 2, rtol=2e-3)
+
+
+def test_eight_falls_large_crane():
+    """domain.md §4.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
+    m = load_crane(EIGHT)
+    assert m.S_eff == pytest.approx(0.80, abs=0.01)
+    res = sweep(m)
+    c = res.columns
+    W, n = m.weight, len(m.falls)
+    assert n == 8 and res.critical_height is None
+    ten = np.array([c[f"fall{i}.tension"] for i in range(1, 9)])
+    assert np.all(np.abs(ten / (W / n) - 1) < 0.05)         # W/n plus the rope's own weight
+    assert np.ptp(ten, axis=0).max() < 0.01 * W / n          # frictionless sheaves: nearly equal
+    psi120 = math.degrees(c["block.yaw"][-1])
+    assert 3.0 < psi120 < 8.0                                # about 5 deg at 100-120 m, stable
+    # the same reeving with a 6-strand rope (k = 0.08) cables inside the hoisting range (~90 m)
+    res8 = sweep(load_crane(EIGHT, {"k0": 0.08, "heights": 60}))
+    assert res8.critical_height is not None and 80.0 < res8.critical_height < 100.0
+    H_est = 0.8 ** 2 / (4 * 0.08 * 0.022)
+    assert res8.critical_height == pytest.approx(H_est, rel=0.03)
+    # k = 0.006: the fold is far beyond the range, near S^2/(4 k d) = 1212 m (rope weight off)
+    far = sweep(load_crane(EIGHT, {"rope_weight": False, "height_max": 1600.0, "heights": 40}))
+    assert far.critical_height == pytest.approx(0.8 ** 2 / (4 * 0.006 * 0.022), rel=0.03)
+
+
+def test_bad_crane_section_names_file_and_key(tmp_path):
+    text = EIGHT.read_text()
+    cases = [
+        ("k0 = 0.006", "k0 = 0.006\ncolour = 1", "[crane] unknown key(s) 'colour'"),
+        ("k0 = 0.006", "", "[crane] missing required key 'k0'"),
+        ('law = "costello"', 'law = "hooke"', "[crane.law] must be one of"),
+        ("height_max = 120.0", "height_max = 1.0", "[crane.height_max] must be > height_min"),
+        ('block = "block"', 'block = "hook"', "[crane.block] unknown body 'hook'"),
+    ]
+    for old, new, msg in cases:
+        p = tmp_path / "bad.toml"
+        head, tail = text.rsplit("\n[crane]", 1)
+        p.write_text(head + "\n[crane]" + tail.replace(old, new, 1))
+        with pytest.raises(SceneError) as exc:
+            load_crane(p)
+        assert str(exc.value).startswith(f"{p}: ") and msg in str(exc.value), str(exc.value)
+
+
+def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
+    from reeve_fmu.cli import main
+    out = tmp_path / "two"
+    assert main(["crane", str(TWO), "--out", str(out), "--heights", "40"]) == 0
+    header = (out / "rotation.csv").read_text().splitlines()[0].split(",")
+    assert header[:2] == ["height", "block.yaw"]
+    assert {"fall1.tension", "fall2.tension", "rope.torque"} <= set(header)
+    data = np.genfromtxt(out / "rotation.csv", delimiter=",", skip_header=1)
+    assert data.shape == (40, len(header))
+    s = json.loads((out / "summary.json").read_text())
+    assert s["critical_height"] == pytest.approx(35.5, rel=0.01)
+    assert (out / "rotation.png").stat().st_size > 10_000
+    assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
