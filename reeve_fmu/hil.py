@@ -1,0 +1,549 @@
+"""`reeve-fmu hil`: the motor controller in the loop over CAN (CiA 402), docs/hil.md.
+
+The bench (reeve_fmu.canhil.bridge) is a simulated CiA 402 drive in front of the plant FMU; the
+controller sits on the other side of a python-can bus:
+
+    --bus virtual        controller in a thread of this process (python-can `virtual` is in-process only)
+    --bus udp_multicast  controller in a separate process (IPv4 multicast 239.74.163.2 on loopback)
+    --controller builtin the demo's ElectricDrive as a CANopen master (reeve_fmu.canhil.controller)
+    --controller external  wait for another CANopen master (e.g. canopen BaseNode402, a real controller)
+    --realtime           pace SYNC to the wall clock (default: lock-step, deterministic, faster than real time)
+    --inject loss=P | delay=MS | controller-dies-at=T | corrupt=P | seed=N
+
+Writes DIR/results.csv (plant outputs + hil.* columns per SYNC) and DIR/summary.json. With the built-in
+controller and no injected faults the summary compares the run with an in-process Plant + ElectricDrive
+run of the same step, transport delay and CAN quantization (`reference`), and with the demo's
+Gauss-Seidel coupling without CAN (`vs_demo_scheme`).
+
+`python -m reeve_fmu.hil controller ...` is the controller process of --bus udp_multicast;
+`python -m reeve_fmu.hil bench ...` runs the bench on any python-can interface (socketcan for a real
+controller, docs/hil.md).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .canhil.buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, make_bus  # noqa: E402  (re-exported)
+
+
+# ---------------------------------------------------------------------------------------------------
+# buses
+# ---------------------------------------------------------------------------------------------------
+def multicast_probe(port: int | None = None, timeout: float = 1.0) -> tuple[bool, str]:
+    """Can two udp_multicast buses on this host exchange a frame? (ok, reason)."""
+    import can
+
+    port = port or random.randint(44000, 44999)
+    a = b = None
+    try:
+        a = make_bus("udp_multicast", port=port)
+        b = make_bus("udp_multicast", port=port)
+        a.send(can.Message(arbitration_id=0x7FF, data=b"probe", is_extended_id=False))
+        deadline = time.perf_counter() + timeout
+        while time.perf_counter() < deadline:
+            m = b.recv(max(0.0, deadline - time.perf_counter()))
+            if m is not None and m.arbitration_id == 0x7FF:
+                return True, "ok"
+        return False, "udp_multicast: a frame sent to 239.74.163.2 was not received within 1 s"
+    except Exception as exc:  # CanInitializationError, OSError
+        return False, f"udp_multicast: {type(exc).__name__}: {exc}"
+    finally:
+        for bus in (a, b):
+            if bus is not None:
+                try:
+                    bus.shutdown()
+                except Exception:
+                    pass
+
+
+def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
+    """udp_multicast usable? If not and we may (root, `ip` available), enable multicast on `lo` and route
+    239.0.0.0/8 there (fmi.md §7.1), then probe again. Where a route to 239/8 exists already (e.g. via
+    a default route) nothing is changed."""
+    ok, why = multicast_probe()
+    if ok or not setup_route:
+        return ok, why
+    ip = shutil.which("ip")
+    if ip is None or not hasattr(os, "geteuid") or os.geteuid() != 0:
+        return False, why + " (and no root/`ip` to add: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
+    subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
+    subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, timeout=10)
+    ok2, why2 = multicast_probe()
+    return ok2, why2 if not ok2 else "ok (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
+
+
+# ---------------------------------------------------------------------------------------------------
+# configuration
+# ---------------------------------------------------------------------------------------------------
+@dataclass
+class HilConfig:
+    bus: str = "virtual"                       # virtual | udp_multicast
+    controller: str = "builtin"                # builtin | external
+    realtime: bool = False
+    inject: list = field(default_factory=list)
+    t_end: float | None = None                 # default: the drive's trip end + 1 s (like the demo)
+    dt: float = 1e-3
+    plant: str = "fmu"                         # fmu | in-process
+    fmu_path: str | None = None                # default: fmus/ReevingPlant.fmu (built when missing/stale)
+    drive_values: dict | None = None           # drive parameters (reeve_fmu.cosim DRIVE_PARAMETERS names)
+    plant_values: dict | None = None           # plant FMU parameters (car.load, ...)
+    out: str | None = "results/hil"
+    lockstep_timeout: float = 0.5
+    start_timeout: float = 300.0              # a cold numba compile of plant + drive can take minutes
+    channel: str | None = None
+    port: int | None = None
+    compare: bool = True                       # builtin, no faults: compare with the in-process references
+    stop_when_safe: bool = False
+    record: bool = True
+
+
+def _drive_model(values):
+    from .canhil.controller import make_electric_drive
+
+    return make_electric_drive(values)
+
+
+def default_t_end(drive_values=None) -> float:
+    return _drive_model(drive_values).t_end + 1.0
+
+
+def _make_plant(cfg: HilConfig, log):
+    from .canhil.plants import FmuPlant, InProcessPlant, default_plant_fmu, make_default_plant
+
+    if cfg.plant == "in-process":
+        return InProcessPlant(make_default_plant(params=cfg.plant_values))
+    path = Path(cfg.fmu_path) if cfg.fmu_path else default_plant_fmu(log=log)
+    return FmuPlant(path, start_values=cfg.plant_values)
+
+
+# ---------------------------------------------------------------------------------------------------
+# reference runs (in-process, no bus)
+# ---------------------------------------------------------------------------------------------------
+def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_values=None,
+                  scheme: str = "hil", names=("car.position", "car.velocity", "motor.speed")) -> dict:
+    """Plant + ElectricDrive in this process, no FMI, no bus.
+
+    scheme "hil":  the bench's semantics: the torque held over [t_k, t_k+1) was computed by the controller
+                   from the sample at t_k-1 (Jacobi coupling) and went through the CAN encoding (angle and
+                   speed in 2^20 increments per revolution, torque in 0.55 N m);
+    scheme "gauss-seidel": the demo's coupling (drive first with the sample at t_k, its torque held over
+                   [t_k, t_k+1)), full float precision.
+    Returns {"time": ..., name: ...} sampled at every t_k (k = 0..n_steps)."""
+    from .canhil.plants import make_default_plant
+    from .canhil.protocol import NM_PER_PERMILLE, RAD_PER_INC
+
+    plant = make_default_plant(params=plant_values)
+    drive = _drive_model(drive_values)
+    on = list(plant.output_names)
+    iw, ia = on.index("motor.speed"), on.index("motor.angle")
+    idx = [on.index(n) for n in names]
+    out = np.empty((n_steps + 1, len(names)))
+    od = plant.outputs()
+    y = np.array([od[n] for n in on])
+    out[0] = y[idx]
+    tau, brake = 0.0, 0.0
+    jacobi = scheme == "hil"
+    for k in range(n_steps):
+        w, th = y[iw], y[ia]
+        if jacobi:
+            w = round(w / RAD_PER_INC) * RAD_PER_INC
+            th = round(th / RAD_PER_INC) * RAD_PER_INC
+            y = plant.step(dt, tau, brake)
+            tq, br = drive.step(k * dt, dt, w, th)
+            tq = min(max(tq, -1000.45), 1000.45)
+            tau, brake = round(tq / NM_PER_PERMILLE) * NM_PER_PERMILLE, (1.0 if br > 0.5 else 0.0)
+        else:
+            tau, brake = drive.step(k * dt, dt, w, th)
+            y = plant.step(dt, tau, brake)
+        out[k + 1] = y[idx]
+    res = {"time": np.arange(n_steps + 1) * dt}
+    res.update({n: out[:, i] for i, n in enumerate(names)})
+    return res
+
+
+# ---------------------------------------------------------------------------------------------------
+# controller runners
+# ---------------------------------------------------------------------------------------------------
+class _ThreadController:
+    def __init__(self, bus_factory, ccfg):
+        from .canhil.controller import BuiltinController
+
+        self.bus = bus_factory()
+        self.ctl = BuiltinController(self.bus, ccfg)
+        self.result = None
+        self.thread = threading.Thread(target=self._run, name="hil-controller", daemon=True)
+
+    def _run(self):
+        self.result = self.ctl.run()
+
+    def start(self):
+        self.thread.start()
+
+    def dead(self):
+        if self.thread.is_alive():
+            return None
+        return self.result.stopped if self.result is not None else "controller thread ended"
+
+    def join(self, timeout):
+        self.thread.join(timeout)
+        alive = self.thread.is_alive()
+        try:
+            self.bus.shutdown()
+        except Exception:
+            pass
+        st = self.result.as_dict() if self.result is not None else {"stopped": "controller thread did not finish"}
+        if alive:
+            st["stopped"] = "controller thread still running after the bench stopped"
+        return st
+
+
+class _ProcessController:
+    def __init__(self, channel, port, ccfg, workdir: Path):
+        self.stats_path = workdir / "controller_stats.json"
+        self.log_path = workdir / "controller.log"
+        args = [sys.executable, "-m", "reeve_fmu.hil", "controller", "--bus", "udp_multicast",
+                "--channel", channel, "--port", str(port), "--n-steps", str(ccfg.n_steps), "--dt", repr(ccfg.dt),
+                "--sync-timeout", repr(ccfg.sync_timeout), "--start-timeout", repr(ccfg.start_timeout),
+                "--stats", str(self.stats_path)]
+        if ccfg.dies_at is not None:
+            args += ["--dies-at", repr(ccfg.dies_at)]
+        if ccfg.drive_values:
+            args += ["--drive-values", json.dumps(ccfg.drive_values)]
+        env = dict(os.environ)
+        root = str(Path(__file__).resolve().parents[1])
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        self._log = open(self.log_path, "w")
+        self.proc = subprocess.Popen(args, env=env, stdout=self._log, stderr=subprocess.STDOUT,
+                                     start_new_session=True)
+
+    def start(self):
+        pass
+
+    def dead(self):
+        rc = self.proc.poll()
+        if rc is None:
+            return None
+        return f"controller process exited with code {rc} (see controller.log)"
+
+    def join(self, timeout):
+        try:
+            rc = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            rc = self.proc.wait(timeout=10)
+        self._log.close()
+        try:
+            st = json.loads(self.stats_path.read_text())
+        except (OSError, ValueError):
+            st = {"stopped": f"controller process wrote no statistics (exit code {rc}); see {self.log_path.name}"}
+        st["exit_code"] = rc
+        st["pid"] = self.proc.pid
+        return st
+
+
+# ---------------------------------------------------------------------------------------------------
+# the run
+# ---------------------------------------------------------------------------------------------------
+def _pct(a, q):
+    return float(np.percentile(a, q)) if len(a) else None
+
+
+def run_hil(cfg: HilConfig, log=print) -> dict:
+    """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
+    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector
+    from .canhil.controller import ControllerConfig
+    from .canhil.protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, STATE_NAMES
+
+    log = log or (lambda *a, **k: None)
+    if cfg.bus not in ("virtual", "udp_multicast"):
+        raise ValueError(f"--bus must be virtual or udp_multicast, got {cfg.bus!r}")
+    if cfg.controller not in ("builtin", "external"):
+        raise ValueError(f"--controller must be builtin or external, got {cfg.controller!r}")
+    if not (cfg.dt > 0 and math.isfinite(cfg.dt)):
+        raise ValueError(f"step must be > 0, got {cfg.dt!r}")
+    faults = FaultSpec.parse(cfg.inject)
+    t_end = cfg.t_end if cfg.t_end is not None else default_t_end(cfg.drive_values)
+    if not (t_end > 0 and math.isfinite(t_end)):
+        raise ValueError(f"--t-end must be > 0, got {t_end!r}")
+    n = int(math.floor(t_end / cfg.dt + 1e-9))
+    if n < 1:
+        raise ValueError(f"--t-end {t_end} s is shorter than one SYNC period")
+    if cfg.bus == "udp_multicast":
+        ok, why = ensure_multicast()
+        if not ok:
+            raise HilError(f"--bus udp_multicast is not usable here: {why}")
+    channel = cfg.channel or (f"reeve_hil_{uuid.uuid4().hex[:8]}" if cfg.bus == "virtual" else MULTICAST_GROUP)
+    port = cfg.port or (None if cfg.bus == "virtual" else
+                        (DEFAULT_UDP_PORT if cfg.controller == "external" else random.randint(43200, 43999)))
+    plant = _make_plant(cfg, log)
+    bus = make_bus(cfg.bus, channel, port)
+    workdir = Path(tempfile.mkdtemp(prefix="reeve_hil_"))
+    ctl = None
+    try:
+        bcfg = BridgeConfig(dt=cfg.dt, realtime=cfg.realtime, lockstep_timeout=cfg.lockstep_timeout,
+                            start_timeout=cfg.start_timeout, stop_when_safe=cfg.stop_when_safe, record=cfg.record)
+        inj = Injector(faults, cfg.dt, lockstep=not cfg.realtime) if faults.any else None
+        bridge = Bridge(bus, plant, bcfg, inj)
+        bridge.warm_up()
+        if cfg.controller == "builtin":
+            ccfg = ControllerConfig(dt=cfg.dt, n_steps=n, drive_values=cfg.drive_values,
+                                    dies_at=faults.controller_dies_at, start_timeout=cfg.start_timeout,
+                                    sync_timeout=max(5.0, 4 * cfg.lockstep_timeout))
+            if cfg.bus == "virtual":
+                ctl = _ThreadController(lambda: make_bus("virtual", channel), ccfg)
+            else:
+                ctl = _ProcessController(channel, port, ccfg, workdir)
+            ctl.start()
+        else:
+            log(f"waiting up to {cfg.start_timeout:g} s for a CANopen master on {cfg.bus} "
+                f"{channel}{'' if port is None else f':{port}'}: drive node 1 ({EDS_PATH.name}, {DBC_PATH.name})")
+        res = bridge.run(n, alive=ctl.dead if ctl is not None else None)
+    finally:
+        try:
+            bus.shutdown()
+        except Exception:
+            pass
+        plant.close()
+        ctl_stats = ctl.join(timeout=30.0) if ctl is not None else None
+        if ctl is not None and isinstance(ctl, _ProcessController) and cfg.out:
+            out_dir = Path(cfg.out)
+            out_dir.mkdir(parents=True, exist_ok=True)
+            shutil.copy(ctl.log_path, out_dir / "controller.log")
+        shutil.rmtree(workdir, ignore_errors=True)
+    st = res.stats
+    cols = res.columns() if res.outputs is not None else {}
+    time_ = res.time
+    names_err = {ERR_RPDO_TIMEOUT: "command watchdog (RPDO timeout)", ERR_HEARTBEAT: "controller heartbeat lost",
+                 ERR_PLANT: "plant error"}
+    summary = {
+        "bus": cfg.bus,
+        "controller": cfg.controller,
+        "mode": "real-time" if cfg.realtime else "lock-step",
+        "plant": plant.describe(),
+        "step_s": cfg.dt,
+        "steps": st.steps,
+        "simulated_s": st.steps * cfg.dt,
+        "wall_s": st.wall,
+        "steps_per_s": st.steps / st.wall if st.wall > 0 else None,
+        "real_time_factor": st.steps * cfg.dt / st.wall if st.wall > 0 else None,
+        "start_wait_s": st.started_wall,
+        "transport_delay": "one SYNC period: the torque held over [t_k, t_k+1) was computed from the sample "
+                           "at t_k-1 (RPDO received in cycle k-1, applied at SYNC k; Jacobi coupling)",
+        "inject": faults.as_dict(),
+        "watchdog_trips": st.watchdog_trips,
+        "brake_engaged_at": st.brake_engaged_at,
+        "frames_rejected": st.frames_rejected,
+        "deadline_misses": st.deadline_misses,
+        "frames_rejected_detail": {"malformed": st.rejected_malformed, "out_of_range": st.rejected_out_of_range,
+                                   "stale": st.rejected_stale},
+        "frames_injected": res.injected,
+        "fault": None if st.fault_at is None else {"code": f"0x{st.fault_code:04X}",
+                                                   "reason": names_err.get(st.fault_code, "fault"),
+                                                   "at": st.fault_at},
+        "brake_closed_at": st.brake_closed_at,
+        "machine_stopped_at": st.machine_stopped_at,
+        "stop_distance_m": st.stop_distance,
+        "car_speed_at_fault_m_s": st.car_speed_at_fault,
+        "car_excursion_after_fault_m": st.car_excursion,
+        "heartbeat_faults": st.heartbeat_faults,
+        "heartbeat_gaps": st.heartbeat_gaps,
+        "commands_valid": st.commands_valid,
+        "commands_missing": st.commands_missing,
+        "lockstep_timeouts": st.lockstep_timeouts,
+        "frames_received": st.frames_rx,
+        "sdo_requests": st.sdo_requests,
+        "plant_error": st.plant_error,
+        "final_state": STATE_NAMES[int(cols["hil.state"][-1])] if cols else None,
+        "step_time_p50_us": _pct(st.step_time, 50) * 1e6 if len(st.step_time) else None,
+        "step_time_p99_us": _pct(st.step_time, 99) * 1e6 if len(st.step_time) else None,
+        "step_time_max_us": float(np.max(st.step_time)) * 1e6 if len(st.step_time) else None,
+        "cycle_time_mean_us": st.wall / st.steps * 1e6 if st.steps else None,
+    }
+    if cfg.realtime and len(st.sync_jitter):
+        summary.update({"sync_jitter_p50_us": _pct(st.sync_jitter, 50) * 1e6,
+                        "sync_jitter_p99_us": _pct(st.sync_jitter, 99) * 1e6,
+                        "sync_jitter_max_us": float(np.max(st.sync_jitter)) * 1e6})
+    if ctl_stats is not None:
+        summary["controller_stats"] = ctl_stats
+    if cols:
+        x = cols.get("car.position")
+        v = cols.get("car.velocity")
+        if x is not None:
+            summary.update({"car_travel_max_m": float(np.max(x) - x[0]), "car_position_final_m": float(x[-1]),
+                            "car_speed_max_m_s": float(np.max(np.abs(v))) if v is not None else None})
+        if "traction.tension_in" in cols:
+            summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
+        summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
+    if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
+        names = ("car.position", "car.velocity", "motor.speed")
+        m = st.steps
+        for key, scheme in (("reference", "hil"), ("vs_demo_scheme", "gauss-seidel")):
+            t0 = time.perf_counter()
+            ref = reference_run(m, cfg.dt, drive_values=cfg.drive_values, plant_values=cfg.plant_values,
+                                scheme=scheme, names=names)
+            d = {f"max_abs_diff_{n.replace('.', '_')}": float(np.max(np.abs(cols[n][:m + 1] - ref[n])))
+                 for n in names}
+            d["scheme"] = ("in-process Plant + ElectricDrive, same step, one-cycle transport delay (Jacobi), same "
+                           "CAN quantization" if scheme == "hil" else
+                           "in-process Plant + ElectricDrive, same step, Gauss-Seidel (the demo's coupling), "
+                           "no CAN quantization")
+            d["wall_s"] = time.perf_counter() - t0
+            summary[key] = d
+    if cfg.out:
+        from .results import write_csv
+
+        out = Path(cfg.out)
+        out.mkdir(parents=True, exist_ok=True)
+        if cols:
+            write_csv(out / "results.csv", time_, cols)
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    return summary
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {o!r}")
+
+
+# ---------------------------------------------------------------------------------------------------
+# command lines
+# ---------------------------------------------------------------------------------------------------
+SUMMARY_KEYS = ("mode", "steps", "wall_s", "steps_per_s", "watchdog_trips", "brake_engaged_at", "frames_rejected",
+                "deadline_misses", "lockstep_timeouts", "final_state", "car_position_final_m",
+                "step_time_p50_us", "step_time_p99_us", "sync_jitter_p99_us")
+
+
+def cli_hil(args) -> int:
+    """reeve-fmu hil (arguments from reeve_fmu.cli)."""
+    from .canhil.bridge import HilError
+
+    cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
+                    t_end=args.t_end, out=args.out)
+    try:
+        summary = run_hil(cfg)
+    except HilError as exc:
+        print(f"reeve-fmu hil: error: {exc}", file=sys.stderr)
+        return 3
+    w = max(len(k) for k in SUMMARY_KEYS)
+    for k in SUMMARY_KEYS:
+        if k in summary:
+            v = summary[k]
+            print(f"  {k:{w}s}  {v:.6g}" if isinstance(v, float) else f"  {k:{w}s}  {v}")
+    for key in ("reference", "vs_demo_scheme"):
+        if key in summary:
+            print(f"  {key:{w}s}  max |dx_car| = {summary[key]['max_abs_diff_car_position']:.3g} m")
+    print(f"-> {cfg.out}/results.csv, summary.json")
+    return 0 if summary.get("plant_error") is None else 2
+
+
+def _controller_main(argv) -> int:
+    import argparse
+
+    from .canhil.controller import BuiltinController, ControllerConfig
+
+    ap = argparse.ArgumentParser(prog="python -m reeve_fmu.hil controller")
+    ap.add_argument("--bus", default="udp_multicast")
+    ap.add_argument("--channel", default=None)
+    ap.add_argument("--port", type=int, default=None)
+    ap.add_argument("--n-steps", type=int, required=True)
+    ap.add_argument("--dt", type=float, default=1e-3)
+    ap.add_argument("--dies-at", type=float, default=None)
+    ap.add_argument("--sync-timeout", type=float, default=5.0)
+    ap.add_argument("--start-timeout", type=float, default=60.0)
+    ap.add_argument("--drive-values", default=None, help="JSON object of drive parameters")
+    ap.add_argument("--stats", default=None, help="write the controller statistics (JSON) here")
+    a = ap.parse_args(argv)
+    ccfg = ControllerConfig(dt=a.dt, n_steps=a.n_steps, dies_at=a.dies_at, sync_timeout=a.sync_timeout,
+                            start_timeout=a.start_timeout,
+                            drive_values=json.loads(a.drive_values) if a.drive_values else None)
+    bus = make_bus(a.bus, a.channel, a.port)
+    try:
+        st = BuiltinController(bus, ccfg).run()
+    finally:
+        bus.shutdown()
+    d = st.as_dict()
+    if a.stats:
+        Path(a.stats).write_text(json.dumps(d))
+    print(json.dumps(d))
+    return 0
+
+
+def _bench_main(argv) -> int:
+    """The bench on any python-can interface (e.g. socketcan can0 for a real controller)."""
+    import argparse
+
+    from .canhil.bridge import HilError
+
+    ap = argparse.ArgumentParser(prog="python -m reeve_fmu.hil bench",
+                                 description="simulated CiA 402 drive (node 1) + plant FMU on a CAN interface")
+    ap.add_argument("--interface", default="socketcan", help="python-can interface (socketcan, pcan, ...)")
+    ap.add_argument("--channel", default="can0")
+    ap.add_argument("--bitrate", type=int, default=None, help="bit/s, for interfaces that set it (not socketcan)")
+    ap.add_argument("--lockstep", action="store_true", help="lock-step instead of real time")
+    ap.add_argument("--t-end", type=float, default=None)
+    ap.add_argument("--dt", type=float, default=1e-3)
+    ap.add_argument("--plant", choices=("fmu", "in-process"), default="fmu")
+    ap.add_argument("--fmu", default=None)
+    ap.add_argument("--start-timeout", type=float, default=300.0)
+    ap.add_argument("--inject", action="append", default=[])
+    ap.add_argument("--out", default="results/hil")
+    a = ap.parse_args(argv)
+    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, Injector
+
+    kw = {"bitrate": a.bitrate} if a.bitrate else {}
+    import can
+
+    bus = can.Bus(interface=a.interface, channel=a.channel, **kw)
+    cfg = HilConfig(plant=a.plant, fmu_path=a.fmu, dt=a.dt, realtime=not a.lockstep)
+    plant = _make_plant(cfg, print)
+    faults = FaultSpec.parse(a.inject)
+    try:
+        bridge = Bridge(bus, plant, BridgeConfig(dt=a.dt, realtime=not a.lockstep, start_timeout=a.start_timeout),
+                        Injector(faults, a.dt, lockstep=a.lockstep) if faults.any else None)
+        n = int(math.floor((a.t_end if a.t_end is not None else 3600.0) / a.dt + 1e-9))
+        print(f"bench on {a.interface}:{a.channel}: waiting for NMT start of node 1 ...")
+        res = bridge.run(n)
+    except HilError as exc:
+        print(f"bench: {exc}", file=sys.stderr)
+        return 3
+    finally:
+        bus.shutdown()
+        plant.close()
+    from .results import write_csv
+
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "results.csv", res.time, res.columns())
+    st = res.stats
+    print(json.dumps({"steps": st.steps, "deadline_misses": st.deadline_misses, "watchdog_trips": st.watchdog_trips,
+                      "frames_rejected": st.frames_rejected, "brake_engaged_at": st.brake_engaged_at}))
+    return 0
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "controller":
+        return _controller_main(argv[1:])
+    if argv and argv[0] == "bench":
+        return _bench_main(argv[1:])
+    print("usage: python -m reeve_fmu.hil controller ... | bench ... (see reeve-fmu hil --help)", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
