@@ -78,6 +78,14 @@ if JIT:
         ("buf_sign", types.float64[::1]),
         ("buf_k", types.float64[::1]),
         ("buf_c", types.float64[::1]),
+        ("mot_gain", types.float64),
+        ("trac_s", types.int64),
+        ("trac_th", types.int64),
+        ("trac_R", types.float64),
+        ("trac_efa", types.float64),
+        ("trac_zmax", types.float64),
+        ("trac_el_in", types.int64),
+        ("trac_el_out", types.int64),
     ])
 
     @structref.register
@@ -154,7 +162,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -199,6 +207,14 @@ if JIT:
         k.buf_sign = buf_sign
         k.buf_k = buf_k
         k.buf_c = buf_c
+        k.mot_gain = mot_gain
+        k.trac_s = trac_s
+        k.trac_th = trac_th
+        k.trac_R = trac_R
+        k.trac_efa = trac_efa
+        k.trac_zmax = trac_zmax
+        k.trac_el_in = trac_el_in
+        k.trac_el_out = trac_el_out
         return k
 
 
@@ -210,7 +226,7 @@ def compiled_kernel(K: Kernel):
     for name, value in zip(K._fields, K):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
-        elif name in ("nd", "nq", "mot_dof", "drive_kind"):  # int fields; all others float
+        elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out"):
             value = int(value)
         else:
             value = float(value)

@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from .geometry import GeometryError, tangent, wrap_angle
+from .traction import equivalent_friction
 from .profiles import Profile, scurve, speed_table
 from .scene import AXES, Scene, SceneError
 
@@ -44,11 +45,14 @@ Kernel = namedtuple("Kernel", [
     "free", "presc", "presc_gain", "profile",
     "out_kind", "out_i", "out_j", "out_scale",
     "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
+    "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
 ])
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
-OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER = range(9)
-INFO_SIZE = 8   # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z, -]
+(OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
+ OUT_FRICTION) = range(11)
+INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
+#                element of a vanishing span, traction friction deflection z, -]
 
 
 @dataclass
@@ -201,6 +205,7 @@ def _build(scene: Scene) -> Model:
     rope_end_taps = []
     wrap_len_total = []
     dof_R = {}
+    slip_info = {}
 
     for ir, rope in enumerate(scene.ropes):
         rhoA = rope.rhoA * rope.count
@@ -265,9 +270,16 @@ def _build(scene: Scene) -> Model:
             sheave_dof[sh.name] = j
             dof_R[j] = sh.radius
             lw, T_in, T_out, theta = wraps[k]
-            M0_terms.append((j, j, sh.inertia / sh.radius ** 2 + rhoA * lw))
-            if scene.drive.sheave == sh.name:
-                M0_terms.append((j, j, scene.drive.motor_inertia / sh.radius ** 2))
+            J = sh.inertia + (scene.drive.motor_inertia if scene.drive.sheave == sh.name else 0.0)
+            if sh.slip:
+                # the sheave turns on its own (angle coordinate, rad); rope and groove are coupled
+                # by friction (system.traction_force)
+                jt = new_q(f"{sh.name}.theta", "angle", 0.0)
+                M0_terms.append((jt, jt, J))
+                M0_terms.append((j, j, rhoA * lw))
+                slip_info.update(sheave=sh, s=j, th=jt, wrap=theta)
+            else:
+                M0_terms.append((j, j, J / sh.radius ** 2 + rhoA * lw))
             if sh.kind == "drum":
                 drums.append((j, rhoA, 1.0 if k == 0 else -1.0))
             if lw > 0 and sh.body is not None:
@@ -443,11 +455,16 @@ def _build(scene: Scene) -> Model:
     presc, presc_gain = [], []
     profile = Profile(*(np.zeros(1) for _ in range(5)))
     torque_table = np.zeros((2, 0))
+    mot_gain = 1.0
     if dv.kind != "none":
-        mot_dof = sheave_dof[dv.sheave]
         mot_R = sheaves[dv.sheave].radius
+        if slip_info and slip_info["sheave"].name == dv.sheave:
+            mot_dof, mot_gain = slip_info["th"], 1.0          # the motor turns the sheave angle
+        else:
+            mot_dof, mot_gain = sheave_dof[dv.sheave], -1.0 / mot_R   # angle = -(sigma - sigma0)/R
         if dv.kind == "speed":
-            presc, presc_gain = [mot_dof], [-dv.roping]
+            # rim travel along the route = roping * profile position
+            presc, presc_gain = [mot_dof], [dv.roping / (mot_R * mot_gain)]
             if dv.profile == "s-curve":
                 profile = scurve(dv.distance, dv.v_max, dv.a_max, dv.jerk, t_start=dv.t_start)
             else:
@@ -474,8 +491,16 @@ def _build(scene: Scene) -> Model:
         if sh.name not in sheave_dof:
             continue
         j = sheave_dof[sh.name]
-        out(f"{sh.name}.angle", OUT_QREL, j, 0, -1.0 / sh.radius)
-        out(f"{sh.name}.speed", OUT_V, j, 0, -1.0 / sh.radius)
+        if sh.slip:
+            jt = slip_info["th"]
+            out(f"{sh.name}.angle", OUT_QREL, jt, 0, 1.0)
+            out(f"{sh.name}.speed", OUT_V, jt, 0, 1.0)
+            out(f"{sh.name}.slip_speed", OUT_SLIP, j, jt, sh.radius)   # rope speed - rim speed
+            out(f"{sh.name}.slip", OUT_SLIP, j, jt, -sh.radius)        # cumulative slip [m]
+            out(f"{sh.name}.friction", OUT_FRICTION, j, jt, sh.radius)  # force on the rope [N]
+        else:
+            out(f"{sh.name}.angle", OUT_QREL, j, 0, -1.0 / sh.radius)
+            out(f"{sh.name}.speed", OUT_V, j, 0, -1.0 / sh.radius)
         taps = tension_taps.get(sh.name, {})
         ti = to = None
         if "in" in taps:
@@ -488,9 +513,9 @@ def _build(scene: Scene) -> Model:
         out(f"{name}.tension_start", OUT_TENSION, e_first, 0)
         out(f"{name}.tension_end", OUT_TENSION, e_last, 1)
     if dv.kind != "none":
-        out("motor.angle", OUT_QREL, mot_dof, 0, -1.0 / mot_R)
-        out("motor.speed", OUT_V, mot_dof, 0, -1.0 / mot_R)
-        out("motor.torque", OUT_TORQUE, mot_dof, 0, mot_R)
+        out("motor.angle", OUT_QREL, mot_dof, 0, mot_gain)
+        out("motor.speed", OUT_V, mot_dof, 0, mot_gain)
+        out("motor.torque", OUT_TORQUE, mot_dof, 0, 1.0 / mot_gain)
     for ib, bf in enumerate(scene.buffers):
         out(f"{bf.name}.force", OUT_BUFFER, ib)
     if scene.brake.torque > 0 and dv.kind in ("torque", "external"):
@@ -523,17 +548,31 @@ def _build(scene: Scene) -> Model:
         buf_sign=np.array([1.0 if b.side == "below" else -1.0 for b in scene.buffers], float),
         buf_k=np.array([b.stiffness for b in scene.buffers], float),
         buf_c=np.array([b.damping for b in scene.buffers], float),
+        mot_gain=float(mot_gain),
+        trac_s=int(slip_info["s"]) if slip_info else -1,
+        trac_th=int(slip_info["th"]) if slip_info else -1,
+        trac_R=float(slip_info["sheave"].radius) if slip_info else 1.0,
+        trac_efa=(math.exp(equivalent_friction(slip_info["sheave"].mu, slip_info["sheave"].undercut_angle,
+                                               slip_info["sheave"].groove_angle, slip_info["sheave"].groove)
+                           * slip_info["wrap"]) - 1.0) if slip_info else 0.0,
+        trac_zmax=float(slip_info["sheave"].creep) if slip_info else 1.0,
+        trac_el_in=int(tension_taps[slip_info["sheave"].name]["in"][0]) if slip_info else -1,
+        trac_el_out=int(tension_taps[slip_info["sheave"].name]["out"][0]) if slip_info else -1,
     )
 
     # ------------------------------------------------------------------ statics sets
     locked = set(presc)
     if dv.kind in ("torque", "external", "none") and mot_dof >= 0 and dv.kind != "none":
         locked.add(mot_dof)   # held by the brake/drive during the initial statics
+    if slip_info:
+        locked.add(slip_info["s"])    # held by groove friction (preloaded after the statics)
+        locked.add(slip_info["th"])
     eqs = [j for j in range(nq) if j not in locked]
     if scene.statics == "positions":
         body_q = {j for d in body_dofs.values() for j in d.values()}
         unknowns = [("q", j) for j in eqs if j not in body_q]
-        unknowns += [("q", j) for j in sorted(locked) if sheaves_kind(scene, q_names[j]) != "drum"]
+        unknowns += [("q", j) for j in sorted(locked)
+                     if sheaves_kind(scene, q_names[j]) not in ("drum", "") and q_kind[j] == "sheave"]
         unknowns += [("par", i) for i in range(n_par)]
         if len(unknowns) != len(eqs):
             raise SceneError(

@@ -44,6 +44,12 @@ class Sheave:
     axis: tuple = (0.0, -1.0, 0.0)   # unit axis; default: ccw in the x-z drawing is positive
     kind: str = "idler"              # idler | traction | drum
     stored: float = 0.0              # m, rope stored on a drum at t = 0
+    slip: bool = False               # traction: rope may slip in the groove (own sheave angle)
+    mu: float = 0.1                  # friction coefficient rope-groove
+    groove: str = "u-undercut"       # u-undercut | semicircular | v-hardened | v (EN 81-50)
+    undercut_angle: float = 90.0     # deg, beta
+    groove_angle: float = 30.0       # deg, gamma
+    creep: float = 1e-3              # m, elastic creep (relative displacement) at full friction
 
 
 @dataclass(frozen=True)
@@ -150,7 +156,8 @@ SCHEMA_KEYS = {
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
     "bodies": {"name", "mass", "position", "free", "damping"},
-    "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored"},
+    "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
+                "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
               "wrap_model", "route"},
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
@@ -333,11 +340,27 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         kind = r.string(s, path, "kind", "idler", ("idler", "traction", "drum"))
         if kind == "drum" and body is not None:
             r.fail(f"{path}.body", "a drum must be fixed to the ground")
+        slip = r.boolean(s, path, "slip", False)
+        if slip and (kind != "traction" or body is not None):
+            r.fail(f"{path}.slip", "only a traction sheave fixed to the ground can slip")
         sheaves.append(Sheave(name=name, center=r.vector(s, path, "center", required=True),
                               radius=r.number(s, path, "radius", positive=True, required=True),
                               body=body, inertia=r.number(s, path, "inertia", 0.0, nonneg=True),
                               axis=r.vector(s, path, "axis", default=(0.0, -1.0, 0.0), unit=True),
-                              kind=kind, stored=r.number(s, path, "stored", 0.0, nonneg=True)))
+                              kind=kind, stored=r.number(s, path, "stored", 0.0, nonneg=True),
+                              slip=slip, mu=r.number(s, path, "mu", 0.1, positive=True),
+                              groove=r.string(s, path, "groove", "u-undercut",
+                                              ("u-undercut", "semicircular", "v-hardened", "v")),
+                              undercut_angle=r.number(s, path, "undercut_angle", 90.0, nonneg=True),
+                              groove_angle=r.number(s, path, "groove_angle", 30.0, nonneg=True),
+                              creep=r.number(s, path, "creep", 1e-3, positive=True)))
+        if slip:
+            from .traction import equivalent_friction
+            try:
+                equivalent_friction(sheaves[-1].mu, sheaves[-1].undercut_angle, sheaves[-1].groove_angle,
+                                    sheaves[-1].groove)
+            except ValueError as exc:
+                r.fail(path, f"groove: {exc}")
     sheave_names = {s.name: s for s in sheaves}
     if model in ("axial-1d", "planar"):
         for i, s in enumerate(sheaves):
@@ -400,6 +423,8 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     dv = r.table(data.get("drive", {}), "drive", SCHEMA_KEYS["drive"])
     kind = r.string(dv, "drive", "kind", "none", ("none", "speed", "torque", "external"))
     dsheave = r.string(dv, "drive", "sheave", None)
+    if sum(1 for sh in sheaves if sh.slip) > 1:
+        r.fail("sheaves", "at most one traction sheave may slip")
     if kind != "none":
         if dsheave is None:
             r.fail("drive", f"missing required key 'sheave' (drive kind {kind!r} acts on a sheave)")

@@ -24,7 +24,7 @@ import numpy as np
 from ._jit import njit
 from .model import Model, State, new_state
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
-                     set_prescribed, workspace)
+                     set_prescribed, traction_deflection, workspace)
 
 
 class SolverError(RuntimeError):
@@ -247,7 +247,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     W = workspace(K)
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
-    ue = np.empty(4)
+    ue = np.empty(7)
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
     t = t0
@@ -261,6 +261,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
         qdd1[:] = qdd
         e1 = info[5]
         z1 = info[6]
+        zt1 = info[8]
         status = 1
         for level in range(4):
             nsub = 1 if level == 0 else 4 ** level
@@ -273,12 +274,17 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 qdd[:] = qdd1
                 info[5] = e1
                 info[6] = z1
+                info[8] = zt1
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 info[5] = target + (info[5] - target) * decay
                 ue[1] = info[5]
                 ue[2] = info[6]
                 ue[3] = q[K.mot_dof] if K.mot_dof >= 0 else 0.0
+                ue[4] = info[8]
+                if K.trac_s >= 0:
+                    ue[5] = q[K.trac_s]
+                    ue[6] = q[K.trac_th]
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -293,6 +299,8 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     break
                 if K.brake_T > 0.0:
                     info[6] = brake_deflection(K, q, ue)
+                if K.trac_s >= 0:
+                    info[8] = traction_deflection(K, q, ue)
             if status != 1:
                 break   # converged (0) or a vanishing span (2): substeps do not help
         if status != 0:
@@ -302,6 +310,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
             qdd[:] = qdd1
             info[5] = e1
             info[6] = z1
+            info[8] = zt1
             if status == 1:
                 for i in range(nq):
                     if not (q[i] == q[i]) or not (qdd[i] == qdd[i]):
@@ -378,6 +387,7 @@ class Simulator:
         self.params = np.array([*gen_alpha_params(self.rho_inf), self.tol, max_iter], float)
         self._fast_integrate = None
         self._stepbuf = None
+        self.warnings: list[str] = []   # conditions a user should know about (not errors)
         self.rtol, self.atol = sv.rtol, sv.atol
 
     # ------------------------------------------------------------------ statics / initial state
@@ -390,16 +400,46 @@ class Simulator:
             st = self._statics(st, mode)
         st.q_ref[:] = st.q
         K = m.K
+        if K.trac_s >= 0:
+            self._preload_traction(st)
         if K.brake_T > 0.0 and st.info[5] > 0.0:
             # the applied brake carries the static load: preload its spring (no start transient)
             M = np.empty((m.nq, m.nq))
             Q = np.empty(m.nq)
             assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
-            tau_hold = Q[K.mot_dof] * K.mot_R          # brake torque needed (Q_sigma = -tau/R)
+            tau_hold = -Q[K.mot_dof] / K.mot_gain      # brake torque needed (Q = tau * gain)
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
         return st
+
+    def _preload_traction(self, st: State):
+        """Groove friction carries the static tension difference at the slipping sheave: set its
+        deflection z so that friction balances the rope coordinate (no start transient). Raises if the
+        static tension ratio already exceeds the friction limit (the rope would slip at rest)."""
+        m = self.model
+        K = m.K
+        M = np.empty((m.nq, m.nq))
+        Q = np.empty(m.nq)
+        ue = self._kernel_inputs_at(st)
+        ue[4] = 0.0
+        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)   # friction zero at z = 0
+        y = dict(zip(m.output_names, self.outputs(st)))
+        name = m.q_names[K.trac_s].rsplit(".", 1)[0]
+        T_in, T_out = y[f"{name}.tension_in"], y[f"{name}.tension_out"]
+        cap = max(min(T_in, T_out), 0.0) * K.trac_efa
+        f_needed = Q[K.trac_s]            # Q_sigma - f = 0
+        k = cap / K.trac_zmax
+        if abs(f_needed) > 0.9 * cap:
+            # friction cannot hold the static tensions: the run starts with the rope sliding at the
+            # capacity (e.g. EN 81 "car stalled": counterweight on its buffer)
+            self.warnings.append(
+                f"t = {st.t:g} s: the rope slips on sheave {name!r} from the start: static tension ratio "
+                f"{max(T_in, T_out) / max(min(T_in, T_out), 1e-9):.4f} exceeds the friction limit "
+                f"e^(f alpha) = {1 + K.trac_efa:.4f}")
+            st.info[8] = float(-np.sign(f_needed) * K.trac_zmax)
+        else:
+            st.info[8] = float(-f_needed / k) if k > 0 else 0.0
 
     def _statics(self, st: State, mode: str) -> State:
         m = self.model
@@ -640,13 +680,18 @@ class Simulator:
     # ------------------------------------------------------------------ queries
     @staticmethod
     def kernel_inputs(st: State) -> np.ndarray:
-        """[motor torque, brake engagement, brake deflection, sigma of the brake at step start]."""
-        return np.array([st.u[0], st.info[5], st.info[6], 0.0])
+        """[motor torque, brake engagement, brake deflection, motor coordinate at step start,
+        traction deflection, rope s and sheave angle of the slipping sheave at step start]."""
+        return np.array([st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0])
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:
         ue = self.kernel_inputs(st)
-        if self.model.K.mot_dof >= 0:
-            ue[3] = st.q[self.model.K.mot_dof]
+        K = self.model.K
+        if K.mot_dof >= 0:
+            ue[3] = st.q[K.mot_dof]
+        if K.trac_s >= 0:
+            ue[5] = st.q[K.trac_s]
+            ue[6] = st.q[K.trac_th]
         return ue
 
     def outputs(self, st: State) -> np.ndarray:

@@ -36,13 +36,9 @@ def _interp(table, t):
 
 
 @njit(cache=True, inline="always")
-def brake_deflection(K, q, u):
-    """Elasto-plastic brake: effective spring deflection z (rad) after the sheave turned from the
-    step's start angle. Linear (holding without creep) up to 90 % of the band zmax = stick_angle,
-    then a C1 tanh saturation at zmax, so Newton sees no kink at stick -> slip. Kernel inputs
-    u = [motor torque, engagement e, z at step start, sigma at step start]."""
-    zmax = K.brake_wreg
-    z = u[2] - (q[K.mot_dof] - u[3]) / K.mot_R
+def _elastoplastic(z, zmax):
+    """Friction spring deflection: linear (sticking, no creep) up to 90 % of zmax, then a C1 tanh
+    saturation at zmax (sliding). Shared by the brake and the rope-groove friction."""
     a = 0.9 * zmax
     az = abs(z)
     if az <= a:
@@ -52,10 +48,63 @@ def brake_deflection(K, q, u):
 
 
 @njit(cache=True, inline="always")
+def brake_deflection(K, q, u):
+    """Elasto-plastic brake: effective spring deflection z (rad of the motor angle) after turning from
+    the step's start. Kernel inputs u = [motor torque, brake engagement e, brake z at step start,
+    motor coordinate at step start, traction z at step start, rope s at the slipping sheave and its
+    angle at step start]."""
+    z = u[2] + K.mot_gain * (q[K.mot_dof] - u[3])
+    return _elastoplastic(z, K.brake_wreg)
+
+
+@njit(cache=True, inline="always")
 def brake_torque(K, q, v, u):
-    """Brake torque on the sheave angle (positive = drives the rope along the route). Stiffness and
+    """Brake torque on the motor angle (positive = drives the rope along the route). Stiffness and
     capacity both scale with the engagement e (lining pressure): -e (T/zmax) z."""
     return -u[1] * (K.brake_T / K.brake_wreg) * brake_deflection(K, q, u)
+
+
+@njit(cache=True, inline="always")
+def _static_end_tension(K, QE, QEs, ie, end):
+    """Rope force at an element end from its forces without inertia (for the friction capacity)."""
+    nd = K.nd
+    dist2 = 0.0
+    for k in range(nd):
+        dk = QE[ie, nd + k] - QE[ie, k]
+        dist2 += dk * dk
+    dist = math.sqrt(dist2)
+    if dist <= 0.0:
+        return 0.0
+    T = 0.0
+    for k in range(nd):
+        tk = (QE[ie, nd + k] - QE[ie, k]) / dist
+        if end == 0:
+            T += tk * QEs[ie, k]
+        else:
+            T -= tk * QEs[ie, nd + k]
+    return T
+
+
+@njit(cache=True, inline="always")
+def traction_deflection(K, q, u):
+    """Rope-groove friction deflection z [m]: relative displacement of the rope along the route
+    against the rim since the step's start, elasto-plastic with band zmax = creep."""
+    z = u[4] - (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+    return _elastoplastic(z, K.trac_zmax)
+
+
+@njit(cache=True, inline="always")
+def traction_force(K, q, u, QE, QEs):
+    """Friction force on the rope along the route [N]. Capacity (Euler-Eytelwein):
+    T_slack (e^(f alpha) - 1), T_slack the smaller static end tension of the two spans at the sheave;
+    stiffness capacity/creep, so the rope creeps elastically below the limit and slips above it."""
+    T_in = _static_end_tension(K, QE, QEs, K.trac_el_in, 1)
+    T_out = _static_end_tension(K, QE, QEs, K.trac_el_out, 0)
+    T_slack = T_in if T_in < T_out else T_out
+    if T_slack < 0.0:
+        T_slack = 0.0
+    k = T_slack * K.trac_efa / K.trac_zmax
+    return -k * traction_deflection(K, q, u)
 
 
 @njit(cache=True, inline="always")
@@ -182,9 +231,15 @@ def assemble_ws(K, W, c, q, v, t, u):
         M[j, j] += K.drum_rhoA[k] * q[j]
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
     if K.mot_dof >= 0 and K.drive_kind >= 2:
-        Q[K.mot_dof] -= drive_torque(K, t, u) / K.mot_R
+        Q[K.mot_dof] += drive_torque(K, t, u) * K.mot_gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
-        Q[K.mot_dof] -= brake_torque(K, q, v, u) / K.mot_R
+        Q[K.mot_dof] += brake_torque(K, q, v, u) * K.mot_gain
+    if K.trac_s >= 0:
+        # friction f on the rope along the route: virtual work f * (-d sigma) on the rope and
+        # -f * R d theta on the sheave
+        f = traction_force(K, q, u, QE, QEs)
+        Q[K.trac_s] -= f
+        Q[K.trac_th] -= f * K.trac_R
     return status
 
 
@@ -250,13 +305,22 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 r = -Q[j]
                 for m in range(K.nq):
                     r += M[j, m] * qdd[m]
-                y[k] = -K.out_scale[k] * r
+                y[k] = K.out_scale[k] * r   # generalized drive force / (d angle / d coordinate)
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
             y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[1]
         elif kind == 8:
             y[k] = buffer_force(K, q, v, K.out_i[k])
+        elif kind == 9:   # slip speed (scale R > 0) or cumulative slip (scale -R)
+            i = K.out_i[k]
+            j = K.out_j[k]
+            if K.out_scale[k] > 0.0:
+                y[k] = -v[i] - K.out_scale[k] * v[j]
+            else:
+                y[k] = -(q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
+        elif kind == 10:
+            y[k] = traction_force(K, q, u, QE, QEs)
 
 
 @njit(cache=True)
