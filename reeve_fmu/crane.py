@@ -483,6 +483,7 @@ class CraneModel:
     weight: float             # N, hook load incl. the block
     S_eff: float              # m, effective fall spacing 2 sqrt(sum p_b.p_t / n)
     H_est: float              # m, torque-factor estimate of the critical height (nan if k0 = 0)
+    torsion: bool = True      # phi unknowns present (False: torque-factor law with GJ0 = k1 = 0)
 
     def x_names(self):
         names = ["block.x", "block.y", "block.z", "block.yaw"] + (["block.pitch", "block.roll"] if self.npose == 6 else [])
@@ -652,7 +653,7 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
     return CraneModel(scene=scene, spec=spec, npose=npose, nx=n, drum_idx=drum_idx, ip=ip, fp=fp,
                       st_i=st_i, st_f=st_f, sp_i=sp_i, sp_f=sp_f, rscale=rscale, falls=tuple(falls),
                       span_names=tuple(names), h_ref=h_ref, p_ref=p0, s_ref=s_ref, phi_ref=phi_ref,
-                      weight=weight, S_eff=S_eff, H_est=H_est)
+                      weight=weight, S_eff=S_eff, H_est=H_est, torsion=torsion)
 
 
 # -------------------------------------------------------------------------------------------- solve
@@ -798,7 +799,9 @@ class SweepResult:
     columns: dict
     critical_height: float | None
     critical_yaw: float | None
-    seconds: float
+    seconds: float               # the sweep, after the first equilibrium
+    first_solve_seconds: float   # first equilibrium in the scene's configuration (incl. JIT compile/load)
+    path: np.ndarray             # accepted continuation points (h, yaw), including the substeps
     steps: int
     rejected: int
     newton_iterations: int
@@ -835,10 +838,11 @@ def sweep(model: CraneModel, heights=None) -> SweepResult:
     heights = np.asarray(heights, float)
     t0 = time.perf_counter()
     sol = CraneSolver(model)
-    sol.history = []
     if not sol.solve(model.h_ref):
         raise CraneError(f"{model.scene.source}: no equilibrium found in the scene's configuration "
-                           f"(height {model.h_ref:.3f} m)")
+                         f"(height {model.h_ref:.3f} m)")
+    t_first = time.perf_counter() - t0   # includes the JIT compile (or cache load) of the kernels
+    t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
     nf = len(model.falls)
     nsp = len(model.sp_i)
@@ -858,6 +862,7 @@ def sweep(model: CraneModel, heights=None) -> SweepResult:
     ok = sol.continue_to(heights[0], dh_min)
     if ok:
         sol.history = [(sol.h, sol.x[3])]
+    path = sol.history
     for i, h in enumerate(heights):
         if ok and i > 0:
             ok = sol.continue_to(h, dh_min)
@@ -877,11 +882,12 @@ def sweep(model: CraneModel, heights=None) -> SweepResult:
                 cols[f"{model.span_names[k]}.tension"][i] = spo[k, 0]
         fk = list(model.falls)
         cols["rope.torque"][i] = float(np.mean(spo[fk, 1]))
-        cols["rope.twist"][i] = float(np.mean(spo[fk, 3]))
+        cols["rope.twist"][i] = float(np.mean(spo[fk, 3])) if model.torsion else math.nan
         cols["drum.s"][i] = x[model.drum_idx]
     seconds = time.perf_counter() - t0
     return SweepResult(columns=cols, critical_height=None if crit is None else float(crit),
                        critical_yaw=None if crit_yaw is None else float(crit_yaw), seconds=seconds,
+                       first_solve_seconds=t_first, path=np.array(path),
                        steps=sol.steps, rejected=sol.rejected, newton_iterations=int(sol.stats[0]),
                        jacobians=int(sol.stats[1]), model=model)
 
@@ -911,7 +917,7 @@ def summary(res: SweepResult) -> dict:
         "critical_height": res.critical_height, "critical_yaw": res.critical_yaw,
         "effective_spacing": m.S_eff, "critical_height_estimate": None if math.isnan(m.H_est) else m.H_est,
         "max_yaw": float(np.nanmax(np.abs(res.columns["block.yaw"]))) if np.isfinite(res.columns["block.yaw"]).any() else None,
-        "sweep_seconds": res.seconds, "steps": res.steps, "rejected_steps": res.rejected,
+        "sweep_seconds": res.seconds, "first_solve_seconds": res.first_solve_seconds, "steps": res.steps, "rejected_steps": res.rejected,
         "newton_iterations": res.newton_iterations, "jacobians": res.jacobians, "unknowns": m.nx,
     }
 
@@ -925,7 +931,7 @@ def plot_rotation(path, res: SweepResult):
     h = c["height"]
     fig, axes = plt.subplots(3, 1, figsize=(8, 8.5), sharex=True)
     ax = axes[0]
-    ax.plot(h, np.degrees(c["block.yaw"]), lw=1.5, label="ALE statics")
+    ax.plot(res.path[:, 0], np.degrees(res.path[:, 1]), lw=1.5, label="ALE statics (continuation path)")
     if not math.isnan(m.H_est):
         ok = h < m.H_est
         ax.plot(h[ok], np.degrees(np.arcsin(np.clip(h[ok] / m.H_est, -1, 1))) * np.sign(m.spec.k0), "k--", lw=0.8,
@@ -948,6 +954,7 @@ def plot_rotation(path, res: SweepResult):
     axes[2].set_xlabel("hoist height h [m]")
     for a in axes:
         a.grid(True, alpha=0.3)
+        a.set_xlim(h[0], h[-1])
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

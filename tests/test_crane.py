@@ -227,3 +227,75 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
     assert s["critical_height"] == pytest.approx(35.5, rel=0.01)
     assert (out / "rotation.png").stat().st_size > 10_000
     assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
+
+
+THREE = """
+[scene]
+name = "three_falls"
+model = "spatial"
+[initial]
+statics = "none"
+[[bodies]]
+name = "block"
+mass = 1000.0
+position = [0.0, 0.0, -5.0]
+free = ["x", "y", "z"]
+[[sheaves]]
+name = "drum"
+kind = "drum"
+center = [-20.0, 0.0, -49.0]
+radius = 0.3
+[[sheaves]]
+name = "tip"
+center = [-0.5, 0.0, 0.0]
+radius = 0.25
+[[sheaves]]
+name = "hook"
+body = "block"
+center = [0.0, 0.0, 0.0]
+radius = 0.25
+[[sheaves]]
+name = "tip2"                      # axis along x: perpendicular to the other sheaves
+center = [0.25, 0.15, 0.0]
+radius = 0.15
+axis = [1.0, 0.0, 0.0]
+[[ropes]]
+name = "hoist"
+EA = 2.28e7
+rhoA = 2.4
+route = [
+  { sheave = "drum", wrap = "cw" },
+  { sheave = "tip", wrap = "cw" },
+  { sheave = "hook", wrap = "ccw" },
+  { sheave = "tip2", wrap = "ccw" },
+  { anchor = "block", at = [0.25, 0.3, 0.0] },
+]
+[crane]
+block = "block"
+payload = 20000.0
+diameter = 0.022
+law = "feyrer"
+k0 = 0.03
+k1 = 0.2
+GJ0 = 50.0
+height_min = 2.0
+height_max = 40.0
+heights = 40
+"""
+
+
+def test_three_falls_dead_end_on_the_block_and_crossed_sheave_axes(tmp_path):
+    """Odd reeving: the dead end on the hook block, a tip sheave turned 90 deg about z (3D
+    tangents between sheaves with perpendicular axes). Tension W/3 per fall (frictionless),
+    the block turns the way of the rope torque, steadily with the height."""
+    p = tmp_path / "three.toml"
+    p.write_text(THREE)
+    m = load_crane(p)
+    assert [m.span_names[k] for k in m.falls] == ["fall1", "fall2", "fall3"]
+    res = sweep(m)
+    c = res.columns
+    assert res.critical_height is None
+    for i in (1, 2, 3):
+        assert np.allclose(c[f"fall{i}.tension"], m.weight / 3, rtol=0.02)
+    psi = c["block.yaw"]
+    assert psi[0] > 0 and np.all(np.diff(psi) > 0)
