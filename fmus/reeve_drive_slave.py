@@ -1,0 +1,96 @@
+"""FMU entry of the electric drive (FMI 2.0 co-simulation): `reeve-fmu build` -> fmus/ElectricDrive.fmu.
+
+Wraps reeve_fmu.drive.ElectricDrive: trip sequencer (pre-torque, brake lift, jerk-limited S-curve
+from landing to landing, zero-speed hold, brake drop, torque ramp-down, dwell, next move), speed PI
+with torque feed-forward and position loop, torque and power limits, and the torque path: Level 1
+first-order lag + dead time (default) or Level 2 PMSM dq model with current PI (drive.level = 2).
+
+Inputs  motor.speed [rad/s], motor.angle [rad] (from the plant, held over the step; the controller
+        runs on its own clock, control.Ts, and extrapolates the angle with the speed).
+Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end of the step, plus
+        the references and the sequencer phase. No output depends directly on an input (the drive
+        samples at the start of the step).
+Parameters: reeve_fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
+"""
+from reeve_fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
+from reeve_fmu.drive import PHASE_NAMES
+from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
+
+OUTPUTS = (
+    # name, unit/type, description
+    ("car.position_ref", "Position", "car position reference of the S-curve"),
+    ("car.velocity_ref", "Velocity", "car speed reference of the S-curve"),
+    ("car.acceleration_ref", "Acceleration", "car acceleration reference of the S-curve"),
+    ("motor.speed_ref", "AngularVelocity", "motor speed reference roping * v_ref / R"),
+    ("drive.torque_ref", "Torque", "torque reference of the speed controller (last tick)"),
+    ("drive.position_error", "Position", "car position error reference - measured (last tick)"),
+)
+
+
+class ElectricDriveSlave(ReeveSlave):
+    description = ("Elevator electric drive (reeve_fmu): trip sequencer, S-curve, speed PI with torque "
+                   "feed-forward, Level 1 torque lag + dead time or Level 2 PMSM dq model, brake "
+                   "sequencing")
+
+    def define(self):
+        self.modelName = "ElectricDrive"
+        self.description = type(self).description
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=trip_end_time(),
+                                                    step_size=1e-3)
+        self.add_real("motor.speed", "input", declared_type="AngularVelocity", start=0.0,
+                      description="measured motor speed (positive: car up)")
+        self.add_real("motor.angle", "input", declared_type="Angle", start=0.0,
+                      description="measured motor angle (positive: car up)")
+        defaults = drive_defaults()
+        for name, kind, unit, _, desc, lo, hi in DRIVE_PARAMETERS:
+            if kind == "int":
+                self.add_integer(name, "parameter", "fixed", description=desc, start=defaults[name],
+                                 min=lo, max=hi)
+            else:
+                self.add_real(name, "parameter", "fixed", unit=unit, description=desc,
+                              start=defaults[name], min=lo, max=hi)
+        self.add_real("motor.torque", "output", declared_type="Torque",
+                      description="air-gap torque at the end of the step (positive lifts the car)")
+        self.add_real("brake.command", "output", "discrete", unit="1",
+                      description="machine brake command: 1 = release (open), 0 = apply (close)")
+        for name, typ, desc in OUTPUTS:
+            self.add_real(name, "output", declared_type=typ, description=desc)
+        self.add_real("motor.current_d", "output", unit="A", description="Level 2: d current (0 for Level 1)")
+        self.add_real("motor.current_q", "output", unit="A", description="Level 2: q current (0 for Level 1)")
+        self.add_integer("drive.phase", "output", description="sequencer phase: " + ", ".join(
+            f"{i} {n}" for i, n in enumerate(PHASE_NAMES)))
+        self.add_integer("drive.move", "output", description="index of the current move (0-based; -1 "
+                                                             "before the first)")
+        self.drive = None
+
+    def initialize(self):
+        v = self.values
+        self.drive = make_drive({name: v[name] for name, *_ in DRIVE_PARAMETERS})
+        self._outputs()
+
+    def _outputs(self):
+        d = self.drive
+        v = self.values
+        v["motor.torque"] = d.torque
+        v["brake.command"] = d.brake_command
+        v["car.position_ref"] = d.position_ref
+        v["car.velocity_ref"] = d.velocity_ref
+        v["car.acceleration_ref"] = d.acceleration_ref
+        v["motor.speed_ref"] = d.speed_ref
+        v["drive.torque_ref"] = d.torque_ref
+        v["drive.position_error"] = d.position_error
+        v["motor.current_d"], v["motor.current_q"] = d.currents
+        v["drive.phase"] = d.phase
+        v["drive.move"] = d.move_index
+
+    def step(self, t, dt):
+        v = self.values
+        self.drive.step(t, dt, v["motor.speed"], v["motor.angle"])
+        self._outputs()
+        return True
+
+    def get_hidden_state(self):
+        return self.drive.get_state()
+
+    def set_hidden_state(self, state):
+        self.drive.set_state(state)

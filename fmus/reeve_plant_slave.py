@@ -1,0 +1,77 @@
+"""FMU entry of the reeving plant (FMI 2.0 co-simulation): `reeve-fmu build` -> fmus/ReevingPlant.fmu.
+
+Input   motor.torque [N.m] (air-gap torque, positive lifts the car) and brake.command (1 = release,
+        0 = apply), both held over the communication step.
+Outputs the names of `reeve-fmu simulate` for the scene (car.position, traction.tension_in, ...,
+        motor.angle, motor.speed, brake.torque, brake.engaged).
+Parameters (fixed: the model is built in exitInitializationMode) car.load, rope.EA, rope.damping,
+        brake.static_torque, motor.inertia.
+
+The scene and the output declarations come from the FMU's resources (scene.toml, reeve_plant.json,
+written by reeve_fmu.cosim.plant_build_inputs). Any communication step is accepted: the plant
+sub-steps internally with the scene's solver step (generalized-alpha, steps <= solver.step).
+A solver failure raises inside step(): ReeveSlave logs the traceback through the FMU logger and
+returns fmi2Discard; further steps are refused until the master restores an FMU state or resets.
+"""
+import json
+
+from reeve_fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
+from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
+
+
+class ReevingPlantSlave(ReeveSlave):
+    description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
+
+    def define(self):
+        with open(self.resource_path(PLANT_CONFIG)) as fh:
+            cfg = json.load(fh)
+        self.config = cfg
+        self.modelName = cfg["name"]
+        self.description = (f"{type(self).description}; scene {cfg['scene_name']}: "
+                            f"{cfg['scene_description']}").rstrip(": ")
+        self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=cfg["stop_time"],
+                                                    step_size=1e-3)
+        self.add_real("motor.torque", "input", declared_type="Torque", start=0.0,
+                      description="air-gap torque of the machine (positive lifts the car), held over "
+                                  "the step")
+        self.add_real("brake.command", "input", "discrete", unit="1", start=0.0, min=0.0, max=1.0,
+                      description="machine brake command: 1 = release (open), 0 = apply (close)")
+        for name, (_, unit, desc) in PLANT_PARAMETERS.items():
+            self.add_real(name, "parameter", "fixed", unit=unit, start=cfg["parameters"][name],
+                          min=1e-9 if name == "rope.EA" else 0.0, description=desc)
+        self._names = []
+        for o in cfg["outputs"]:
+            self.add_real(o["name"], "output", unit=o["unit"], declared_type=o["type"],
+                          display_unit=o["display"], derivative_of=o["derivative_of"],
+                          description=o["description"],
+                          dependencies=["motor.torque"] if o["depends"] else ())
+            self._names.append(o["name"])
+        self.plant = None
+
+    def initialize(self):
+        v = self.values
+        cfg = self.config
+        self.plant = make_plant(self.resource_path(cfg["scene"]), cfg["scene_payload"],
+                                {name: v[name] for name in PLANT_PARAMETERS})
+        names = self.plant.output_names
+        missing = [n for n in self._names if n not in names]
+        if missing:
+            raise RuntimeError(f"the plant model has no outputs {missing} (resources out of date?)")
+        self._idx = [names.index(n) for n in self._names]
+        outs = self.plant.outputs()
+        self.values.update((n, outs[n]) for n in self._names)
+
+    def _write(self, y):
+        yl = y.tolist()
+        self.values.update(zip(self._names, [yl[i] for i in self._idx]))
+
+    def step(self, t, dt):
+        v = self.values
+        self._write(self.plant.step(dt, v["motor.torque"], v["brake.command"]))
+        return True
+
+    def get_hidden_state(self):
+        return self.plant.get_state()
+
+    def set_hidden_state(self, state):
+        self.plant.set_state(state)

@@ -1,0 +1,758 @@
+"""Co-simulation of the reeving plant with the electric drive: FMU build, fmpy master, monolithic reference.
+
+Three ways to run the same closed loop (docs/cosim.md):
+
+* `cosimulate(plant_fmu, drive_fmu, ...)`   an fmpy `FMU2Slave` master. The two FMUs exchange
+  `motor.speed`/`motor.angle` (plant -> drive) and `motor.torque`/`brake.command` (drive -> plant)
+  every communication step `step`. Scheme "gauss-seidel" (default): the drive steps first with the
+  plant's measurement at t, then the plant steps holding the drive's new torque; "jacobi": both step
+  in parallel with the values of t (what libcosim's fixed-step algorithm does).
+* `monolithic(...)`   the same `Plant` and `ElectricDrive` objects in this process without FMI,
+  exchanging at a much finer step (default 0.1 ms, Gauss-Seidel): the reference of the
+  co-simulation accuracy check.
+* cosim/ReevingSystem/SystemStructure.ssd   the SSP description of the same system, run by libcosim
+  (cosim/run_libcosim.py).
+
+The plant and drive FMU entries (fmus/reeve_plant_slave.py, fmus/reeve_drive_slave.py) build their
+models with `make_plant`/`make_drive` from this module, so the FMUs and the in-process reference are
+the same code with the same parameter mapping.
+
+Car load convention: the shipped elevator scenes model the car *with its rated load* (scene comments;
+`SCENE_PAYLOAD`). The plant FMU's parameter `car.load` is the payload on top of the *empty* car, so
+the plant is built from the scene with the car body's mass reduced by the scene payload and
+`car.load` added back: the default `car.load` (= the rated load) reproduces the scene exactly.
+
+This module imports only numpy (plus reeve_fmu) at import time: it is vendored into the FMUs.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable, Iterable, Mapping, Optional, Sequence
+
+import numpy as np
+
+PLANT_NAME = "ReevingPlant"
+DRIVE_NAME = "ElectricDrive"
+PLANT_CONFIG = "reeve_plant.json"     # resource of the plant FMU (see plant_config)
+PLANT_SCENE = "scene.toml"            # resource of the plant FMU: the scene it was built from
+DEFAULT_SCENE = "elevator_2to1.toml"
+
+#: payload (kg) the shipped scenes include in the car body's mass (their rated load)
+SCENE_PAYLOAD = {"elevator_2to1": 1000.0, "elevator_1to1_highrise": 1600.0}
+
+#: plant FMU parameter -> (Plant keyword, unit, description); all fixed (they change the model)
+PLANT_PARAMETERS = {
+    "car.load": ("car_load", "kg", "payload in the car (on top of the empty car); default: the rated load"),
+    "rope.EA": ("rope_EA", "N", "axial stiffness per rope; a value different from the default sets "
+                                "every rope of the scene"),
+    "rope.damping": ("rope_damping", "s", "Kelvin-Voigt time constant of the ropes (every rope)"),
+    # (not "brake.torque": that is the output of the torque the brake transmits)
+    "brake.static_torque": ("brake_torque", "N.m", "total static torque (capacity) of the machine brake"),
+    "motor.inertia": ("motor_inertia", "kg.m2", "rotor + traction sheave + brake discs"),
+}
+
+# ------------------------------------------------------------------------------------------------
+# plant
+# ------------------------------------------------------------------------------------------------
+
+
+def scene_payload(scene) -> float:
+    """Payload (kg) included in the scene's car mass: SCENE_PAYLOAD for the shipped scenes, else 0."""
+    return float(SCENE_PAYLOAD.get(scene.name, 0.0))
+
+
+def empty_car_scene(scene, payload: float, car_body: str = "car"):
+    """The scene with `payload` kg taken out of the car body's mass."""
+    from .scene import SceneError
+
+    if not payload:
+        return scene
+    bodies = list(scene.bodies)
+    idx = [i for i, b in enumerate(bodies) if b.name == car_body]
+    if not idx:
+        raise SceneError(f"{scene.source}: no body named {car_body!r} (needed for car.load)")
+    b = bodies[idx[0]]
+    if not b.mass - payload > 0.0:
+        raise SceneError(f"{scene.source}: car mass {b.mass} kg does not include a payload of {payload} kg")
+    bodies[idx[0]] = replace(b, mass=b.mass - payload)
+    return replace(scene, bodies=tuple(bodies))
+
+
+def plant_defaults(scene, payload: float) -> dict:
+    """Default values of the plant FMU parameters for `scene` (FMU name -> value)."""
+    return {
+        "car.load": float(payload),
+        "rope.EA": float(scene.ropes[0].EA),
+        "rope.damping": float(scene.ropes[0].damping),
+        "brake.static_torque": float(scene.brake.torque),
+        "motor.inertia": float(scene.drive.motor_inertia),
+    }
+
+
+def make_plant(scene, payload: float | None = None, params: Optional[Mapping[str, float]] = None):
+    """The `Plant` of the plant FMU: `scene` (Scene or path), payload included in its car mass
+    (None: `scene_payload`), and FMU parameter values {"car.load": ..., "rope.EA": ...} (PLANT_PARAMETERS).
+
+    Parameters equal to their default leave the scene untouched (so a scene with ropes of different
+    EA keeps them unless rope.EA is changed)."""
+    from .plant import Plant
+    from .scene import Scene, load_scene
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    if payload is None:
+        payload = scene_payload(scene)
+    params = dict(params or {})
+    unknown = set(params) - set(PLANT_PARAMETERS)
+    if unknown:
+        raise ValueError(f"unknown plant parameters {sorted(unknown)}; known: {sorted(PLANT_PARAMETERS)}")
+    defaults = plant_defaults(scene, payload)
+    kw = {"car_load": float(params.get("car.load", payload))}
+    for name, (key, _, _) in PLANT_PARAMETERS.items():
+        if name == "car.load":
+            continue
+        v = params.get(name)
+        if v is not None and float(v) != defaults[name]:
+            kw[key] = float(v)
+    return Plant(empty_car_scene(scene, payload), **kw)
+
+
+def holding_torques(scene, landings: Sequence[float], payload: float | None = None,
+                    params: Optional[Mapping[str, float]] = None, car_body: str = "car",
+                    counterweight_body: str = "counterweight") -> list[float]:
+    """Static motor torque (N m) that holds the car at each landing: the plant's `brake.torque` at rest
+    with the car moved to the landing (the counterweight moved by the same distance the other way).
+    This is what a load-weighing device gives the drive as pre-torque."""
+    from .scene import Scene, load_scene
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    car = [b for b in scene.bodies if b.name == car_body]
+    if not car:
+        raise ValueError(f"holding_torques: the scene has no body {car_body!r}")
+    z0 = float(car[0].position[2])
+    out = []
+    for x in landings:
+        d = float(x) - z0
+
+        def moved(b):
+            s = {car_body: d, counterweight_body: -d}.get(b.name)
+            if s is None or s == 0.0:
+                return b
+            p = b.position
+            return replace(b, position=(p[0], p[1], p[2] + s))
+        sc = replace(scene, bodies=tuple(moved(b) for b in scene.bodies))
+        out.append(make_plant(sc, payload, params).output("brake.torque"))
+    return out
+
+
+def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str]) -> list[dict]:
+    """FMI declaration of each plant output: unit, declaredType, derivative, description and the
+    direct feed-through from motor.torque.
+
+    Feed-through (measured, tests/test_plant_fmu.py::test_declared_dependencies_match_the_plant):
+    with the torque held over the step, body accelerations and the rope forces at the sheaves (and
+    the traction ratio) react to a torque change within an arbitrarily short step; positions, speeds,
+    angles, the hitch forces, the brake torque and engagement do not (they integrate it). No output
+    depends directly on brake.command (the brake engages with a lag)."""
+    sheaves = set(sheave_names)
+    specs = []
+    seen = set()
+    for name in output_names:
+        if name == "motor.torque":
+            continue  # the input of the same name
+        obj, _, q = name.partition(".")
+        spec = {"name": name, "unit": None, "type": None, "derivative_of": None, "display": None,
+                "depends": False, "description": None}
+        if q == "position":
+            spec.update(type="Position", display="mm", description=f"{obj} position (up positive)")
+        elif q == "velocity":
+            spec.update(type="Velocity", description=f"{obj} velocity (up positive)")
+            if f"{obj}.position" in seen:
+                spec["derivative_of"] = f"{obj}.position"
+        elif q == "acceleration":
+            spec.update(type="Acceleration", depends=True, description=f"{obj} acceleration (up positive)")
+            if f"{obj}.velocity" in seen:
+                spec["derivative_of"] = f"{obj}.velocity"
+        elif q == "angle":
+            spec.update(type="Angle", description=f"{obj} rotation angle (positive: rope moves along "
+                                                  f"its route; motor: car up)")
+        elif q == "speed":
+            spec.update(type="AngularVelocity", display="rpm", description=f"{obj} angular speed")
+            if f"{obj}.angle" in seen:
+                spec["derivative_of"] = f"{obj}.angle"
+        elif q in ("tension_in", "tension_out"):
+            side = "entry" if q == "tension_in" else "exit"
+            spec.update(type="Force", depends=obj in sheaves,
+                        description=f"rope force at the {side} tangent point of {obj} (all parallel ropes)")
+        elif q in ("tension_start", "tension_end"):
+            spec.update(type="Force", description=f"rope force at the {q[8:]} of rope {obj} "
+                                                  f"(all parallel ropes)")
+        elif q == "traction_ratio":
+            spec.update(unit="1", depends=True, description=f"larger over smaller rope force at {obj} "
+                                                            f"(compare with e^(f alpha))")
+        elif name == "brake.torque":
+            spec.update(type="Torque", description="torque transmitted by the machine brake")
+        elif name == "brake.engaged":
+            spec.update(unit="1", description="brake engagement 0 (open) .. 1 (closed)")
+        else:
+            spec.update(unit="1", description=name)
+        seen.add(name)
+        specs.append(spec)
+    return specs
+
+
+def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = None) -> dict:
+    """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
+    from .model import build_model
+    from .plant import plant_scene
+    from .scene import load_scene
+
+    scene = load_scene(scene_path)
+    if payload is None:
+        payload = scene_payload(scene)
+    model = build_model(plant_scene(empty_car_scene(scene, payload)))
+    return {
+        "format": "reeve_fmu.plant_fmu/1",
+        "name": name,
+        "scene": PLANT_SCENE,
+        "scene_name": scene.name,
+        "scene_description": getattr(scene, "description", "") or "",
+        "scene_payload": float(payload),
+        "parameters": plant_defaults(scene, payload),
+        "stop_time": max(float(scene.t_end), trip_end_time()),
+        "outputs": plant_output_specs(model.output_names, [s.name for s in scene.sheaves]),
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+# drive
+# ------------------------------------------------------------------------------------------------
+#: R1 pre-torque (N m) for a start at the bottom / top landing with the rated load: the plant's holding
+#: torque (`holding_torques`, scenes/elevator_2to1.toml, car.load = 1000 kg), rounded to 0.1 N m
+R1_PRETORQUE = (522.5, 331.5)
+
+# drive FMU parameters: (FMU name, kind, unit, DriveParams field, description, min, max)
+# kind: "real" | "int"; special fields: "landing", "pretorque" (per landing, 1-based index),
+# "moves" (number of moves alternating between landing[1] and landing[2]), "start_landing" (1-based)
+DRIVE_PARAMETERS = [
+    ("drive.level", "int", None, "level", "drive model: 1 = torque lag + dead time, 2 = PMSM dq model", 1, 2),
+    ("trip.v_max", "real", "m/s", "v_max", "rated car speed of the S-curve", 1e-6, None),
+    ("trip.a_max", "real", "m/s2", "a_max", "car acceleration limit of the S-curve", 1e-6, None),
+    ("trip.jerk", "real", "m/s3", "jerk", "car jerk limit of the S-curve", 1e-6, None),
+    ("landing[1]", "real", "m", "landing", "car position at landing 1 (start)", None, None),
+    ("landing[2]", "real", "m", "landing", "car position at landing 2", None, None),
+    ("trip.start_landing", "int", None, "start_landing", "landing (1 or 2) where the car starts", 1, 2),
+    ("trip.moves", "int", None, "moves", "number of moves, alternating to the other landing", 1, 1000),
+    ("trip.start_delay", "real", "s", "start_delay", "time before the first pre-torque", 0.0, None),
+    ("trip.dwell_time", "real", "s", "dwell_time", "rest between moves", 0.0, None),
+    ("trip.hold_time", "real", "s", "hold_time", "zero-speed hold after the profile", 0.0, None),
+    ("pretorque[1]", "real", "N.m", "pretorque",
+     "load-weighing pre-torque for a start at landing 1 (set to the holding torque at the load)", None, None),
+    ("pretorque[2]", "real", "N.m", "pretorque",
+     "load-weighing pre-torque for a start at landing 2 (set to the holding torque at the load)", None, None),
+    ("pretorque.ramp_time", "real", "s", "pretorque_time", "torque ramp to the pre-torque before the "
+                                                          "brake lifts", 0.0, None),
+    ("torque.ramp_down_time", "real", "s", "torque_ramp_time", "torque ramp to zero after the brake "
+                                                               "has dropped", 0.0, None),
+    ("brake.lift_delay", "real", "s", "brake_lift_delay", "wait after the release command", 0.0, None),
+    ("brake.drop_delay", "real", "s", "brake_drop_delay", "wait after the apply command", 0.0, None),
+    ("machine.sheave_radius", "real", "m", "sheave_radius", "traction sheave pitch radius", 1e-6, None),
+    ("machine.roping", "real", "1", "roping", "roping factor (rope speed / car speed)", 1e-6, None),
+    ("control.J_ff", "real", "kg.m2", "J_ff", "inertia at the motor shaft for the feed-forward", 0.0, None),
+    ("control.Kp", "real", "N.m.s/rad", "Kp", "speed PI proportional gain", 0.0, None),
+    ("control.Ti", "real", "s", "Ti", "speed PI integral time", 1e-9, None),
+    ("control.Kpos", "real", "1/s", "Kpos", "position loop gain", 0.0, None),
+    ("control.Ts", "real", "s", "Ts", "speed-loop sample time", 1e-7, None),
+    ("torque.max", "real", "N.m", "T_max", "torque limit", 1e-6, None),
+    ("torque.power_max", "real", "W", "P_max", "power limit |T w|", 1e-6, None),
+    ("torque.tau", "real", "s", "tau_T", "Level 1: first-order torque lag", 0.0, None),
+    ("torque.dead_time", "real", "s", "dead_time", "Level 1: dead time (whole control.Ts)", 0.0, None),
+    ("pmsm.pole_pairs", "int", None, "pole_pairs", "Level 2: pole pairs", 1, 200),
+    ("pmsm.psi", "real", "Wb", "psi", "Level 2: PM flux linkage (amplitude-invariant dq)", 1e-9, None),
+    ("pmsm.Rs", "real", "Ohm", "Rs", "Level 2: stator resistance", 1e-9, None),
+    ("pmsm.Ld", "real", "H", "Ld", "Level 2: d inductance", 1e-9, None),
+    ("pmsm.Lq", "real", "H", "Lq", "Level 2: q inductance", 1e-9, None),
+    ("pmsm.V_dc", "real", "V", "V_dc", "Level 2: DC-link voltage (|v_dq| <= V_dc/sqrt 3)", 1e-6, None),
+    ("pmsm.Ts_current", "real", "s", "Ts_current", "Level 2: current-loop sample time (divides "
+                                                   "control.Ts)", 1e-8, None),
+]
+
+
+def drive_defaults() -> dict:
+    """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
+    round trip, pre-torque for the rated load (R1_PRETORQUE)."""
+    from .drive import DriveParams
+
+    p = DriveParams()
+    out = {}
+    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
+        if field == "landing":
+            v = list(p.landings)[int(name[-2]) - 1]
+        elif field == "pretorque":
+            v = R1_PRETORQUE[int(name[-2]) - 1]
+        elif field == "moves":
+            v = len(list(p.moves))
+        elif field == "start_landing":
+            v = int(p.start_landing) + 1
+        else:
+            v = getattr(p, field)
+        out[name] = int(v) if kind == "int" else float(v)
+    return out
+
+
+def drive_params(values: Optional[Mapping[str, float]] = None):
+    """DriveParams from drive FMU parameter values (missing names take `drive_defaults`)."""
+    from .drive import DriveParams
+
+    vals = drive_defaults()
+    if values:
+        unknown = set(values) - set(vals)
+        if unknown:
+            raise ValueError(f"unknown drive parameters {sorted(unknown)}; known: {sorted(vals)}")
+        vals.update(values)
+    kw = {}
+    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
+        if field in ("landing", "pretorque", "moves", "start_landing"):
+            continue
+        kw[field] = int(vals[name]) if kind == "int" else float(vals[name])
+    start = int(vals["trip.start_landing"]) - 1
+    if start not in (0, 1):
+        raise ValueError(f"trip.start_landing must be 1 or 2, got {vals['trip.start_landing']!r}")
+    n = int(vals["trip.moves"])
+    kw["landings"] = (float(vals["landing[1]"]), float(vals["landing[2]"]))
+    kw["start_landing"] = start
+    kw["moves"] = tuple((start + 1 + i) % 2 for i in range(n))
+    kw["pretorque"] = (float(vals["pretorque[1]"]), float(vals["pretorque[2]"]))
+    return DriveParams(**kw)
+
+
+def make_drive(values: Optional[Mapping[str, float]] = None):
+    """The `ElectricDrive` of the drive FMU for these parameter values."""
+    from .drive import ElectricDrive
+
+    return ElectricDrive(drive_params(values))
+
+
+# ------------------------------------------------------------------------------------------------
+# building the FMUs
+# ------------------------------------------------------------------------------------------------
+
+def repo_root() -> Path:
+    return Path(__file__).resolve().parents[1]
+
+
+def entry_script(kind: str) -> Path:
+    """fmus/reeve_plant_slave.py or fmus/reeve_drive_slave.py of this checkout."""
+    p = repo_root() / "fmus" / f"reeve_{kind}_slave.py"
+    if not p.is_file():
+        raise FileNotFoundError(f"FMU entry script {p} not found: building FMUs needs a source checkout "
+                                f"of reeve_fmu (pip install -e .)")
+    return p
+
+
+def default_scene_path() -> Path:
+    from .cli import default_scene
+
+    return Path(default_scene(DEFAULT_SCENE))
+
+
+def _slug(name: str) -> str:
+    s = "".join(c.lower() if c.isalnum() else "_" for c in name).strip("_")
+    return s or "plant"
+
+
+def _plant_entry(name: str, workdir: Path) -> Path:
+    """Entry script for a plant FMU called `name`: the shipped one for the default name, else a copy
+    with a unique module name (two FMUs sharing an entry module name clash in one process)."""
+    entry = entry_script("plant")
+    if name == PLANT_NAME:
+        return entry
+    target = workdir / f"reeve_plant_{_slug(name)}_slave.py"
+    target.write_bytes(entry.read_bytes())
+    return target
+
+
+def _check_model_name(name: str) -> None:
+    if not name or not name.isidentifier():
+        raise ValueError(f"FMU model name {name!r} must be a valid identifier (it names the binary)")
+    if name == DRIVE_NAME:
+        raise ValueError(f"the plant FMU cannot be called {DRIVE_NAME!r} (that is the drive FMU)")
+
+
+def plant_fmu_model(plant_fmu) -> tuple:
+    """(Scene, scene payload) a built plant FMU carries (resources/scene.toml, reeve_plant.json)."""
+    import zipfile
+
+    from .scene import loads_scene
+
+    with zipfile.ZipFile(plant_fmu) as zf:
+        cfg = json.loads(zf.read(f"resources/{PLANT_CONFIG}").decode("utf-8"))
+        text = zf.read(f"resources/{cfg['scene']}").decode("utf-8")
+    return loads_scene(text, f"{plant_fmu}!resources/{cfg['scene']}"), float(cfg["scene_payload"])
+
+
+def plant_build_inputs(scene=None, name: str = PLANT_NAME, workdir: Optional[Path] = None):
+    """(entry script, resources) of the plant FMU for `scene` (path) and model `name`."""
+    _check_model_name(name)
+    scene_path = Path(scene) if scene is not None else default_scene_path()
+    if not scene_path.is_file():
+        raise FileNotFoundError(f"scene file {scene_path} not found")
+    workdir = Path(workdir or tempfile.mkdtemp(prefix="reeve_plant_entry_"))
+    cfg = plant_config(scene_path, name)
+    resources = {PLANT_SCENE: scene_path.read_bytes(),
+                 PLANT_CONFIG: (json.dumps(cfg, indent=1) + "\n").encode()}
+    return _plant_entry(name, workdir), resources
+
+
+def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True) -> tuple[Path, bool]:
+    """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?)."""
+    from .fmu.build import build_fmu, fmu_is_stale
+
+    dest = Path(dest)
+    with tempfile.TemporaryDirectory(prefix="reeve_plant_entry_") as work:
+        entry, res = plant_build_inputs(scene, name, Path(work))
+        path = dest / f"{name}.fmu"
+        if not force and not fmu_is_stale(path, entry, res):
+            return path, False
+        return build_fmu(entry, dest, resources=res), True
+
+
+def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
+    from .fmu.build import build_fmu, fmu_is_stale
+
+    entry = entry_script("drive")
+    path = Path(dest) / f"{DRIVE_NAME}.fmu"
+    if not force and not fmu_is_stale(path, entry):
+        return path, False
+    return build_fmu(entry, dest), True
+
+
+def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
+                log: Optional[Callable[[str], None]] = print) -> tuple[Path, Path]:
+    """Build the plant and drive FMUs into `dest` if missing, stale or `rebuild`; return their paths."""
+    out = []
+    for what, fn in (("plant", lambda f: build_plant_fmu(dest, scene, name, force=f)),
+                     ("drive", lambda f: build_drive_fmu(dest, force=f))):
+        t0 = time.perf_counter()
+        path, built = fn(rebuild)
+        if log is not None:
+            if built:
+                log(f"built {path} ({time.perf_counter() - t0:.1f} s)")
+            else:
+                log(f"{path} is up to date")
+        out.append(path)
+    return out[0], out[1]
+
+
+# ------------------------------------------------------------------------------------------------
+# results
+# ------------------------------------------------------------------------------------------------
+#: drive outputs recorded by the masters (after motor.torque and brake.command)
+DRIVE_RECORD = ("car.position_ref", "car.velocity_ref", "car.acceleration_ref",
+                "motor.speed_ref", "drive.torque_ref")
+PLANT_EXCHANGE = ("motor.speed", "motor.angle")        # plant -> drive
+DRIVE_EXCHANGE = ("motor.torque", "brake.command")     # drive -> plant
+
+
+class CosimResult:
+    """Sampled signals of a co-simulation: `time` and named columns (numpy arrays)."""
+
+    def __init__(self, time_: np.ndarray, columns: dict, info: Optional[dict] = None):
+        self.time = time_
+        self.columns = columns
+        self.info = dict(info or {})
+
+    def __getitem__(self, name):
+        return self.columns[name]
+
+    def names(self) -> list:
+        return list(self.columns)
+
+    def as_dict(self) -> dict:
+        d = {"time": self.time}
+        d.update(self.columns)
+        return d
+
+
+class CosimError(RuntimeError):
+    """A co-simulation step failed; the message carries the FMU log."""
+
+
+def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: float = 1.0) -> float:
+    """End of the drive's move sequence (torque off after the last move) plus `settle` seconds."""
+    return make_drive(drive_values).t_end + settle
+
+
+# ------------------------------------------------------------------------------------------------
+# fmpy master
+# ------------------------------------------------------------------------------------------------
+class _FastReal:
+    """A preallocated value-reference array + value buffer for one setReal/getReal call per step."""
+
+    def __init__(self, handle, names: Sequence[str], buf=None):
+        from fmpy.fmi2 import fmi2Real, fmi2ValueReference
+
+        self.names = tuple(names)
+        self.n = len(self.names)
+        self.vr = (fmi2ValueReference * self.n)(*[handle.vr(n) for n in self.names])
+        self.buf = buf if buf is not None else (fmi2Real * self.n)()
+        self.view = np.ctypeslib.as_array(self.buf)
+
+
+def _check(status, what, handles, t):
+    if status > 1:
+        logs = "\n".join(f"--- {h.instance_name} log ---\n{h.log_text()}" for h in handles if h.messages)
+        name = ("ok", "warning", "discard", "error", "fatal", "pending")[status] if status < 6 else status
+        raise CosimError(f"{what} at t = {t:.6f} s returned fmi2 status {status} ({name})\n{logs}")
+
+
+def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[float] = None,
+               plant_values: Optional[Mapping[str, float]] = None,
+               drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
+               record: Optional[Sequence[str]] = None, record_every: int = 1,
+               progress: Optional[Callable[[float], None]] = None, progress_every: float = 0.25,
+               timing: bool = False, echo_log: bool = False) -> CosimResult:
+    """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (see the module docstring).
+
+    step          communication step (s); any value > 0
+    t_end         end time (default: the drive's last move + 1 s)
+    plant_values, drive_values   start values of parameters ({"car.load": 1000.0, "pretorque[1]": ...})
+    scheme        "gauss-seidel" (drive, then plant with the new torque) or "jacobi" (libcosim's order)
+    record        plant outputs to record (default: all plant outputs); the drive's motor.torque,
+                  brake.command and DRIVE_RECORD are always recorded
+    record_every  record every n-th communication point
+    progress      called with the simulated time every `progress_every` s of simulated time
+    timing        measure every plant and drive doStep (info["plant_doStep_ns"], ...)
+
+    Per step the master makes exactly one setReal, doStep and getReal call per FMU through fmpy's
+    ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
+    motor.speed/angle straight into the buffer the drive's setReal reads, and vice versa.
+    """
+    from .fmu.runner import SlaveHandle
+
+    if not (step > 0.0 and math.isfinite(step)):
+        raise ValueError(f"communication step must be a finite number > 0, got {step!r}")
+    if scheme not in ("gauss-seidel", "jacobi"):
+        raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
+    if t_end is None:
+        t_end = trip_end_time(drive_values)
+    n = int(math.floor(t_end / step + 1e-9))
+    if n < 1:
+        raise ValueError(f"t_end = {t_end} s is shorter than one step ({step} s)")
+    record_every = max(1, int(record_every))
+    handles = []
+    t_wall0 = time.perf_counter()
+    try:
+        plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log)
+        handles.append(plant)
+        drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log)
+        handles.append(drive)
+        plant.setup(0.0, t_end, start_values=dict(plant_values or {}))
+        drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
+        for h in handles:
+            errs = h.errors()
+            if errs:
+                raise CosimError(f"{h.instance_name}: initialization failed\n{h.log_text()}")
+        plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
+        rec = [r for r in (record if record is not None else plant_outputs) if r not in PLANT_EXCHANGE]
+        missing = [r for r in rec if r not in plant.variables]
+        if missing:
+            raise ValueError(f"plant FMU has no variables {missing}")
+        P = _FastReal(plant, list(PLANT_EXCHANGE) + rec)
+        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
+        D = _FastReal(drive, list(DRIVE_EXCHANGE) + drive_rec)
+        # the exchange: drive.setReal reads the head of the plant's output buffer and vice versa
+        DI = _FastReal(drive, PLANT_EXCHANGE, buf=P.buf)
+        PI = _FastReal(plant, DRIVE_EXCHANGE, buf=D.buf)
+        fp, fd = plant.fmu, drive.fmu
+        cp, cd = fp.component, fd.component
+        getp, getd = fp.dll.fmi2GetReal, fd.dll.fmi2GetReal
+        setp, setd = fp.dll.fmi2SetReal, fd.dll.fmi2SetReal
+        stepp, stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
+        _check(getp(cp, P.vr, P.n, P.buf), "plant getReal", handles, 0.0)
+        _check(getd(cd, D.vr, D.n, D.buf), "drive getReal", handles, 0.0)
+        # recording
+        nrec = n // record_every + 1
+        Prec = np.empty((nrec, P.n))
+        Drec = np.empty((nrec, D.n))
+        Prec[0] = P.view
+        Drec[0] = D.view
+        tns_p = np.zeros(n, dtype=np.int64) if timing else None
+        tns_d = np.zeros(n, dtype=np.int64) if timing else None
+        every = max(1, int(round(progress_every / step))) if progress is not None else n + 1
+        Pv, Dv = P.view, D.view
+        PIvr, PIn, DIvr, DIn = PI.vr, PI.n, DI.vr, DI.n
+        Pvr, Pn, Pbuf, Dvr, Dn, Dbuf = P.vr, P.n, P.buf, D.vr, D.n, D.buf
+        gs = scheme == "gauss-seidel"
+        perf = time.perf_counter_ns
+        j = 1
+        t_loop0 = time.perf_counter()
+        for k in range(n):
+            t = k * step
+            if gs:
+                s = setd(cd, DIvr, DIn, Pbuf)
+                if s > 1:
+                    _check(s, "drive setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepd(cd, t, step, 1)
+                    tns_d[k] = perf() - a
+                else:
+                    s = stepd(cd, t, step, 1)
+                if s > 1:
+                    _check(s, "drive doStep", handles, t)
+                s = getd(cd, Dvr, Dn, Dbuf)
+                if s > 1:
+                    _check(s, "drive getReal", handles, t)
+                s = setp(cp, PIvr, PIn, Dbuf)
+                if s > 1:
+                    _check(s, "plant setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepp(cp, t, step, 1)
+                    tns_p[k] = perf() - a
+                else:
+                    s = stepp(cp, t, step, 1)
+                if s > 1:
+                    _check(s, "plant doStep", handles, t)
+                s = getp(cp, Pvr, Pn, Pbuf)
+                if s > 1:
+                    _check(s, "plant getReal", handles, t)
+            else:
+                s = setd(cd, DIvr, DIn, Pbuf)
+                if s > 1:
+                    _check(s, "drive setReal", handles, t)
+                s = setp(cp, PIvr, PIn, Dbuf)
+                if s > 1:
+                    _check(s, "plant setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepd(cd, t, step, 1)
+                    b = perf()
+                    s2 = stepp(cp, t, step, 1)
+                    tns_p[k] = perf() - b
+                    tns_d[k] = b - a
+                else:
+                    s = stepd(cd, t, step, 1)
+                    s2 = stepp(cp, t, step, 1)
+                if s > 1:
+                    _check(s, "drive doStep", handles, t)
+                if s2 > 1:
+                    _check(s2, "plant doStep", handles, t)
+                s = getd(cd, Dvr, Dn, Dbuf)
+                if s > 1:
+                    _check(s, "drive getReal", handles, t)
+                s = getp(cp, Pvr, Pn, Pbuf)
+                if s > 1:
+                    _check(s, "plant getReal", handles, t)
+            if (k + 1) % record_every == 0:
+                Prec[j] = Pv
+                Drec[j] = Dv
+                j += 1
+            if (k + 1) % every == 0:
+                progress((k + 1) * step)
+        loop_wall = time.perf_counter() - t_loop0
+        if progress is not None:
+            progress(n * step)
+        warnings = [str(m) for h in handles for m in h.messages if m.status >= 1]
+    finally:
+        for h in reversed(handles):
+            try:
+                h.close()
+            except Exception:  # pragma: no cover - teardown must not hide the real error
+                pass
+    total_wall = time.perf_counter() - t_wall0
+    cols = {}
+    for i, name in enumerate(P.names):
+        cols[name] = Prec[:j, i]
+    for i, name in enumerate(D.names):
+        cols[name] = Drec[:j, i]
+    tt = np.arange(j) * (step * record_every)
+    info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": plant_outputs, "t_end_s": n * step, "steps": n,
+            "loop_wall_s": loop_wall, "total_wall_s": total_wall,
+            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf, "fmu_warnings": warnings}
+    if timing:
+        info["plant_doStep_ns"] = tns_p
+        info["drive_doStep_ns"] = tns_d
+    return CosimResult(tt, cols, info)
+
+
+# ------------------------------------------------------------------------------------------------
+# monolithic reference (no FMI)
+# ------------------------------------------------------------------------------------------------
+def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step: float = 1e-3,
+               scene=None, plant_fmu=None, plant_values: Optional[Mapping[str, float]] = None,
+               drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
+               progress: Optional[Callable[[float], None]] = None) -> CosimResult:
+    """The same Plant and ElectricDrive as the FMUs, coupled in this process every `step` seconds
+    (Gauss-Seidel: the drive steps first with the measurement at t, the plant then holds the drive's
+    torque over [t, t + step]); samples every `record_step` (a multiple of `step`).
+
+    With step = the co-simulation's communication step and scheme equal, this is exactly what the FMU
+    co-simulation computes (tests compare them bit for bit); with a much finer step it is the
+    reference of the co-simulation error (docs/cosim.md). The plant comes from `scene` (default: the
+    shipped elevator_2to1 scene) or, if given, from the scene the plant FMU `plant_fmu` carries."""
+    if scheme not in ("gauss-seidel", "jacobi"):
+        raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
+    payload = None
+    if plant_fmu is not None:
+        scene, payload = plant_fmu_model(plant_fmu)
+    scene = scene if scene is not None else default_scene_path()
+    plant = make_plant(scene, payload, plant_values)
+    drive = make_drive(drive_values)
+    if t_end is None:
+        t_end = drive.t_end + 1.0
+    n = int(math.floor(t_end / step + 1e-9))
+    m = int(round(record_step / step))
+    if m < 1 or abs(m * step - record_step) > 1e-9 * record_step:
+        raise ValueError(f"record_step {record_step} must be a multiple of step {step}")
+    names = [s for s in plant.output_names if s != "motor.torque"]
+    idx = [plant.output_names.index(s) for s in names]
+    iw = plant.output_names.index("motor.speed")
+    ia = plant.output_names.index("motor.angle")
+    nrec = n // m + 1
+    Y = np.empty((nrec, len(names)))
+    D = np.empty((nrec, 2 + len(DRIVE_RECORD)))
+
+    def drive_row(tau, br):
+        return (tau, br, drive.position_ref, drive.velocity_ref, drive.acceleration_ref,
+                drive.speed_ref, drive.torque_ref)
+
+    y = plant._y
+    Y[0] = y[idx]
+    D[0] = drive_row(0.0, 0.0)
+    tau = br = 0.0
+    j = 1
+    every = max(1, int(round(0.25 / step)))
+    t0 = time.perf_counter()
+    for k in range(n):
+        t = k * step
+        w, th = y[iw], y[ia]
+        if scheme == "gauss-seidel":
+            tau, br = drive.step(t, step, w, th)
+            y = plant.step(step, tau, br)
+        else:
+            y = plant.step(step, tau, br)
+            tau, br = drive.step(t, step, w, th)
+        if (k + 1) % m == 0:
+            Y[j] = y[idx]
+            D[j] = drive_row(tau, br)
+            j += 1
+        if progress is not None and (k + 1) % every == 0:
+            progress((k + 1) * step)
+    wall = time.perf_counter() - t0
+    cols = {name: Y[:j, i] for i, name in enumerate(names)}
+    for i, name in enumerate(DRIVE_EXCHANGE + DRIVE_RECORD):
+        cols[name] = D[:j, i]
+    info = {"master": "monolithic", "scheme": scheme, "step_s": step, "t_end_s": n * step, "steps": n,
+            "loop_wall_s": wall, "rtf": n * step / wall if wall > 0 else math.inf}
+    return CosimResult(np.arange(j) * (m * step), cols, info)
