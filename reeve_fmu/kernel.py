@@ -86,6 +86,8 @@ if JIT:
         ("trac_zmax", types.float64),
         ("trac_el_in", types.int64),
         ("trac_el_out", types.int64),
+        ("el_type", types.int64),
+        ("el_EI", types.float64[::1]),
     ])
 
     @structref.register
@@ -162,7 +164,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -215,6 +217,8 @@ if JIT:
         k.trac_zmax = trac_zmax
         k.trac_el_in = trac_el_in
         k.trac_el_out = trac_el_out
+        k.el_type = el_type
+        k.el_EI = el_EI
         return k
 
 
@@ -226,7 +230,8 @@ def compiled_kernel(K: Kernel):
     for name, value in zip(K._fields, K):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
-        elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out"):
+        elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out",
+                      "el_type"):
             value = int(value)
         else:
             value = float(value)

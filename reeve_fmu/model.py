@@ -46,6 +46,7 @@ Kernel = namedtuple("Kernel", [
     "out_kind", "out_i", "out_j", "out_scale",
     "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
+    "el_type", "el_EI",
 ])
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
@@ -207,6 +208,18 @@ def _build(scene: Scene) -> Model:
     dof_R = {}
     slip_info = {}
 
+    cubic = bool(scene.ropes) and scene.ropes[0].element == "cubic"
+    comps_nd = [0] if nd == 1 else ([0, 2] if nd == 2 else [0, 1, 2])
+
+    def free_slope(prefix, e):
+        """Material gradient dr/ds of a node as free coordinates (cubic elements), start: e."""
+        d = _Affine(np.zeros(3))
+        for kk in comps_nd:
+            b = np.zeros(3)
+            b[kk] = 1.0
+            d.add(new_q(f"{prefix}.d{AXES[kk]}", "slope", e[kk]), b)
+        return d
+
     for ir, rope in enumerate(scene.ropes):
         rhoA = rope.rhoA * rope.count
         stops = rope.route
@@ -322,7 +335,15 @@ def _build(scene: Scene) -> Model:
                         # deflection along the span, positive toward the rope (spring extends)
                         r.add(jh, e if stop == 0 else -e)
                         springs.append((jh, st.hitch_stiffness * rope.count, st.hitch_damping * rope.count))
-                nodes.append(dict(r=r, e=e, s=s_row(kind, k)))
+                node = dict(r=r, e=e, s=s_row(kind, k))
+                if cubic:
+                    if st.sheave is not None:
+                        # leaves/meets the sheave tangentially: slope = stretch * span direction
+                        jl = new_q(f"{rope.name}.span{k}.{kind}.stretch", "slope", 1.0)
+                        node["d"] = _Affine(np.zeros(3)).add(jl, e)
+                    else:
+                        node["d"] = free_slope(f"{rope.name}.span{k}.{kind}", e)
+                nodes.append(node)
                 ends.append(len(nodes) - 1)
             n_el = rope.elements_per_span
             chain = [ends[0]]
@@ -351,7 +372,10 @@ def _build(scene: Scene) -> Model:
                 for d_, w_ in ((sa[1], 1 - xi), (sb[1], xi)):
                     for jj, cc in d_.items():
                         spar[jj] = spar.get(jj, 0.0) + w_ * cc
-                nodes.append(dict(r=r, e=e, s=(sq, spar, (1 - xi) * sa[2] + xi * sb[2])))
+                node = dict(r=r, e=e, s=(sq, spar, (1 - xi) * sa[2] + xi * sb[2]))
+                if cubic:
+                    node["d"] = free_slope(f"{rope.name}.span{k}.node{m}", e)
+                nodes.append(node)
                 chain.append(len(nodes) - 1)
             chain.append(ends[1])
             first_el = len(elements)
@@ -378,7 +402,8 @@ def _build(scene: Scene) -> Model:
 
     # ------------------------------------------------------------------ p = B q + Bpar par + c0
     n_nodes = len(nodes)
-    n_p = n_nodes * (nd + 1)
+    n_slope = n_nodes * nd if cubic else 0      # slopes block (cubic elements) after positions
+    n_p = n_nodes * (nd + 1) + n_slope
     B = np.zeros((n_p, nq))
     Bpar = np.zeros((n_p, n_par))
     c0 = np.zeros(n_p)
@@ -395,8 +420,15 @@ def _build(scene: Scene) -> Model:
                 c0[i * nd + kk] = r.r0[comp]
                 for j, b in r.terms.items():
                     B[i * nd + kk, j] += b[comp]
+        if cubic:
+            dvec = nd_["d"]
+            for kk, comp in enumerate([0, 2] if nd == 2 else [0, 1, 2]):
+                rowd = n_nodes * nd + i * nd + kk
+                c0[rowd] = dvec.r0[comp]
+                for j, b in dvec.terms.items():
+                    B[rowd, j] += b[comp]
         sq, spar, sc = nd_["s"]
-        row = n_nodes * nd + i
+        row = n_nodes * nd + n_slope + i
         c0[row] = sc
         for j, cc in sq.items():
             B[row, j] += cc
@@ -406,11 +438,20 @@ def _build(scene: Scene) -> Model:
     def pidx(node):
         return [node * nd + k for k in range(nd)]
 
-    ne = 2 * nd + 2
+    def didx(node):
+        return [n_nodes * nd + node * nd + k for k in range(nd)]
+
+    def sidx(node):
+        return n_nodes * nd + n_slope + node
+
+    ne = 4 * nd + 2 if cubic else 2 * nd + 2
     el_idx = np.zeros((len(elements), ne), dtype=np.int64)
     el_g = np.zeros((len(elements), nd))
     for ie, (a, b, ir, k) in enumerate(elements):
-        el_idx[ie] = pidx(a) + pidx(b) + [n_nodes * nd + a, n_nodes * nd + b]
+        if cubic:   # Westin order [r1, d1, s1, r2, d2, s2]
+            el_idx[ie] = pidx(a) + didx(a) + [sidx(a)] + pidx(b) + didx(b) + [sidx(b)]
+        else:
+            el_idx[ie] = pidx(a) + pidx(b) + [sidx(a), sidx(b)]
         e = nodes[a]["e"]
         if nd == 1:
             el_g[ie, 0] = e @ g
@@ -558,6 +599,8 @@ def _build(scene: Scene) -> Model:
         trac_zmax=float(slip_info["sheave"].creep) if slip_info else 1.0,
         trac_el_in=int(tension_taps[slip_info["sheave"].name]["in"][0]) if slip_info else -1,
         trac_el_out=int(tension_taps[slip_info["sheave"].name]["out"][0]) if slip_info else -1,
+        el_type=1 if cubic else 0,
+        el_EI=np.array([r.EI * r.count for r in rope_of_el], float),
     )
 
     # ------------------------------------------------------------------ statics sets
@@ -591,7 +634,7 @@ def _build(scene: Scene) -> Model:
                  body_dofs=body_dofs, ropes=tuple(rope_info), statics_unknowns=tuple(unknowns),
                  statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
-                 info=dict(n_nodes=n_nodes, wraps=wrap_len_total, dof_R=dof_R))
+                 info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R))
 
 
 def sheaves_kind(scene: Scene, qname: str) -> str:

@@ -74,6 +74,8 @@ class Rope:
     length: float | None = None      # m, unstretched length (needed for statics = "rope-length")
     elements_per_span: int = 1
     wrap_model: str = "W1"           # W0: zero-length wraps, W1: constant-material wraps
+    element: str = "linear"          # linear | cubic (ALE-ANCF with bending; planar/spatial models)
+    EI: float = 0.0                  # N m^2 per rope, bending stiffness (cubic elements)
 
 
 @dataclass(frozen=True)
@@ -159,7 +161,7 @@ SCHEMA_KEYS = {
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
-              "wrap_model", "route"},
+              "wrap_model", "route", "element", "EI"},
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
               "table", "torque", "motor_inertia"},
@@ -416,13 +418,22 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                           damping=r.number(rp, path, "damping", 0.0, nonneg=True),
                           tension_only=r.boolean(rp, path, "tension_only", False), length=length,
                           elements_per_span=r.integer(rp, path, "elements_per_span", 1),
-                          wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1"))))
+                          wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1")),
+                          element=r.string(rp, path, "element", "linear", ("linear", "cubic")),
+                          EI=r.number(rp, path, "EI", 0.0, nonneg=True)))
+        if ropes[-1].element == "cubic" and model == "axial-1d":
+            r.fail(f"{path}.element", "cubic elements bend: use scene.model = 'planar' or 'spatial'")
+        if ropes[-1].element != ropes[0].element:
+            r.fail(f"{path}.element", f"all ropes of a scene use one element type (ropes[0] uses "
+                                      f"{ropes[0].element!r})")
         if statics == "rope-length" and length is None:
             r.fail(f"{path}.length", "missing: initial.statics = 'rope-length' needs each rope's unstretched length")
 
     dv = r.table(data.get("drive", {}), "drive", SCHEMA_KEYS["drive"])
     kind = r.string(dv, "drive", "kind", "none", ("none", "speed", "torque", "external"))
     dsheave = r.string(dv, "drive", "sheave", None)
+    if any(sh.slip for sh in sheaves) and any(rp.element == "cubic" for rp in ropes):
+        r.fail("sheaves", "a slipping traction sheave needs linear rope elements")
     if sum(1 for sh in sheaves if sh.slip) > 1:
         r.fail("sheaves", "at most one traction sheave may slip")
     if kind != "none":

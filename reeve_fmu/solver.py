@@ -514,12 +514,13 @@ class Simulator:
         st.c[:] = c
         if KS is not m.KJ:
             p = m.B @ qq + c
-            nd, n_nodes = m.nd, m.info["n_nodes"]
+            nd = m.nd
+            o2 = 2 * nd + 1 if m.K.el_type == 1 else nd    # start of r2 in the element layout
             for ie, idx in enumerate(m.K.el_idx):
                 if not m.K.el_tonly[ie]:
                     continue
-                r1, r2 = p[idx[:nd]], p[idx[nd:2 * nd]]
-                l = p[idx[2 * nd + 1]] - p[idx[2 * nd]]
+                r1, r2 = p[idx[:nd]], p[idx[o2:o2 + nd]]
+                l = p[idx[-1]] - p[idx[2 * nd]]
                 if np.linalg.norm(r2 - r1) < l:
                     ir, k = m.element_span[ie]
                     raise SolverError(f"{m.scene.source}: initial statics: rope {m.scene.ropes[ir].name!r} "

@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from ._jit import njit
+from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element, linear_element_1d_at, linear_element_at
 from .kernel import new_work
 from .profiles import profile_eval
@@ -173,7 +174,7 @@ def assemble_ws(K, W, c, q, v, t, u):
     Kernel fields are read into locals once: attribute access inside the loops measurably costs."""
     nq = K.nq
     nd = K.nd
-    ne = 2 * nd + 2
+    ne = K.el_idx.shape[1]
     M = W.M
     Q = W.Q
     QE = W.QE
@@ -198,16 +199,19 @@ def assemble_ws(K, W, c, q, v, t, u):
     status = 0
     for ie in range(el_map.shape[0]):
         gather(K, c, q, v, ie, QE, VE)
-        if nd == 1:
-            res = linear_element_1d_at(rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G[ie, 0], C[ie],
-                                       QE, VE, MEs, QEs, ie)
-        else:
-            res = linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
-                                    QE, VE, MEs, QEs, ie)
-        if res[2] < 0.0 or QE[ie, ne - 1] - QE[ie, ne - 2] < K.l_min:
-            status = -1 - ie   # vanishing span: the event names the element
-            if res[2] < 0.0:
+        if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
+            status = -1 - ie   # vanishing span: the event names the element (checked before any 1/l)
+            if not QE[ie, ne - 1] - QE[ie, 2 * nd] > 0.0:
                 continue
+        if K.el_type == 1:
+            cubic_element_at(nd, rhoA[ie], EA[ie], K.el_EI[ie], nu[ie], tonly[ie] != 0, G,
+                             QE, VE, MEs, QEs, ie)
+        elif nd == 1:
+            linear_element_1d_at(rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G[ie, 0], C[ie],
+                                 QE, VE, MEs, QEs, ie)
+        else:
+            linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
+                              QE, VE, MEs, QEs, ie)
         for a in range(ne):
             for wa in range(W):
                 ba = el_coef[ie, a, wa]
@@ -257,7 +261,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
     fresh = False the workspace of the last Newton residual is used as it is: that residual was
     evaluated within the Newton tolerance of (q, v), which saves an assembly per output step."""
     nd = K.nd
-    ne = 2 * nd + 2
+    ne = K.el_idx.shape[1]
     ae = np.empty(ne)
     if fresh:
         assemble_ws(K, W, c, q, v, t, u)
@@ -280,6 +284,16 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
             y[k] = v[i] * s
         elif kind == 2:
             y[k] = qdd[i] * s
+        elif kind == 3 and K.el_type == 1:
+            # cubic: the axial force at the node, EA(|d| - 1) (slopes are nodal unknowns)
+            MEsc = np.empty((1, ne, ne))
+            QEsc = np.empty((1, ne))
+            QEc = QE[i:i + 1].copy()
+            VEc = VE[i:i + 1].copy()
+            res = cubic_element_at(nd, K.el_rhoA[i], K.el_EA[i], K.el_EI[i], K.el_nu[i],
+                                   K.el_tonly[i] != 0, K.el_g[i:i + 1], QEc, VEc, MEsc, QEsc, 0)
+            T = res[0] if K.out_j[k] == 0 else res[1]
+            y[k] = T if (K.el_tonly[i] == 0 or T > 0.0) else 0.0
         elif kind == 3:
             for a in range(ne):   # element accelerations B qdd
                 x = 0.0
@@ -328,7 +342,7 @@ def energy(K, c, q, v):
     """(kinetic, gravity potential, strain energy) of the whole system."""
     nq = K.nq
     nd = K.nd
-    ne = 2 * nd + 2
+    ne = K.el_idx.shape[1]
     M = np.empty((nq, nq))
     Q = np.empty(nq)
     u = np.zeros(1)
@@ -349,6 +363,11 @@ def energy(K, c, q, v):
     zero = np.zeros(nq)
     for ie in range(n_el):
         gather(K, c, q, zero, ie, QE, VE)
+        if K.el_type == 1:
+            Vg += cubic_gravity(nd, K.el_rhoA[ie], K.el_g[ie], QE[ie], QEs[ie])
+            U += cubic_elastic(nd, K.el_EA[ie], K.el_EI[ie], 0.0, K.el_tonly[ie] != 0, QE[ie], VE[ie],
+                               QEs[ie])[0]
+            continue
         l = QE[ie, 2 * nd + 1] - QE[ie, 2 * nd]
         res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], 0.0, K.el_tonly[ie] != 0,
                                 K.el_g, K.el_C[ie], QE, VE, MEs, QEs, ie)
