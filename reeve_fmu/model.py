@@ -154,6 +154,10 @@ def build_model(scene: Scene) -> Model:
 
 
 def _build(scene: Scene) -> Model:
+    if scene.model == "spatial-torsion":
+        raise SceneError(f"{scene.source}: [scene.model] 'spatial-torsion' (axial-torsion coupling, hook-block "
+                         f"yaw) is solved quasi-statically by `reeve-fmu crane`; the dynamic engine "
+                         f"models 'axial-1d', 'planar' and 'spatial'")
     nd = {"axial-1d": 1, "planar": 2, "spatial": 3}[scene.model]
     g = np.asarray(scene.gravity, float)
     bodies = {b.name: b for b in scene.bodies}

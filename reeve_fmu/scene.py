@@ -16,7 +16,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-MODELS = ("axial-1d", "planar", "spatial")
+MODELS = ("axial-1d", "planar", "spatial", "spatial-torsion")
 AXES = ("x", "y", "z")
 
 
