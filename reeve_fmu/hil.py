@@ -32,7 +32,7 @@ import tempfile
 import threading
 import time
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,20 +70,39 @@ def multicast_probe(port: int | None = None, timeout: float = 1.0) -> tuple[bool
                     pass
 
 
-def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
-    """udp_multicast usable? If not and we may (root, `ip` available), enable multicast on `lo` and route
-    239.0.0.0/8 there (fmi.md §7.1), then probe again. Where a route to 239/8 exists already (e.g. via
-    a default route) nothing is changed."""
-    ok, why = multicast_probe()
-    if ok or not setup_route:
-        return ok, why
+def _multicast_dev() -> str | None:
     ip = shutil.which("ip")
+    if ip is None:
+        return None
+    try:
+        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, timeout=10).stdout
+    except (OSError, subprocess.SubprocessError):
+        return None
+    parts = out.split()
+    return parts[parts.index("dev") + 1] if "dev" in parts else None
+
+
+def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
+    """Is udp_multicast usable on this host? As root (and with `ip`), first keep the bench's multicast on
+    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (fmi.md §7.1)
+    unless 239.74.163.2 already routes to lo. Through a real NIC (a default route) frames leave the
+    host and single sends took up to 15 ms on the test VM; through lo the p99 SYNC lateness of the real-time
+    bench was 52 us (docs/hil.md). Then probe with two buses. Returns (ok, what was done or why not)."""
+    note = ""
+    ip = shutil.which("ip")
+    if setup_route and ip is not None and hasattr(os, "geteuid") and os.geteuid() == 0 \
+            and _multicast_dev() != "lo":
+        subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
+        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True,
+                           timeout=10)
+        note = " (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)" if r.returncode == 0 \
+            else f" (ip route add 239.0.0.0/8 dev lo failed: {r.stderr.strip()})"
+    ok, why = multicast_probe()
+    if ok:
+        return True, "ok" + note
     if ip is None or not hasattr(os, "geteuid") or os.geteuid() != 0:
-        return False, why + " (and no root/`ip` to add: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
-    subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
-    subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, timeout=10)
-    ok2, why2 = multicast_probe()
-    return ok2, why2 if not ok2 else "ok (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
+        why += " (as root: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
+    return False, why + note
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -99,8 +118,8 @@ class HilConfig:
     dt: float = 1e-3
     plant: str = "fmu"                         # fmu | in-process
     fmu_path: str | None = None                # default: fmus/ReevingPlant.fmu (built when missing/stale)
-    drive_values: dict | None = None           # drive parameters (reeve_fmu.cosim DRIVE_PARAMETERS names)
-    plant_values: dict | None = None           # plant FMU parameters (car.load, ...)
+    drive_values: dict | None = None           # drive parameters (cosim DRIVE_PARAMETERS names); None: the demo's
+    plant_values: dict | None = None           # plant FMU parameters (car.load, ...); None: the demo's
     out: str | None = "results/hil"
     lockstep_timeout: float = 0.5
     start_timeout: float = 300.0              # a cold numba compile of plant + drive can take minutes
@@ -109,6 +128,28 @@ class HilConfig:
     compare: bool = True                       # builtin, no faults: compare with the in-process references
     stop_when_safe: bool = False
     record: bool = True
+    rt_priority: int = 50                      # real time: SCHED_FIFO priority of bench and controller (0: off)
+
+
+_DEMO_SCENARIO: tuple | None = None
+
+
+def demo_scenario() -> tuple[dict, dict]:
+    """(plant_values, drive_values) of `reeve-fmu demo` (reeve_fmu/demo.py): rated load 1000 kg, landings
+    0 m and 39 m, one round trip, Level-1 drive, pre-torque = the plant's holding torque at each landing
+    (cosim.holding_torques). The built-in controller runs this drive; the bench runs this plant."""
+    global _DEMO_SCENARIO
+    if _DEMO_SCENARIO is None:
+        from . import cosim, demo
+        from .scene import load_scene
+
+        scene = load_scene(cosim.default_scene_path())
+        plant_values = {"car.load": float(demo.RATED_LOAD_KG)}
+        pre = cosim.holding_torques(scene, demo.LANDINGS, cosim.scene_payload(scene), params=plant_values)
+        drive_values = {"landing[1]": demo.LANDINGS[0], "landing[2]": demo.LANDINGS[1], "trip.moves": 2,
+                        "pretorque[1]": pre[0], "pretorque[2]": pre[1], "drive.level": 1}
+        _DEMO_SCENARIO = (plant_values, drive_values)
+    return dict(_DEMO_SCENARIO[0]), dict(_DEMO_SCENARIO[1])
 
 
 def _drive_model(values):
@@ -118,6 +159,7 @@ def _drive_model(values):
 
 
 def default_t_end(drive_values=None) -> float:
+    """The demo's end time: the drive's last move + 1 s."""
     return _drive_model(drive_values).t_end + 1.0
 
 
@@ -221,6 +263,8 @@ class _ProcessController:
                 "--stats", str(self.stats_path)]
         if ccfg.dies_at is not None:
             args += ["--dies-at", repr(ccfg.dies_at)]
+        if ccfg.rt_priority:
+            args += ["--rt-priority", str(int(ccfg.rt_priority))]
         if ccfg.drive_values:
             args += ["--drive-values", json.dumps(ccfg.drive_values)]
         env = dict(os.environ)
@@ -276,6 +320,10 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     if not (cfg.dt > 0 and math.isfinite(cfg.dt)):
         raise ValueError(f"step must be > 0, got {cfg.dt!r}")
     faults = FaultSpec.parse(cfg.inject)
+    if cfg.plant_values is None or cfg.drive_values is None:
+        pv, dv = demo_scenario()
+        cfg = replace(cfg, plant_values=pv if cfg.plant_values is None else cfg.plant_values,
+                      drive_values=dv if cfg.drive_values is None else cfg.drive_values)
     t_end = cfg.t_end if cfg.t_end is not None else default_t_end(cfg.drive_values)
     if not (t_end > 0 and math.isfinite(t_end)):
         raise ValueError(f"--t-end must be > 0, got {t_end!r}")
@@ -295,14 +343,16 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     ctl = None
     try:
         bcfg = BridgeConfig(dt=cfg.dt, realtime=cfg.realtime, lockstep_timeout=cfg.lockstep_timeout,
-                            start_timeout=cfg.start_timeout, stop_when_safe=cfg.stop_when_safe, record=cfg.record)
+                            start_timeout=cfg.start_timeout, stop_when_safe=cfg.stop_when_safe, record=cfg.record,
+                            rt_priority=cfg.rt_priority)
         inj = Injector(faults, cfg.dt, lockstep=not cfg.realtime) if faults.any else None
         bridge = Bridge(bus, plant, bcfg, inj)
         bridge.warm_up()
         if cfg.controller == "builtin":
             ccfg = ControllerConfig(dt=cfg.dt, n_steps=n, drive_values=cfg.drive_values,
                                     dies_at=faults.controller_dies_at, start_timeout=cfg.start_timeout,
-                                    sync_timeout=max(5.0, 4 * cfg.lockstep_timeout))
+                                    sync_timeout=max(5.0, 4 * cfg.lockstep_timeout),
+                                    rt_priority=cfg.rt_priority if cfg.realtime else 0)
             if cfg.bus == "virtual":
                 ctl = _ThreadController(lambda: make_bus("virtual", channel), ccfg)
             else:
@@ -333,6 +383,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
         "bus": cfg.bus,
         "controller": cfg.controller,
         "mode": "real-time" if cfg.realtime else "lock-step",
+        "rt_priority": st.rt_priority,
         "plant": plant.describe(),
         "step_s": cfg.dt,
         "steps": st.steps,
@@ -410,6 +461,12 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
         out.mkdir(parents=True, exist_ok=True)
         if cols:
             write_csv(out / "results.csv", time_, cols)
+        if len(st.step_time):
+            # per-cycle latency log: work time SYNC -> plant stepped, and (real time) SYNC lateness
+            tcols = {"step_time_us": st.step_time * 1e6}
+            if cfg.realtime and len(st.sync_jitter):
+                tcols["sync_late_us"] = st.sync_jitter * 1e6
+            write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
         (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
     return summary
 
@@ -467,9 +524,10 @@ def _controller_main(argv) -> int:
     ap.add_argument("--start-timeout", type=float, default=60.0)
     ap.add_argument("--drive-values", default=None, help="JSON object of drive parameters")
     ap.add_argument("--stats", default=None, help="write the controller statistics (JSON) here")
+    ap.add_argument("--rt-priority", type=int, default=0, help="SCHED_FIFO priority while cycling (0: off)")
     a = ap.parse_args(argv)
     ccfg = ControllerConfig(dt=a.dt, n_steps=a.n_steps, dies_at=a.dies_at, sync_timeout=a.sync_timeout,
-                            start_timeout=a.start_timeout,
+                            start_timeout=a.start_timeout, rt_priority=a.rt_priority,
                             drive_values=json.loads(a.drive_values) if a.drive_values else None)
     bus = make_bus(a.bus, a.channel, a.port)
     try:

@@ -173,6 +173,27 @@ class Injector:
         return self._held[0][0] if self._held else math.inf
 
 
+def set_realtime_priority(priority: int):
+    """SCHED_FIFO for the calling thread (Linux, needs root or CAP_SYS_NICE); returns a function that
+    restores the previous policy, or None when not possible. The loops block in recv() with timeouts,
+    so a FIFO thread never spins."""
+    import os
+
+    try:
+        old_policy = os.sched_getscheduler(0)
+        old_param = os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+    except (AttributeError, OSError, PermissionError):
+        return None
+
+    def restore():
+        try:
+            os.sched_setscheduler(0, old_policy, old_param)
+        except OSError:
+            pass
+    return restore
+
+
 def _copy_msg(msg, data: bytes):
     import can
 
@@ -191,6 +212,7 @@ class BridgeConfig:
     start_timeout: float = 60.0         # s of wall time to wait for NMT start
     heartbeat_wall_period: float = 0.1  # s, drive heartbeat while waiting for NMT start
     record: bool = True
+    rt_priority: int = 50               # real time: SCHED_FIFO priority of the bench thread (0: leave it)
     stop_when_safe: bool = False        # end the run 1 s after a fault reaction has stopped the machine
     node_id: int = DRIVE_NODE_ID
 
@@ -221,6 +243,7 @@ class BridgeStats:
     car_excursion: float | None = None            # largest |car position - position at the fault| after it
     car_speed_at_fault: float | None = None
     plant_error: str | None = None
+    rt_priority: bool = False
     started_wall: float = 0.0
     wall: float = 0.0
     step_time: np.ndarray = field(default_factory=lambda: np.zeros(0))     # per cycle, s
@@ -470,13 +493,26 @@ class Bridge:
                 self._hb_lost = False
         d.warning = (self._missed > 0) or self._hb_lost
 
-    def run(self, n_steps: int, progress=None, alive=None) -> "BridgeResult":
-        """Wait for NMT start, then run n_steps SYNC cycles; returns the recorded signals and statistics."""
+    def run(self, n_steps: int, progress=None, alive=None, stop=None) -> "BridgeResult":
+        """Wait for NMT start, then run n_steps SYNC cycles; returns the recorded signals and statistics.
+        alive(): see wait_for_start; stop: a threading.Event that ends the run early (checked every cycle)."""
         cfg = self.cfg
         dt = cfg.dt
         st = self.stats
         self.warm_up()
         st.started_wall = self.wait_for_start(alive)
+        restore = set_realtime_priority(cfg.rt_priority) if cfg.realtime and cfg.rt_priority else None
+        st.rt_priority = restore is not None
+        try:
+            return self._run(n_steps, progress, stop)
+        finally:
+            if restore is not None:
+                restore()
+
+    def _run(self, n_steps, progress, stop) -> "BridgeResult":
+        cfg = self.cfg
+        dt = cfg.dt
+        st = self.stats
         n = int(n_steps)
         nout = len(self.output_names)
         rec = cfg.record
@@ -503,6 +539,9 @@ class Bridge:
         x_fault = None
         for k in range(n):
             t = k * dt
+            if stop is not None and stop.is_set():
+                k_done = k
+                break
             if cfg.realtime:
                 self._wait_until(t_wall0 + k * dt)
                 t_sync = perf()

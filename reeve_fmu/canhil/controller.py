@@ -32,6 +32,7 @@ class ControllerConfig:
     heartbeat_every: int = 10           # SYNC cycles between controller heartbeats
     heartbeat_consumer_ms: int = 50     # written to the drive's 0x1016:01
     sdo_timeout: float = 1.0
+    rt_priority: int = 0                # SCHED_FIFO priority of the controller thread while cycling (0: leave it)
 
 
 @dataclass
@@ -127,6 +128,19 @@ class BuiltinController:
         except Exception as exc:
             st.stopped = f"start failed: {exc}"
             return st
+        restore = None
+        if cfg.rt_priority:
+            from .bridge import set_realtime_priority
+
+            restore = set_realtime_priority(cfg.rt_priority)
+        try:
+            return self._cycle(st)
+        finally:
+            if restore is not None:
+                restore()
+
+    def _cycle(self, st) -> ControllerStats:
+        cfg = self.cfg
         dt = cfg.dt
         dec_status = self.proto.DriveStatus.decode_raw
         dec_fb = self.proto.DriveFeedback.decode

@@ -168,10 +168,15 @@ def make_default_plant(scene=None, params: dict | None = None):
     return make_plant(scene, params=params or None)
 
 
-def default_plant_fmu(dest="fmus", *, build: bool = True, log=None) -> Path:
-    """fmus/ReevingPlant.fmu, built (or rebuilt when stale) with reeve_fmu.cosim.build_plant_fmu."""
+def default_plant_fmu(dest=None, *, build: bool = True, log=None) -> Path:
+    """The demo's plant FMU (reeve_fmu.demo.fmu_dir(): $REEVE_FMU_FMUS or fmus/ of the checkout) /
+    ReevingPlant.fmu, built, or rebuilt when stale, with reeve_fmu.cosim.build_plant_fmu."""
     from ..cosim import PLANT_NAME, build_plant_fmu
 
+    if dest is None:
+        from ..demo import fmu_dir
+
+        dest = fmu_dir()
     path = Path(dest) / f"{PLANT_NAME}.fmu"
     if build:
         path, built = build_plant_fmu(dest, force=False)
