@@ -85,6 +85,8 @@ def parse_crane(scene: Scene) -> CraneSpec:
     if "crane" not in scene.extra:
         r.fail("crane", "missing section: a crane scene needs a [crane] table (see docs/crane.md)")
     c = r.table(scene.extra["crane"], "crane", CRANE_KEYS)
+    if scene.model not in ("spatial-torsion", "spatial"):
+        r.fail("scene.model", f"the crane statics is three-dimensional: use 'spatial-torsion', got {scene.model!r}")
     bodies = {b.name for b in scene.bodies}
     block = r.string(c, "crane", "block", required=True)
     if block not in bodies:

@@ -197,18 +197,22 @@ def test_eight_falls_large_crane():
 
 
 def test_bad_crane_section_names_file_and_key(tmp_path):
-    text = EIGHT.read_text()
     cases = [
-        ("k0 = 0.006", "k0 = 0.006\ncolour = 1", "[crane] unknown key(s) 'colour'"),
-        ("k0 = 0.006", "", "[crane] missing required key 'k0'"),
-        ('law = "costello"', 'law = "hooke"', "[crane.law] must be one of"),
-        ("height_max = 120.0", "height_max = 1.0", "[crane.height_max] must be > height_min"),
-        ('block = "block"', 'block = "hook"', "[crane.block] unknown body 'hook'"),
+        (EIGHT, "k0 = 0.006", "k0 = 0.006\ncolour = 1", "[crane] unknown key(s) 'colour'"),
+        (EIGHT, "k0 = 0.006", "", "[crane] missing required key 'k0'"),
+        (EIGHT, 'law = "costello"', 'law = "hooke"', "[crane.law] must be one of"),
+        (EIGHT, "height_max = 120.0", "height_max = 1.0", "[crane.height_max] must be > height_min"),
+        (EIGHT, 'block = "block"', 'block = "hook"', "[crane.block] unknown body 'hook'"),
+        (TWO, 'model = "spatial-torsion"', 'model = "planar"', "[scene.model] the crane statics is three-dimensional"),
     ]
-    for old, new, msg in cases:
+    for src, old, new, msg in cases:
         p = tmp_path / "bad.toml"
-        head, tail = text.rsplit("\n[crane]", 1)
-        p.write_text(head + "\n[crane]" + tail.replace(old, new, 1))
+        head, tail = src.read_text().rsplit("\n[crane]", 1)
+        if old.startswith("model"):
+            head = head.replace(old, new, 1)
+        else:
+            tail = tail.replace(old, new, 1)
+        p.write_text(head + "\n[crane]" + tail)
         with pytest.raises(SceneError) as exc:
             load_crane(p)
         assert str(exc.value).startswith(f"{p}: ") and msg in str(exc.value), str(exc.value)
@@ -232,7 +236,7 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
 THREE = """
 [scene]
 name = "three_falls"
-model = "spatial"
+model = "spatial-torsion"
 [initial]
 statics = "none"
 [[bodies]]
