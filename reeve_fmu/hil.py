@@ -467,8 +467,8 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             if cfg.realtime and len(st.sync_jitter):
                 tcols["sync_late_us"] = st.sync_jitter * 1e6
             write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-    return summary
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
+    return json.loads(json.dumps(summary, default=_json_default))
 
 
 def _json_default(o):
@@ -491,11 +491,30 @@ def cli_hil(args) -> int:
 
     cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
                     t_end=args.t_end, out=args.out)
+    print(f"HIL: {'real time' if cfg.realtime else 'lock-step'} over {cfg.bus}, {cfg.controller} controller"
+          + (f", faults {' '.join(cfg.inject)}" if cfg.inject else ""))
     try:
         summary = run_hil(cfg)
     except HilError as exc:
         print(f"reeve-fmu hil: error: {exc}", file=sys.stderr)
         return 3
+    rc = _print_summary(summary, cfg)
+    if summary.get("plant", {}).get("kind") == "fmu" and _is_cli_process():
+        # results are written: skip interpreter finalisation, where pythonfmu FMUs occasionally corrupt
+        # the heap at exit ("corrupted double-linked list", fmi.md §5.2, PythonFMU #228)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(rc)
+    return rc
+
+
+def _is_cli_process() -> bool:
+    """True when this process is the `reeve-fmu` console script or `python -m reeve_fmu.cli`."""
+    p = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    return p is not None and (p.name == "reeve-fmu" or (p.name == "cli.py" and p.parent.name == "reeve_fmu"))
+
+
+def _print_summary(summary: dict, cfg) -> int:
     w = max(len(k) for k in SUMMARY_KEYS)
     for k in SUMMARY_KEYS:
         if k in summary:

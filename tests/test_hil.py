@@ -1,0 +1,456 @@
+"""Motor controller in the loop over CAN (issue 7, docs/hil.md).
+
+* protocol: the DBC (cantools) and the EDS (canopen) describe the same frames; the fast frame codec
+  equals cantools bit for bit; the CiA 402 state machine;
+* lock-step over `virtual` reproduces the in-process co-simulation (plant FMU, in its own subprocess);
+* a cross-process run over `udp_multicast` on loopback;
+* fault injection: frame loss, delay, a dead controller, malformed / out-of-range / stale frames, lost
+  heartbeat; every wait is bounded;
+* a canopen BaseNode402 master takes the simulated drive to OPERATION ENABLED and runs a short move.
+
+Runs that do not load an FMU use the in-process plant (the same Plant the FMU wraps) to stay fast.
+"""
+from __future__ import annotations
+
+import json
+import math
+import random
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from reeve_fmu.canhil import protocol as P  # noqa: E402
+from reeve_fmu.canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError  # noqa: E402
+from reeve_fmu.canhil.buses import make_bus  # noqa: E402
+from reeve_fmu.canhil.drive402 import Drive402  # noqa: E402
+from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
+from reeve_fmu.hil import HilConfig, ensure_multicast, run_hil  # noqa: E402
+
+JOBS = str(ROOT / "tests" / "hil_jobs.py")
+
+# a short trip: 0 m -> 1 m, one move (pre-torque from the demo's holding torque at the bottom landing)
+SHORT = {"landing[1]": 0.0, "landing[2]": 1.0, "trip.moves": 1, "pretorque[1]": 522.5, "pretorque[2]": 522.5,
+         "drive.level": 1}
+PLANT = {"car.load": 1000.0}
+
+
+def _run(tmp_path=None, **kw):
+    cfg = {"plant": "in-process", "drive_values": SHORT, "plant_values": PLANT, "t_end": 3.0, "out": None,
+           "lockstep_timeout": 0.3}
+    cfg.update(kw)
+    if tmp_path is not None and cfg.get("out") is None:
+        cfg["out"] = str(tmp_path / "hil")
+    return run_hil(HilConfig(**cfg), log=None)
+
+
+# ------------------------------------------------------------------------------------------------
+# protocol
+# ------------------------------------------------------------------------------------------------
+def test_dbc_and_eds_describe_the_same_frames():
+    """COB-IDs, transmission types and PDO mappings of the EDS equal the DBC's message layouts."""
+    import cantools
+
+    db = cantools.database.load_file(str(P.DBC_PATH))
+    od = P.load_eds()
+    pdos = {  # DBC message -> (communication index, mapping index)
+        "TorqueCmd": (0x1400, 0x1600), "VelocityCmd": (0x1401, 0x1601),
+        "DriveStatus": (0x1800, 0x1A00), "DriveFeedback": (0x1801, 0x1A01), "PlantStatus": (0x1802, 0x1A02)}
+    for name, (com, mapping) in pdos.items():
+        msg = db.get_message_by_name(name)
+        assert od[com][1].default == msg.frame_id, name
+        every = od[com][2].default
+        assert msg.cycle_time == every, (name, msg.cycle_time, every)   # 1 ms SYNC: every n-th SYNC = n ms
+        entries = [od[mapping][i].default for i in range(1, od[mapping][0].default + 1)]
+        # mapped objects, in order, with their bit lengths; 1-bit DBC flags share one mapped byte (0x2110)
+        bits = 0
+        sigs = sorted(msg.signals, key=lambda s: s.start)
+        i = 0
+        for e in entries:
+            index, length = e >> 16, e & 0xFF
+            var = od[index]
+            assert len(var) == length, (name, hex(index))
+            group = []
+            while i < len(sigs) and sigs[i].start < bits + length:
+                group.append(sigs[i])
+                i += 1
+            assert group and group[0].start == bits, (name, hex(index))
+            assert group[-1].start + group[-1].length <= bits + length, (name, hex(index))
+            assert group[0].is_signed == (var.data_type in (0x2, 0x3, 0x4)) or len(group) > 1, (name, hex(index))
+            bits += length
+        assert i == len(sigs) and bits == 8 * msg.length, name
+    assert [s.name for s in db.get_message_by_name("DriveStatus").signals if 40 <= s.start < 48] == [
+        "BrakeApplied", "BrakeEngaged", "WatchdogTrip", "HeartbeatLost", "PlantFault", "CommandRejected",
+        "CommandMissing", "QuickStop"]                   # the 8 bits of 0x2110
+    # units the DBC scales with are the EDS's
+    assert od[0x6076].default == P.RATED_TORQUE * 1000
+    assert od[0x608F][1].default == P.INC_PER_REV
+    assert db.get_message_by_name("TorqueCmd").get_signal_by_name("TargetTorque").scale == P.NM_PER_PERMILLE
+    assert db.get_message_by_name("DriveFeedback").get_signal_by_name("PositionActual").scale == P.RAD_PER_INC
+    assert od[0x6502].default == 0x300            # CSV + CST
+    assert od[0x1006].default == 1000             # SYNC period 1 ms
+
+
+def test_frame_codec_equals_cantools():
+    import cantools
+
+    db = cantools.database.load_file(str(P.DBC_PATH))
+    proto = P.protocol()
+    rng = random.Random(7)
+    for msg in db.messages:
+        codec = proto.codecs[msg.name]
+        for _ in range(200):
+            vals = {}
+            for s in msg.signals:
+                lo, hi = codec.raw_limits(s.name)
+                vals[s.name] = rng.randint(lo, hi) * s.scale + s.offset
+            data = codec.encode([vals[n] for n in codec.names])
+            assert data == msg.encode(vals, strict=True), msg.name
+            assert codec.decode(data) == [msg.decode(data, decode_choices=False)[n] for n in codec.names]
+    tc = proto.TorqueCmd
+    with pytest.raises(P.CodecError):
+        tc.encode([15, 1001.0, 10, 1, 1])                       # beyond the DBC range (1820 > 1819)
+    with pytest.raises(P.CodecError):
+        tc.decode_raw(b"\x00" * 6)                              # wrong length
+
+
+def test_cia402_state_machine():
+    d = Drive402()
+    assert d.state == P.S_SWITCH_ON_DISABLED
+    assert P.state_from_statusword(d.statusword()) == P.S_SWITCH_ON_DISABLED
+    for cw, state in ((P.CW_SWITCH_ON, P.S_SWITCH_ON_DISABLED),        # no transition from SOD
+                      (P.CW_SHUTDOWN, P.S_READY_TO_SWITCH_ON), (P.CW_SWITCH_ON, P.S_SWITCHED_ON),
+                      (P.CW_ENABLE_OPERATION, P.S_OPERATION_ENABLED)):
+        d.apply_controlword(cw)
+        assert d.state == state and P.state_from_statusword(d.statusword()) == state
+    d.target_torque, d.brake_release = 300.0, True
+    assert d.actuation(0.0, 1e-3) == (300.0, 1.0)
+    d.apply_controlword(P.CW_QUICK_STOP)                                # 11: torque off, brake applied
+    assert d.state == P.S_QUICK_STOP_ACTIVE and d.actuation(0.0, 1e-3) == (0.0, 0.0)
+    assert d.statusword() & 0x6F == 0x07
+    d.apply_controlword(P.CW_ENABLE_OPERATION)                          # 16
+    assert d.state == P.S_OPERATION_ENABLED
+    assert d.fault(P.ERR_RPDO_TIMEOUT) and d.state == P.S_FAULT_REACTION_ACTIVE
+    assert d.actuation(5.0, 1e-3) == (0.0, 0.0)
+    d.at_sync()
+    assert d.state == P.S_FAULT and d.statusword() & 0x4F == 0x08 and d.error_register & 0x10
+    d.apply_controlword(P.CW_ENABLE_OPERATION)                          # ignored in FAULT
+    assert d.state == P.S_FAULT
+    d.apply_controlword(P.CW_FAULT_RESET)                               # 15: rising edge of bit 7
+    assert d.state == P.S_SWITCH_ON_DISABLED and d.error_code == 0
+    # CSV: the drive's speed PI with the torque offset as feed-forward, limited to the max torque
+    d.apply_controlword(P.CW_SHUTDOWN), d.apply_controlword(P.CW_SWITCH_ON), d.apply_controlword(P.CW_ENABLE_OPERATION)
+    assert d.set_mode(P.MODE_CSV) and not d.set_mode(1)
+    d.target_velocity, d.torque_offset = 0.5, 100.0
+    tq, _ = d.actuation(0.0, 1e-3)
+    assert tq == pytest.approx(970.0 * 0.5 + 100.0, rel=1e-12)
+    d.target_velocity = 50.0
+    assert d.actuation(0.0, 1e-3)[0] == pytest.approx(d.max_torque)
+    d.apply_controlword(P.CW_DISABLE_VOLTAGE)                           # 9
+    assert d.state == P.S_SWITCH_ON_DISABLED
+
+
+def test_inject_parsing():
+    f = FaultSpec.parse(["loss=0.1@2", "delay=3", "controller-dies-at=4.5", "seed=3"])
+    assert (f.loss, f.loss_from, f.delay_ms, f.controller_dies_at, f.seed) == (0.1, 2.0, 3.0, 4.5, 3)
+    for bad in ("loss=2", "loss", "delay=-1", "bogus=1", "controller-dies-at=1@2"):
+        with pytest.raises(ValueError):
+            FaultSpec.parse([bad])
+
+
+# ------------------------------------------------------------------------------------------------
+# lock-step reproduces the in-process co-simulation
+# ------------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def plant_fmu(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("hil_fmus")
+    p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--dest", str(dest)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return str(dest / "ReevingPlant.fmu")
+
+
+def test_lockstep_virtual_fmu_reproduces_inprocess_cosimulation(plant_fmu, tmp_path):
+    """The plant FMU (fmpy, own subprocess) behind the bench, the ElectricDrive behind the bus: a full
+    1 m move equals the in-process Plant + ElectricDrive run with the same step, one-cycle transport
+    delay and CAN quantization exactly, and the demo's Gauss-Seidel coupling within 1 mm."""
+    out = tmp_path / "hil"
+    r = run_in_subprocess(f"{JOBS}:hil_run", {
+        "plant": "fmu", "fmu_path": plant_fmu, "drive_values": SHORT, "plant_values": PLANT, "t_end": 5.5,
+        "out": str(out)}, timeout=600)
+    s = r["summary"]
+    assert s["plant"]["kind"] == "fmu" and s["mode"] == "lock-step" and s["steps"] == 5500
+    assert s["frames_rejected"] == 0 and s["watchdog_trips"] == 0 and s["lockstep_timeouts"] == 0
+    assert s["commands_valid"] == 5499 and s["final_state"] == "OPERATION ENABLED"
+    assert s["reference"]["max_abs_diff_car_position"] == 0.0
+    assert s["reference"]["max_abs_diff_motor_speed"] == 0.0
+    assert s["vs_demo_scheme"]["max_abs_diff_car_position"] < 1e-3
+    x = np.asarray(r["columns"]["car.position"])
+    assert abs(x[-1] - 1.0) < 0.01                               # stopped at the landing (±10 mm)
+    assert np.max(x) > 0.99
+    assert (out / "summary.json").is_file() and (out / "timing.csv").is_file()
+    assert json.loads((out / "summary.json").read_text())["steps"] == 5500
+
+
+def test_lockstep_is_deterministic_and_realtime_reports_timing(tmp_path):
+    a = _run(t_end=1.5)
+    b = _run(t_end=1.5)
+    assert a["reference"]["max_abs_diff_car_position"] == 0.0 == b["reference"]["max_abs_diff_car_position"]
+    r = _run(tmp_path, t_end=1.5, realtime=True)
+    assert r["mode"] == "real-time" and r["steps"] == 1500
+    assert r["wall_s"] >= 1.5 - 1e-3                               # paced by the wall clock
+    for k in ("deadline_misses", "step_time_p50_us", "step_time_p99_us", "sync_jitter_p50_us", "sync_jitter_p99_us"):
+        assert r[k] is not None and r[k] >= 0
+    assert r["step_time_p50_us"] < 1000.0
+    assert r["controller_stats"]["operation_enabled_at"] is not None
+    cols = np.genfromtxt(tmp_path / "hil" / "timing.csv", delimiter=",", names=True)
+    assert len(cols) == 1500 and "sync_late_us" in cols.dtype.names
+
+
+# ------------------------------------------------------------------------------------------------
+# cross-process over udp_multicast
+# ------------------------------------------------------------------------------------------------
+def test_udp_multicast_cross_process_lockstep():
+    ok, why = ensure_multicast()
+    if not ok:
+        pytest.skip(f"no IPv4 multicast on this host: {why}")
+    s = _run(bus="udp_multicast", t_end=2.0)
+    assert s["controller_stats"]["exit_code"] == 0 and s["controller_stats"]["pid"] > 0
+    assert s["controller_stats"]["stopped"] == "done"
+    assert s["frames_rejected"] == 0 and s["watchdog_trips"] == 0
+    # same trajectory as the in-process reference: lock-step does not depend on the transport
+    assert s["reference"]["max_abs_diff_car_position"] == 0.0
+    assert s["car_travel_max_m"] > 0.1
+
+
+# ------------------------------------------------------------------------------------------------
+# fault injection and safety
+# ------------------------------------------------------------------------------------------------
+def test_frame_loss_holds_the_setpoint_then_trips_the_watchdog(tmp_path):
+    from reeve_fmu.hil import reference_run
+    from reeve_fmu.results import read_csv
+
+    light = _run(tmp_path, inject=["loss=0.02", "seed=3"])
+    assert light["frames_injected"]["lost"] > 20
+    assert light["commands_missing"] > 0 and light["watchdog_trips"] == 0 and light["fault"] is None
+    # single lost commands are bridged by holding the last set-point: the trip barely changes
+    x = read_csv(tmp_path / "hil" / "results.csv")["car.position"]
+    ref = reference_run(3000, drive_values=SHORT, plant_values=PLANT)["car.position"]
+    assert 0.0 < np.max(np.abs(x - ref)) < 1e-3
+    heavy = _run(inject=["loss=0.6@2.0"], t_end=3.0)
+    assert heavy["watchdog_trips"] == 1 and heavy["fault"]["code"] == "0x8250"
+    assert 2.0 < heavy["brake_engaged_at"] < 2.05
+    assert heavy["brake_closed_at"] > heavy["brake_engaged_at"]
+    assert heavy["machine_stopped_at"] is not None and heavy["final_state"] == "FAULT"
+    assert heavy["controller_stats"]["fault_seen_at"] is not None
+
+
+def test_delay_shorter_than_a_cycle_is_harmless_longer_is_stale_and_trips():
+    short = _run(inject=["delay=0.5"], t_end=1.5)
+    assert short["frames_rejected"] == 0 and short["watchdog_trips"] == 0
+    long = _run(inject=["delay=2@2.0"])
+    assert long["frames_rejected_detail"]["stale"] > 0
+    assert long["watchdog_trips"] == 1
+    # the last fresh command belongs to cycle 1999; cycles 2000..2002 bring none: trip at SYNC 2003
+    assert long["brake_engaged_at"] == pytest.approx(2.003, abs=1e-9)
+    assert long["machine_stopped_at"] is not None
+
+
+def test_dead_controller_safe_stop_and_bounded_waits():
+    t0 = time.perf_counter()
+    s = _run(inject=["controller-dies-at=2.0"], t_end=4.0, stop_when_safe=True)
+    assert s["controller_stats"]["died_at"] == pytest.approx(2.0)
+    assert s["watchdog_trips"] == 1 and s["fault"]["reason"].startswith("command watchdog")
+    assert s["brake_engaged_at"] == pytest.approx(2.003, abs=1e-9)     # 3 missing SYNC periods at 1 ms
+    assert s["car_speed_at_fault_m_s"] > 0.3                            # it was moving
+    assert s["machine_stopped_at"] < 2.3 and s["stop_distance_m"] < 0.2
+    assert s["lockstep_timeouts"] == 3                                  # then the bench stops waiting
+    assert time.perf_counter() - t0 < 30.0
+    # nobody starts the drive: the bench gives up after start_timeout
+    t0 = time.perf_counter()
+    with pytest.raises(HilError, match="no controller started"):
+        _run(controller="external", start_timeout=1.0, t_end=1.0)
+    assert time.perf_counter() - t0 < 10.0
+
+
+def _scripted_bench(script, n=40):
+    """The bench (in-process plant) against a scripted controller thread: script(k, counter, send)."""
+    from reeve_fmu.canhil.plants import InProcessPlant
+
+    ch = "hil_script_" + uuid.uuid4().hex[:6]
+    bus = make_bus("virtual", ch)
+    cbus = make_bus("virtual", ch)
+    bridge = Bridge(bus, InProcessPlant(), BridgeConfig(lockstep_timeout=0.3, start_timeout=5.0))
+    import can
+
+    def send(cob, data):
+        cbus.send(can.Message(arbitration_id=cob, data=bytes(data), is_extended_id=False))
+
+    def controller():
+        deadline = time.time() + 20
+        while time.time() < deadline:
+            m = cbus.recv(0.5)
+            if m is not None and m.arbitration_id == P.COB_HB_DRIVE:
+                break
+        send(P.COB_NMT, [P.NMT_START, 1])
+        k, c = -1, 0
+        while time.time() < deadline:
+            m = cbus.recv(1.0)
+            if m is None:
+                return
+            if m.arbitration_id == P.COB_SYNC:
+                k, c = k + 1, m.data[0]
+            elif m.arbitration_id == P.COB_TPDO2:
+                script(k, c, send)
+                if k >= n - 1:
+                    return
+
+    th = threading.Thread(target=controller, daemon=True)
+    th.start()
+    try:
+        res = bridge.run(n)
+    finally:
+        th.join(10)
+        bus.shutdown()
+        cbus.shutdown()
+    return res
+
+
+def test_malformed_out_of_range_and_stale_frames_are_rejected_and_counted():
+    tc = P.protocol().TorqueCmd
+    state = {"cw": P.CW_SHUTDOWN}
+
+    def script(k, c, send):
+        cw = [P.CW_SHUTDOWN, P.CW_SWITCH_ON][min(k, 1)] if k < 2 else P.CW_ENABLE_OPERATION
+        good = tc.encode([cw, 100.0, P.MODE_CST, 1, c])
+        if k == 10:
+            send(P.COB_RPDO1, good[:5])                                  # malformed: 5 of 7 bytes
+        elif k == 11:
+            raw = bytearray(good)
+            raw[2:4] = (2000).to_bytes(2, "little", signed=True)         # 1100 N m > 0x6072 max torque
+            send(P.COB_RPDO1, raw)
+        elif k == 12:
+            send(P.COB_RPDO1, tc.encode([cw, 100.0, 1, 0, c], strict=False))   # unsupported mode 1
+        elif k == 13:
+            send(P.COB_RPDO1, tc.encode([cw, 100.0, P.MODE_CST, 0, (c - 2) % 240 + 1]))   # stale counter
+            send(P.COB_RPDO1, good)                                       # then the fresh one
+        elif k == 14:
+            send(P.COB_HB_CONTROLLER, [5, 7])
+            send(P.COB_HB_CONTROLLER, [5, 7])                             # repeated heartbeat counter
+            send(P.COB_RPDO1, good)
+        else:
+            send(P.COB_RPDO1, good)
+        state["cw"] = cw
+
+    res = _scripted_bench(script)
+    st = res.stats
+    assert st.rejected_malformed == 1 and st.rejected_out_of_range == 2 and st.rejected_stale == 2
+    assert st.frames_rejected == 5
+    assert st.commands_missing == 3 and st.watchdog_trips == 1       # cycles 10-12 brought no valid command
+    assert st.fault_code == P.ERR_RPDO_TIMEOUT and st.fault_at == pytest.approx(0.013, abs=1e-9)
+    flags = res.column("hil.flags")
+    assert int(flags[11]) & 32 and int(flags[12]) & 64                 # CommandRejected / CommandMissing bits
+    assert np.allclose(res.column("hil.torque")[4:13], 182 * 0.55, rtol=0, atol=1e-12)   # 182 per mille
+    assert np.all(res.column("hil.brake_command")[4:13] == 1.0)
+    assert np.all(res.column("hil.torque")[13:] == 0.0)                # FAULT: torque off ...
+    assert np.all(res.column("hil.brake_command")[13:] == 0.0)         # ... and the brake applied
+
+
+def test_lost_controller_heartbeat_faults_the_drive():
+    tc = P.protocol().TorqueCmd
+
+    def script(k, c, send):
+        if k == 0:   # heartbeat consumer 0x1016:01 = node 0x10, 20 ms (expedited SDO download)
+            send(P.COB_SDO_RX, bytes([0x23, 0x16, 0x10, 0x01]) + ((0x10 << 16) | 20).to_bytes(4, "little"))
+        cw = (P.CW_SHUTDOWN, P.CW_SWITCH_ON)[k] if k < 2 else P.CW_ENABLE_OPERATION
+        if k < 10 and k % 5 == 0:
+            send(P.COB_HB_CONTROLLER, [5, k // 5])                        # heartbeats stop after 5 ms
+        send(P.COB_RPDO1, tc.encode([cw, 0.0, P.MODE_CST, 0, c]))
+
+    res = _scripted_bench(script, n=60)
+    st = res.stats
+    assert st.heartbeat_faults == 1 and st.fault_code == P.ERR_HEARTBEAT
+    assert st.fault_at == pytest.approx(0.026, abs=1e-9)               # last heartbeat at 5 ms + 20 ms
+    assert st.watchdog_trips == 0 and st.sdo_requests == 1
+
+
+# ------------------------------------------------------------------------------------------------
+# a canopen BaseNode402 master drives the simulated drive
+# ------------------------------------------------------------------------------------------------
+def test_canopen_basenode402_enables_the_drive_and_runs_a_short_move():
+    import canopen
+    from canopen.profiles.p402 import BaseNode402
+
+    from reeve_fmu.canhil.plants import InProcessPlant
+
+    ch = "hil_402_" + uuid.uuid4().hex[:6]
+    bus = make_bus("virtual", ch)
+    bridge = Bridge(bus, InProcessPlant(), BridgeConfig(lockstep_timeout=0.5, start_timeout=30.0))
+    bridge.warm_up()
+    stop = threading.Event()
+    out = {}
+    th = threading.Thread(target=lambda: out.setdefault("res", bridge.run(120_000, stop=stop)), daemon=True)
+    th.start()
+    net = canopen.Network()
+    net.connect(interface="virtual", channel=ch)
+    try:
+        node = BaseNode402(1, str(P.EDS_PATH))
+        net.add_node(node)
+        node.nmt.state = "PRE-OPERATIONAL"
+        node.setup_402_state_machine(read_pdos=True)        # PDO configuration uploaded over SDO
+        assert {0x6040, 0x6060, 0x6071, 0x60FF} <= set(node.rpdo_pointers)
+        assert {0x6041, 0x6061, 0x6064, 0x606C} <= set(node.tpdo_values)
+        assert node.sdo[0x6502].raw == 0x300
+        ctl = {"c": 0, "k": -1, "start": None, "done": False, "vmax": 5.0}
+
+        def on_sync(can_id, data, ts):
+            ctl["c"], ctl["k"] = data[0], ctl["k"] + 1
+
+        def on_tpdo2(can_id, data, ts):   # the master's cyclic task: RPDO2 (velocity), then RPDO1
+            if ctl["start"] is not None:
+                tau = (ctl["k"] - ctl["start"]) * 1e-3
+                v = ctl["vmax"] * (min(1.0, tau / 0.2) if tau < 0.5 else max(0.0, 1.0 - (tau - 0.5) / 0.2))
+                node.rpdo[2]["Target velocity"].raw = round(v / P.RAD_PER_INC)
+                node.rpdo[2]["Torque offset"].raw = round(522.5 / P.NM_PER_PERMILLE)   # load-weighing feed-forward
+                ctl["done"] = tau > 0.9
+            node.rpdo[1]["Command counter"].raw = ctl["c"]
+            node.rpdo[2].transmit()
+            node.rpdo[1].transmit()
+
+        net.subscribe(P.COB_SYNC, on_sync)
+        net.subscribe(P.COB_TPDO2, on_tpdo2)
+        node.nmt.state = "OPERATIONAL"
+        node.op_mode = "CYCLIC SYNCHRONOUS VELOCITY"
+        assert node.op_mode == "CYCLIC SYNCHRONOUS VELOCITY"
+        node.state = "OPERATION ENABLED"
+        assert node.state == "OPERATION ENABLED"
+        x0 = node.tpdo_values[0x6064]
+        node.rpdo[1]["Brake command"].raw = 1
+        ctl["start"] = ctl["k"]
+        deadline = time.time() + 60
+        while not ctl["done"] and time.time() < deadline:
+            time.sleep(0.01)
+        assert ctl["done"]
+        node.rpdo[1]["Brake command"].raw = 0
+        node.check_statusword()
+        moved = (node.tpdo_values[0x6064] - x0) * P.RAD_PER_INC
+        assert 0.6 * 2.5 < moved < 1.2 * 2.5          # the velocity profile integrates to 2.5 rad
+        node.state = "SWITCH ON DISABLED"
+        assert node.state == "SWITCH ON DISABLED"
+    finally:
+        stop.set()
+        th.join(30)
+        net.disconnect()
+        bus.shutdown()
+    st = out["res"].stats
+    assert st.frames_rejected == 0 and st.watchdog_trips == 0 and st.sdo_requests > 10
+    assert st.commands_valid == st.steps - 1
