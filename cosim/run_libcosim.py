@@ -33,7 +33,8 @@ def run_ssp(ssp_dir: str | os.PathLike = DEFAULT_SSP, step: float = 1e-3, t_end:
             plant_record=PLANT_RECORD, drive_record=DRIVE_RECORD, log_level: str = "WARNING") -> dict:
     """Simulate the SSP with libcosim; return {"time": [...], "<instance>.<variable>": [...], "info": {...}}.
 
-    Samples are taken every communication step with a time-series observer (t = k * step)."""
+    Samples are taken after every communication step with a time-series observer: t = step .. n*step
+    (the initial values at t = 0 are not included)."""
     from libcosimpy.CosimEnums import CosimVariableType
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
@@ -72,8 +73,10 @@ def run_ssp(ssp_dir: str | os.PathLike = DEFAULT_SSP, step: float = 1e-3, t_end:
     out = {}
     times = None
     for inst, var in wanted:
-        tp, steps, vals = obs.time_series_real_samples(idx[inst], variables[inst][var], from_step=0,
-                                                       sample_count=n + 1)
+        # from step 1: libcosimpy 0.0.6 trims as many trailing samples as there are step numbers 0
+        # in the answer, so asking from step 0 silently loses the last sample
+        tp, steps, vals = obs.time_series_real_samples(idx[inst], variables[inst][var], from_step=1,
+                                                       sample_count=n)
         out[f"{inst}.{var}"] = list(vals)
         if times is None:
             times = [t * 1e-9 for t in tp]

@@ -495,6 +495,17 @@ def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: fl
 # ------------------------------------------------------------------------------------------------
 # fmpy master
 # ------------------------------------------------------------------------------------------------
+def _time_grid(step: float):
+    """Communication points t_k as the masters compute them: for a step that is a whole number of
+    nanoseconds, t_k = (k * step_ns) / 1e9, the correctly rounded k*step (what libcosim passes: it counts
+    time in integer nanoseconds); otherwise k * step."""
+    step_ns = round(step * 1e9)
+    if step_ns >= 1 and abs(step_ns - step * 1e9) <= 1e-6 * step * 1e9:
+        ns = float(step_ns)
+        return lambda k: (k * ns) / 1e9
+    return lambda k: k * step
+
+
 class _FastReal:
     """A preallocated value-reference array + value buffer for one setReal/getReal call per step."""
 
@@ -520,7 +531,7 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
                record: Optional[Sequence[str]] = None, record_every: int = 1,
                progress: Optional[Callable[[float], None]] = None, progress_every: float = 0.25,
-               timing: bool = False, echo_log: bool = False) -> CosimResult:
+               timing: bool = False, echo_log: bool = False, ns_step_differences: bool = False) -> CosimResult:
     """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (see the module docstring).
 
     step          communication step (s); any value > 0
@@ -532,6 +543,9 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     record_every  record every n-th communication point
     progress      called with the simulated time every `progress_every` s of simulated time
     timing        measure every plant and drive doStep (info["plant_doStep_ns"], ...)
+    ns_step_differences   pass communicationStepSize = t_(k+1) - t_k of the nanosecond time grid (it
+                  differs from `step` by one ulp on most steps) instead of `step`: what libcosim does;
+                  only for bit-for-bit comparisons with it (tests/test_cosim.py)
 
     Per step the master makes exactly one setReal, doStep and getReal call per FMU through fmpy's
     ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
@@ -594,20 +608,24 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
         Pvr, Pn, Pbuf, Dvr, Dn, Dbuf = P.vr, P.n, P.buf, D.vr, D.n, D.buf
         gs = scheme == "gauss-seidel"
         perf = time.perf_counter_ns
+        tk = _time_grid(step)
         j = 1
         t_loop0 = time.perf_counter()
+        h = step
         for k in range(n):
-            t = k * step
+            t = tk(k)
+            if ns_step_differences:
+                h = tk(k + 1) - t
             if gs:
                 s = setd(cd, DIvr, DIn, Pbuf)
                 if s > 1:
                     _check(s, "drive setReal", handles, t)
                 if timing:
                     a = perf()
-                    s = stepd(cd, t, step, 1)
+                    s = stepd(cd, t, h, 1)
                     tns_d[k] = perf() - a
                 else:
-                    s = stepd(cd, t, step, 1)
+                    s = stepd(cd, t, h, 1)
                 if s > 1:
                     _check(s, "drive doStep", handles, t)
                 s = getd(cd, Dvr, Dn, Dbuf)
@@ -618,10 +636,10 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                     _check(s, "plant setReal", handles, t)
                 if timing:
                     a = perf()
-                    s = stepp(cp, t, step, 1)
+                    s = stepp(cp, t, h, 1)
                     tns_p[k] = perf() - a
                 else:
-                    s = stepp(cp, t, step, 1)
+                    s = stepp(cp, t, h, 1)
                 if s > 1:
                     _check(s, "plant doStep", handles, t)
                 s = getp(cp, Pvr, Pn, Pbuf)
@@ -636,14 +654,14 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                     _check(s, "plant setReal", handles, t)
                 if timing:
                     a = perf()
-                    s = stepd(cd, t, step, 1)
+                    s = stepd(cd, t, h, 1)
                     b = perf()
-                    s2 = stepp(cp, t, step, 1)
+                    s2 = stepp(cp, t, h, 1)
                     tns_p[k] = perf() - b
                     tns_d[k] = b - a
                 else:
-                    s = stepd(cd, t, step, 1)
-                    s2 = stepp(cp, t, step, 1)
+                    s = stepd(cd, t, h, 1)
+                    s2 = stepp(cp, t, h, 1)
                 if s > 1:
                     _check(s, "drive doStep", handles, t)
                 if s2 > 1:
@@ -733,9 +751,10 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     tau = br = 0.0
     j = 1
     every = max(1, int(round(0.25 / step)))
+    tk = _time_grid(step)
     t0 = time.perf_counter()
     for k in range(n):
-        t = k * step
+        t = tk(k)
         w, th = y[iw], y[ia]
         if scheme == "gauss-seidel":
             tau, br = drive.step(t, step, w, th)
@@ -756,3 +775,27 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     info = {"master": "monolithic", "scheme": scheme, "step_s": step, "t_end_s": n * step, "steps": n,
             "loop_wall_s": wall, "rtf": n * step / wall if wall > 0 else math.inf}
     return CosimResult(np.arange(j) * (m * step), cols, info)
+
+
+# ------------------------------------------------------------------------------------------------
+# SSP
+# ------------------------------------------------------------------------------------------------
+def ssp_parameters(ssp_dir) -> dict:
+    """{component name: {parameter: value}} from the inline ParameterBindings of an SSP directory's
+    SystemStructure.ssd (Real, Integer and Boolean values), and the FMU source of each component
+    under the key "__source__"."""
+    from xml.etree import ElementTree as ET
+
+    ns = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+          "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues"}
+    root = ET.parse(Path(ssp_dir) / "SystemStructure.ssd").getroot()
+    out = {}
+    for comp in root.iter(f"{{{ns['ssd']}}}Component"):
+        vals = {"__source__": comp.get("source")}
+        for p in comp.iter(f"{{{ns['ssv']}}}Parameter"):
+            for kind, conv in (("Real", float), ("Integer", int), ("Boolean", lambda s: s == "true")):
+                e = p.find(f"ssv:{kind}", ns)
+                if e is not None:
+                    vals[p.get("name")] = conv(e.get("value"))
+        out[comp.get("name")] = vals
+    return out

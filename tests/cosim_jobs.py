@@ -337,13 +337,39 @@ def cosim_accuracy(plant_fmu, drive_fmu, steps, drive_values, ref_step=1e-4):
     return out
 
 
-def fmpy_run(plant_fmu, drive_fmu, t_end, scheme, plant_values, drive_values):
+def reference_error(results_csv, summary_json, ref_step=1e-4):
+    """Monolithic reference (same plant scene, parameters and drive values as the demo, coupled every
+    ref_step) against the car position of the demo's co-simulation (results.csv)."""
+    _host_package()
+    import json
+
+    import numpy as np
+
+    from reeve_fmu.cosim import monolithic
+
+    with open(summary_json) as fh:
+        sc = json.load(fh)["scenario"]
+    d = np.genfromtxt(results_csv, delimiter=",", names=True, deletechars="")
+    drive_values = {"pretorque[1]": sc["pretorque_Nm"][0], "pretorque[2]": sc["pretorque_Nm"][1],
+                    "landing[1]": sc["landings_m"][0], "landing[2]": sc["landings_m"][1]}
+    ref = monolithic(step=ref_step, t_end=sc["t_end_s"], record_step=sc["communication_step_s"],
+                     plant_fmu=sc["plant_fmu"], plant_values={"car.load": sc["car_load_kg"]},
+                     drive_values=drive_values)
+    n = min(len(ref.time), len(d["time"]))
+    assert np.allclose(ref.time[:n], d["time"][:n], rtol=0, atol=1e-9)
+    err = np.abs(d["car.position"][:n] - ref["car.position"][:n])
+    k = int(np.argmax(err))
+    return {"max_err_m": float(err[k]), "t_at_max": float(d["time"][k]), "n": n, "ref_rtf": ref.info["rtf"],
+            "travel_m": float(np.max(d["car.position"]) - np.min(d["car.position"]))}
+
+
+def fmpy_run(plant_fmu, drive_fmu, t_end, scheme, plant_values, drive_values, ns_step_differences=False):
     """fmpy master run (FMUs via their own package) for the comparison with libcosim."""
     _fmu_package(plant_fmu)
     from reeve_fmu.cosim import cosimulate
 
     c = cosimulate(plant_fmu, drive_fmu, step=DT, t_end=t_end, scheme=scheme, plant_values=plant_values,
-                   drive_values=drive_values)
+                   drive_values=drive_values, ns_step_differences=ns_step_differences)
     return {"time": [float(x) for x in c.time], **_cols(c, CMP)}
 
 
