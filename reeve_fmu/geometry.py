@@ -92,9 +92,12 @@ def tangent(cA, RA, aA, sA, cB, RB, aB, sB):
         return np.array(r)
 
     x = np.array(phis, float)
+    # residuals are lengths (D . radius_unit): tolerance relative to the scene's coordinate scale,
+    # an absolute 1e-13 m is below round-off ~100 m from the origin
+    tol = 1e-13 * max(1.0, float(np.max(np.abs(cA))), float(np.max(np.abs(cB))), float(np.linalg.norm(cB - cA)))
     for _ in range(50):
         r = resid(x)
-        if np.max(np.abs(r)) < 1e-13:
+        if np.max(np.abs(r)) < tol:
             break
         J = np.empty((len(x), len(x)))
         for j in range(len(x)):

@@ -135,3 +135,13 @@ def test_drum_hoist_kinematics_and_stored_rope():
     assert abs(stored - (sc.sheaves[0].stored + 5.0)) < 1e-9
     # rope length conserved: s of the last node equals the length solved at t = 0
     assert abs(s[-1] - L_tot0) < 1e-12
+
+
+def test_3d_tangent_far_from_the_origin():
+    """The 3D tangent iteration converges ~130 m from the origin (tolerance relative to the scale)."""
+    off = np.array([0.0, 0.0, 130.0])
+    aB = np.array([1.0, 0.2, 0.1]) / np.linalg.norm([1.0, 0.2, 0.1])
+    cA, cB = off.copy(), np.array([2.0, 0.5, 5.0]) + off
+    TA, TB = tangent(cA, 0.3, np.array([0.0, 1.0, 0.0]), 1.0, cB, 0.4, aB, -1.0)
+    D = TB - TA
+    assert abs(D @ (TA - cA)) < 1e-9 and abs(D @ (TB - cB)) < 1e-9
