@@ -68,11 +68,11 @@ class ElectricDriveSlave(ReeveSlave):
         self.drive = make_drive({name: v[name] for name, *_ in DRIVE_PARAMETERS})
         self._outputs()
 
-    def _outputs(self):
+    def _outputs(self, torque=None, brake=None):
         d = self.drive
         v = self.values
-        v["motor.torque"] = d.torque
-        v["brake.command"] = d.brake_command
+        v["motor.torque"] = d.torque if torque is None else torque
+        v["brake.command"] = d.brake_command if brake is None else brake
         v["car.position_ref"] = d.position_ref
         v["car.velocity_ref"] = d.velocity_ref
         v["car.acceleration_ref"] = d.acceleration_ref
@@ -85,8 +85,8 @@ class ElectricDriveSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        self.drive.step(t, dt, v["motor.speed"], v["motor.angle"])
-        self._outputs()
+        tau, brake = self.drive.step(t, dt, v["motor.speed"], v["motor.angle"])
+        self._outputs(tau, brake)
         return True
 
     def get_hidden_state(self):

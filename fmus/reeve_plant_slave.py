@@ -39,6 +39,10 @@ class ReevingPlantSlave(ReeveSlave):
         for name, (_, unit, desc) in PLANT_PARAMETERS.items():
             self.add_real(name, "parameter", "fixed", unit=unit, start=cfg["parameters"][name],
                           min=1e-9 if name == "rope.EA" else 0.0, description=desc)
+        # the engine also reports the torque it applied; it is kept in a local variable so that one
+        # dict update per step writes all outputs (the input motor.torque is never overwritten)
+        self.add_real("motor.torque_applied", "local", declared_type="Torque",
+                      description="motor torque the plant applied during the last step (the input held)")
         self._names = []
         for o in cfg["outputs"]:
             self.add_real(o["name"], "output", unit=o["unit"], declared_type=o["type"],
@@ -57,13 +61,17 @@ class ReevingPlantSlave(ReeveSlave):
         missing = [n for n in self._names if n not in names]
         if missing:
             raise RuntimeError(f"the plant model has no outputs {missing} (resources out of date?)")
-        self._idx = [names.index(n) for n in self._names]
+        # model output order, with the engine's motor.torque mapped to the local motor.torque_applied
+        self._all = [("motor.torque_applied" if n == "motor.torque" else n) for n in names]
+        unknown = [n for n in self._all if n not in self.values]
+        if unknown:
+            raise RuntimeError(f"the plant model has outputs {unknown} this FMU does not declare "
+                               f"(resources out of date?)")
         outs = self.plant.outputs()
-        self.values.update((n, outs[n]) for n in self._names)
+        self._write([outs[n] for n in names])
 
     def _write(self, y):
-        yl = y.tolist()
-        self.values.update(zip(self._names, [yl[i] for i in self._idx]))
+        self.values.update(zip(self._all, y if type(y) is list else y.tolist()))
 
     def step(self, t, dt):
         v = self.values
