@@ -1,8 +1,8 @@
 """Long run of the plant FMU (issue 6 item 9): 10^6 doSteps in one instance through fmpy.
 
 Reports resident memory growth and the step time over the run (first vs last 10 % of the steps).
-The plant holds the car with the motor torque (brake released) with a small torque oscillation, so
-every step does real work. Runs in a subprocess-free fresh interpreter (this script).
+The brake is released and the motor holds the car with a PD loop on the motor angle around the
+static holding torque, plus a small 0.5 Hz torque oscillation, so every step does real work. Runs in a subprocess-free fresh interpreter (this script).
 
     python benchmarks/fmu_long_run.py [--steps N] [--dt DT]
 """
@@ -46,18 +46,19 @@ def main():
     f.exitInitializationMode()
     hold = f.getReal([vr["brake.torque"]])[0] if "brake.torque" in vr else 0.0
     vin = [vr["motor.torque"], vr["brake.command"]]
-    vout = [vr["car.position"], vr["motor.speed"]]
+    vout = [vr["car.position"], vr["motor.speed"], vr["motor.angle"]]
     n, dt = args.steps, args.dt
     blk = max(1, n // 10)
     times, mems = [], []
     t = 0.0
     t_blk = time.perf_counter()
     rss0 = None
+    speed, angle = 0.0, 0.0
     for i in range(n):
-        tau = hold * (1.0 + 0.01 * math.sin(2 * math.pi * 0.5 * t))
+        tau = hold * (1.0 + 0.01 * math.sin(2 * math.pi * 0.5 * t)) - 3000.0 * angle - 300.0 * speed
         f.setReal(vin, [tau, 1.0])
-        st = f.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
-        f.getReal(vout)
+        f.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
+        _, speed, angle = f.getReal(vout)
         t += dt
         if i == 1000:
             rss0 = rss_mb()
