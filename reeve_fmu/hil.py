@@ -128,7 +128,7 @@ class HilConfig:
     compare: bool = True                       # builtin, no faults: compare with the in-process references
     stop_when_safe: bool = False
     record: bool = True
-    rt_priority: int = 50                      # real time: SCHED_FIFO priority of bench and controller (0: off)
+    rt_priority: int | None = None             # SCHED_FIFO priority of bench + controller; None: 50 in real time, off in lock-step
 
 
 _DEMO_SCENARIO: tuple | None = None
@@ -308,7 +308,7 @@ def _pct(a, q):
 
 def run_hil(cfg: HilConfig, log=print) -> dict:
     """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
-    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector
+    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector, effective_rt_priority
     from .canhil.controller import ControllerConfig
     from .canhil.protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, STATE_NAMES
 
@@ -352,7 +352,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             ccfg = ControllerConfig(dt=cfg.dt, n_steps=n, drive_values=cfg.drive_values,
                                     dies_at=faults.controller_dies_at, start_timeout=cfg.start_timeout,
                                     sync_timeout=max(5.0, 4 * cfg.lockstep_timeout),
-                                    rt_priority=cfg.rt_priority if cfg.realtime else 0)
+                                    rt_priority=effective_rt_priority(cfg.rt_priority, cfg.realtime))
             if cfg.bus == "virtual":
                 ctl = _ThreadController(lambda: make_bus("virtual", channel), ccfg)
             else:

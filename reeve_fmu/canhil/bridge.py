@@ -27,6 +27,7 @@ Safety (all on the drive side, independent of the controller):
 """
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 import random
@@ -35,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .buses import send_batch
 from .drive402 import DriveNode
 from .plants import PlantError
 from .protocol import (BENCH_TX, COB_EMCY, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_RPDO1, COB_RPDO2,
@@ -173,6 +175,13 @@ class Injector:
         return self._held[0][0] if self._held else math.inf
 
 
+def effective_rt_priority(rt_priority: int | None, realtime: bool) -> int:
+    """None -> 50 in real time (wake-ups on time despite other load), 0 (normal scheduling) in lock-step."""
+    if rt_priority is None:
+        return 50 if realtime else 0
+    return int(rt_priority)
+
+
 def set_realtime_priority(priority: int):
     """SCHED_FIFO for the calling thread (Linux, needs root or CAP_SYS_NICE); returns a function that
     restores the previous policy, or None when not possible. The loops block in recv() with timeouts,
@@ -212,7 +221,7 @@ class BridgeConfig:
     start_timeout: float = 60.0         # s of wall time to wait for NMT start
     heartbeat_wall_period: float = 0.1  # s, drive heartbeat while waiting for NMT start
     record: bool = True
-    rt_priority: int = 50               # real time: SCHED_FIFO priority of the bench thread (0: leave it)
+    rt_priority: int | None = None      # SCHED_FIFO priority of the bench thread; None: 50 in real time, off in lock-step
     stop_when_safe: bool = False        # end the run 1 s after a fault reaction has stopped the machine
     node_id: int = DRIVE_NODE_ID
 
@@ -501,7 +510,8 @@ class Bridge:
         st = self.stats
         self.warm_up()
         st.started_wall = self.wait_for_start(alive)
-        restore = set_realtime_priority(cfg.rt_priority) if cfg.realtime and cfg.rt_priority else None
+        prio = effective_rt_priority(cfg.rt_priority, cfg.realtime)
+        restore = set_realtime_priority(prio) if prio else None
         st.rt_priority = restore is not None
         try:
             return self._run(n_steps, progress, stop)
@@ -528,7 +538,7 @@ class Bridge:
         enc_status, enc_fb, enc_plant = proto.DriveStatus.encode, proto.DriveFeedback.encode, proto.PlantStatus.encode
         iw, ia, it, ix, iv, ib = self._iw, self._ia, self._it, self._ix, self._iv, self._ib
         Message = self._can.Message
-        send = self.bus.send
+        send_frames = functools.partial(send_batch, self.bus)
         recv = self.bus.recv
         inj = self.inj
         d = self.drive
@@ -567,21 +577,22 @@ class Bridge:
             vel_inc = round(w / RAD_PER_INC)
             tq_pm = round(torque / NM_PER_PERMILLE)
             live[0x6064], live[0x606C], live[0x6077], live[0x2110], live[0x2111] = pos_inc, vel_inc, tq_pm, flags, c
-            send(Message(arbitration_id=COB_SYNC, data=bytes((c,)), is_extended_id=False))
+            frames = [Message(arbitration_id=COB_SYNC, data=bytes((c,)), is_extended_id=False)]
             if dn.nmt_state == NMT_STATE_OPERATIONAL:
                 if tp1 and k % tp1 == 0:
-                    send(Message(arbitration_id=COB_TPDO1, is_extended_id=False, data=enc_status(
+                    frames.append(Message(arbitration_id=COB_TPDO1, is_extended_id=False, data=enc_status(
                         [sw, tq_pm * NM_PER_PERMILLE, d.mode, flags & 1, (flags >> 1) & 1, (flags >> 2) & 1,
                          (flags >> 3) & 1, (flags >> 4) & 1, (flags >> 5) & 1, (flags >> 6) & 1, flags >> 7, c,
                          d.error_register], strict=False)))
                 if tp2 and k % tp2 == 0:
-                    send(Message(arbitration_id=COB_TPDO2, is_extended_id=False, data=enc_fb(
+                    frames.append(Message(arbitration_id=COB_TPDO2, is_extended_id=False, data=enc_fb(
                         [pos_inc * RAD_PER_INC, vel_inc * RAD_PER_INC], strict=False)))
                 if tp3 and k % tp3 == 0:
                     tension = y[it] if it is not None else 0.0
                     xcar = y[ix] if ix is not None else 0.0
-                    send(Message(arbitration_id=COB_TPDO3, is_extended_id=False, data=enc_plant(
+                    frames.append(Message(arbitration_id=COB_TPDO3, is_extended_id=False, data=enc_plant(
                         [min(max(tension, -2e7), 2e7), min(max(xcar, -2000.0), 2000.0)], strict=False)))
+            send_frames(frames)
             if hb_every and k % hb_every == 0:
                 self._heartbeat()
             if rec:

@@ -45,6 +45,45 @@ class FastVirtualBus(VirtualBus):
         if not all_sent:
             raise can.CanOperationError("Could not send message to one or more recipients")
 
+    def send_batch(self, msgs) -> None:
+        """Send frames back to back with one wake-up per receiver (a receiving thread is woken once per
+        cycle instead of once per frame: each wake-up costs a GIL hand-over, measured ~80 us under load)."""
+        try:
+            chan = self.channel
+            own = self.queue
+            own_too = self.receive_own_messages
+            cid = self.channel_id
+            self._check_if_open()
+        except AttributeError:
+            for m in msgs:
+                self.send(m)
+            return
+        ts = time.time()
+        for q in chan:
+            if q is own and not own_too:
+                continue
+            copies = [can.Message(timestamp=ts, arbitration_id=m.arbitration_id, is_extended_id=m.is_extended_id,
+                                  is_remote_frame=m.is_remote_frame, is_error_frame=m.is_error_frame, channel=cid,
+                                  dlc=m.dlc, data=bytes(m.data), is_rx=q is not own, check=False) for m in msgs]
+            if q.maxsize > 0:                      # bounded queue: keep the blocking semantics
+                for m in copies:
+                    q.put(m)
+                continue
+            with q.not_empty:                      # queue.Queue's own condition (stdlib API)
+                q.queue.extend(copies)
+                q.unfinished_tasks += len(copies)
+                q.not_empty.notify()
+
+
+def send_batch(bus, msgs) -> None:
+    """bus.send_batch(msgs) where the bus has it (FastVirtualBus), else one send per frame."""
+    f = getattr(bus, "send_batch", None)
+    if f is not None:
+        f(msgs)
+    else:
+        for m in msgs:
+            bus.send(m)
+
 
 MULTICAST_GROUP = "239.74.163.2"          # python-can UdpMulticastBus.DEFAULT_GROUP_IPv4
 DEFAULT_UDP_PORT = 43113

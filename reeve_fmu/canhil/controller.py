@@ -15,6 +15,7 @@ import struct
 import time
 from dataclasses import dataclass, field
 
+from .buses import send_batch
 from .protocol import (COB_EMCY, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX,
                        COB_SYNC, COB_TPDO1, COB_TPDO2, CONTROLLER_NODE_ID, DRIVE_NODE_ID, MODE_CST,
                        NMT_START, NMT_STATE_OPERATIONAL, S_FAULT, S_FAULT_REACTION_ACTIVE,
@@ -153,6 +154,7 @@ class BuiltinController:
         alive = 0
         k_last = -1
         perf = time.perf_counter
+        Msg = self._Message
         try:
             while True:
                 msg = self._recv(cfg.sync_timeout)
@@ -201,12 +203,17 @@ class BuiltinController:
                             st.operation_enabled_at = t
                         cw = controlword_for(state)
                     tau = min(max(tau, -1000.45), 1000.45)
-                    self._send(COB_RPDO1, enc_cmd([cw, tau, MODE_CST, 1 if brake > 0.5 else 0, c_prev]))
+                    frames = []
+                    if cfg.heartbeat_every and k % cfg.heartbeat_every == 0:
+                        frames.append(Msg(arbitration_id=COB_HB_CONTROLLER, is_extended_id=False,
+                                          data=bytes([NMT_STATE_OPERATIONAL, alive])))
+                        alive = (alive + 1) % 256
+                    # RPDO1 last: in lock-step it closes the bench's cycle
+                    frames.append(Msg(arbitration_id=COB_RPDO1, is_extended_id=False,
+                                      data=enc_cmd([cw, tau, MODE_CST, 1 if brake > 0.5 else 0, c_prev])))
+                    send_batch(self.bus, frames)
                     st.compute_time.append(perf() - t0)
                     st.commands_sent += 1
-                    if cfg.heartbeat_every and k % cfg.heartbeat_every == 0:
-                        self._send(COB_HB_CONTROLLER, bytes([NMT_STATE_OPERATIONAL, alive]))
-                        alive = (alive + 1) % 256
                     st.cycles = k + 1
                     if k + 1 >= cfg.n_steps:
                         st.stopped = "done"
