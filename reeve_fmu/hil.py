@@ -310,7 +310,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
     from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector, effective_rt_priority
     from .canhil.controller import ControllerConfig
-    from .canhil.protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, STATE_NAMES
+    from .canhil.protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
 
     log = log or (lambda *a, **k: None)
     if cfg.bus not in ("virtual", "udp_multicast"):
@@ -378,7 +378,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     cols = res.columns() if res.outputs is not None else {}
     time_ = res.time
     names_err = {ERR_RPDO_TIMEOUT: "command watchdog (RPDO timeout)", ERR_HEARTBEAT: "controller heartbeat lost",
-                 ERR_PLANT: "plant error"}
+                 ERR_PLANT: "plant error", ERR_SYNC: "SYNC from the controller lost"}
     summary = {
         "bus": cfg.bus,
         "controller": cfg.controller,
@@ -572,6 +572,10 @@ def _bench_main(argv) -> int:
     ap.add_argument("--channel", default="can0")
     ap.add_argument("--bitrate", type=int, default=None, help="bit/s, for interfaces that set it (not socketcan)")
     ap.add_argument("--lockstep", action="store_true", help="lock-step instead of real time")
+    ap.add_argument("--sync", choices=("bench", "controller"), default="bench",
+                    help="who produces SYNC: the bench (default) or the controller (each received SYNC = one step)")
+    ap.add_argument("--sync-timeout", type=float, default=None,
+                    help="--sync controller: seconds without SYNC before the drive faults (default 20 periods)")
     ap.add_argument("--t-end", type=float, default=None)
     ap.add_argument("--dt", type=float, default=1e-3)
     ap.add_argument("--plant", choices=("fmu", "in-process"), default="fmu")
@@ -590,7 +594,8 @@ def _bench_main(argv) -> int:
     plant = _make_plant(cfg, print)
     faults = FaultSpec.parse(a.inject)
     try:
-        bridge = Bridge(bus, plant, BridgeConfig(dt=a.dt, realtime=not a.lockstep, start_timeout=a.start_timeout),
+        bridge = Bridge(bus, plant, BridgeConfig(dt=a.dt, realtime=not a.lockstep, start_timeout=a.start_timeout,
+                                                 sync_source=a.sync, sync_timeout=a.sync_timeout),
                         Injector(faults, a.dt, lockstep=a.lockstep) if faults.any else None)
         n = int(math.floor((a.t_end if a.t_end is not None else 3600.0) / a.dt + 1e-9))
         print(f"bench on {a.interface}:{a.channel}: waiting for NMT start of node 1 ...")

@@ -314,6 +314,7 @@ def _scripted_bench(script, n=40):
                 if k >= n - 1:
                     return
 
+    bridge.warm_up()                     # JIT before the scripted controller's clock starts
     th = threading.Thread(target=controller, daemon=True)
     th.start()
     try:
@@ -454,3 +455,61 @@ def test_canopen_basenode402_enables_the_drive_and_runs_a_short_move():
     st = out["res"].stats
     assert st.frames_rejected == 0 and st.watchdog_trips == 0 and st.sdo_requests > 10
     assert st.commands_valid == st.steps - 1
+
+
+def test_controller_as_sync_producer_and_sync_loss():
+    """--sync controller: each SYNC from the controller advances the plant one period; when the SYNCs
+    stop, the drive faults (EMCY 0x8100), applies the brake and the bench finishes on its own clock."""
+    import can
+
+    from reeve_fmu.canhil.plants import InProcessPlant
+
+    ch = "hil_extsync_" + uuid.uuid4().hex[:6]
+    bus, cbus = make_bus("virtual", ch), make_bus("virtual", ch)
+    bridge = Bridge(bus, InProcessPlant(), BridgeConfig(sync_source="controller", sync_timeout=0.2,
+                                                        start_timeout=5.0))
+    tc = P.protocol().TorqueCmd
+    seen = {"emcy": None, "tpdo1": 0}
+
+    def send(cob, data):
+        cbus.send(can.Message(arbitration_id=cob, data=bytes(data), is_extended_id=False))
+
+    def controller():
+        deadline = time.time() + 20
+        while time.time() < deadline and (m := cbus.recv(0.5)) is not None:
+            if m.arbitration_id == P.COB_HB_DRIVE:
+                break
+        send(P.COB_NMT, [P.NMT_START, 1])
+        for k in range(30):                            # 30 SYNC cycles, then silence
+            c = P.sync_counter(k)
+            send(P.COB_SYNC, [c])
+            while time.time() < deadline:
+                m = cbus.recv(1.0)
+                if m is not None and m.arbitration_id == P.COB_TPDO2:
+                    break
+            cw = (P.CW_SHUTDOWN, P.CW_SWITCH_ON)[k] if k < 2 else P.CW_ENABLE_OPERATION
+            send(P.COB_RPDO1, tc.encode([cw, 522.5, P.MODE_CST, 1, c]))
+        while time.time() < deadline and (m := cbus.recv(0.5)) is not None:
+            if m.arbitration_id == P.COB_EMCY:
+                seen["emcy"] = bytes(m.data)
+
+    bridge.warm_up()
+    th = threading.Thread(target=controller, daemon=True)
+    th.start()
+    t0 = time.perf_counter()
+    try:
+        res = bridge.run(100)
+    finally:
+        th.join(10)
+        bus.shutdown()
+        cbus.shutdown()
+    st = res.stats
+    assert st.steps == 100 and st.frames_rejected == 0
+    assert st.commands_valid == 30                                       # one per controller SYNC
+    assert st.fault_code == P.ERR_SYNC and st.fault_at == pytest.approx(0.030, abs=1e-9)
+    assert st.brake_engaged_at == pytest.approx(0.030, abs=1e-9)
+    assert np.all(res.column("hil.state")[:3] != P.S_OPERATION_ENABLED)
+    assert np.all(res.column("hil.state")[3:30] == P.S_OPERATION_ENABLED)
+    assert np.all(res.column("hil.brake_command")[31:] == 0.0)
+    assert seen["emcy"] is not None and int.from_bytes(seen["emcy"][:2], "little") == P.ERR_SYNC
+    assert time.perf_counter() - t0 < 10.0                               # 0.2 s timeout + 70 ms on its own clock

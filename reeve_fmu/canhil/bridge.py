@@ -39,7 +39,7 @@ import numpy as np
 from .buses import send_batch
 from .drive402 import DriveNode
 from .plants import PlantError
-from .protocol import (BENCH_TX, COB_EMCY, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_RPDO1, COB_RPDO2,
+from .protocol import (BENCH_TX, COB_EMCY, ERR_SYNC, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_RPDO1, COB_RPDO2,
                        COB_SDO_RX, COB_SYNC, COB_TPDO1, COB_TPDO2, COB_TPDO3, CodecError, DRIVE_NODE_ID,
                        ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, MODE_CSV, NM_PER_PERMILLE, NMT_PREOP,
                        NMT_RESET_COMM, NMT_RESET_NODE, NMT_START, NMT_STATE_BOOT, NMT_STATE_OPERATIONAL,
@@ -221,6 +221,8 @@ class BridgeConfig:
     start_timeout: float = 60.0         # s of wall time to wait for NMT start
     heartbeat_wall_period: float = 0.1  # s, drive heartbeat while waiting for NMT start
     record: bool = True
+    sync_source: str = "bench"          # "bench": the bench produces SYNC; "controller": a received SYNC starts each cycle
+    sync_timeout: float | None = None   # controller SYNC: wall time without SYNC -> fault (None: 20 periods, >= 50 ms)
     rt_priority: int | None = None      # SCHED_FIFO priority of the bench thread; None: 50 in real time, off in lock-step
     stop_when_safe: bool = False        # end the run 1 s after a fault reaction has stopped the machine
     node_id: int = DRIVE_NODE_ID
@@ -303,8 +305,13 @@ class Bridge:
         self._last_cmd_valid = False
         self._brake_applied = True
         self._torque = 0.0
-        self._stop_timer = 0
         self._warm = False
+        self._ext = self.cfg.sync_source == "controller"
+        if self.cfg.sync_source not in ("bench", "controller"):
+            raise ValueError(f"sync_source must be 'bench' or 'controller', got {self.cfg.sync_source!r}")
+        self._sync_rx = None                  # data of a SYNC received from the controller (external SYNC)
+        self._sync_lost = False
+        self._counter = None                  # SYNC counter of the current cycle (None: no counter check)
 
     # -- frames -----------------------------------------------------------------------------------------
     def _send(self, cob: int, data: bytes) -> None:
@@ -313,7 +320,12 @@ class Bridge:
     def _service(self, msg) -> None:
         """Handle one received frame (after fault injection)."""
         cob = msg.arbitration_id
-        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or cob in BENCH_TX:
+        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            return
+        if cob == COB_SYNC and self._ext:
+            self._sync_rx = bytes(msg.data)
+            return
+        if cob in BENCH_TX:
             return
         st = self.stats
         st.frames_rx += 1
@@ -347,7 +359,7 @@ class Bridge:
             self._reject("malformed")
             self._closed = True                       # the controller's (broken) answer to this cycle
             return
-        if self.dn.params["counter_check"] and raw[4] != sync_counter(self._k):
+        if self.dn.params["counter_check"] and self._counter is not None and raw[4] != self._counter:
             self._reject("stale")                     # an answer to an older SYNC: keep waiting
             return
         if codec.in_range(raw) is not None or raw[2] not in (0,) + SUPPORTED_MODES \
@@ -545,6 +557,8 @@ class Bridge:
         dn = self.dn
         perf = time.perf_counter
         t_wall0 = perf()
+        t_prev_sync = t_wall0
+        sync_timeout = cfg.sync_timeout if cfg.sync_timeout is not None else max(20 * dt, 0.05)
         k_done = n
         x_fault = None
         for k in range(n):
@@ -552,19 +566,36 @@ class Bridge:
             if stop is not None and stop.is_set():
                 k_done = k
                 break
-            if cfg.realtime:
+            if self._ext and not self._sync_lost:
+                got = self._wait_external_sync(sync_timeout)
+                t_sync = perf()
+                if got is None:                       # the SYNC producer fell silent: fault, then own clock
+                    self._sync_lost = True
+                    self._k = k
+                    self._fault(ERR_SYNC, t)
+                    t_wall0 = t_sync - k * dt
+                    self._counter = None
+                else:
+                    self._counter = got[0] if got else None
+                    if jitter is not None:
+                        jitter[k] = (t_sync - t_prev_sync - dt) if k else 0.0
+                t_prev_sync = t_sync
+            elif cfg.realtime or self._sync_lost:
                 self._wait_until(t_wall0 + k * dt)
                 t_sync = perf()
-                jitter[k] = t_sync - (t_wall0 + k * dt)
+                if jitter is not None:
+                    jitter[k] = t_sync - (t_wall0 + k * dt)
             else:
                 t_sync = perf()
+            if not self._ext:
+                self._counter = sync_counter(k)
             self._k = k
             self._at_sync(k, t)
             w = y[iw]
             torque, brake = d.actuation(w, dt)
             self._torque = torque
             self._brake_applied = brake < 0.5
-            c = sync_counter(k)
+            c = self._counter if self._counter is not None else sync_counter(k)
             brake_engaged = ib is not None and y[ib] > 0.5
             flags = ((1 if self._brake_applied else 0) | (2 if brake_engaged else 0)
                      | (4 if st.watchdog_trips else 0) | (8 if self._hb_lost else 0)
@@ -577,8 +608,8 @@ class Bridge:
             vel_inc = round(w / RAD_PER_INC)
             tq_pm = round(torque / NM_PER_PERMILLE)
             live[0x6064], live[0x606C], live[0x6077], live[0x2110], live[0x2111] = pos_inc, vel_inc, tq_pm, flags, c
-            frames = [Message(arbitration_id=COB_SYNC, data=bytes((c,)), is_extended_id=False)]
-            if dn.nmt_state == NMT_STATE_OPERATIONAL:
+            frames = [] if self._ext else [Message(arbitration_id=COB_SYNC, data=bytes((c,)), is_extended_id=False)]
+            if dn.nmt_state == NMT_STATE_OPERATIONAL and not self._sync_lost:
                 if tp1 and k % tp1 == 0:
                     frames.append(Message(arbitration_id=COB_TPDO1, is_extended_id=False, data=enc_status(
                         [sw, tq_pm * NM_PER_PERMILLE, d.mode, flags & 1, (flags >> 1) & 1, (flags >> 2) & 1,
@@ -592,7 +623,8 @@ class Bridge:
                     xcar = y[ix] if ix is not None else 0.0
                     frames.append(Message(arbitration_id=COB_TPDO3, is_extended_id=False, data=enc_plant(
                         [min(max(tension, -2e7), 2e7), min(max(xcar, -2000.0), 2000.0)], strict=False)))
-            send_frames(frames)
+            if frames:
+                send_frames(frames)
             if hb_every and k % hb_every == 0:
                 self._heartbeat()
             if rec:
@@ -623,7 +655,10 @@ class Bridge:
                 break
             done = perf()
             step_time[k] = done - t_sync
-            if cfg.realtime:
+            if self._ext and not self._sync_lost:
+                if cfg.realtime and done - t_sync > dt:
+                    st.deadline_misses += 1             # the work did not fit into one SYNC period
+            elif cfg.realtime or self._sync_lost:
                 if done > t_wall0 + (k + 1) * dt:
                     st.deadline_misses += 1
             else:
@@ -682,6 +717,33 @@ class Bridge:
             self._service(msg)
         if self._closed or heard:
             self._consec_timeouts = 0
+
+    def _wait_external_sync(self, timeout: float):
+        """Collect frames until the controller's SYNC arrives; its data (b'' without counter), or None
+        after `timeout` s of silence (bounded)."""
+        recv = self.bus.recv
+        inj = self.inj
+        perf = time.perf_counter
+        deadline = perf() + timeout
+        while self._sync_rx is None:
+            now = perf()
+            if inj is not None and not inj.lockstep:
+                for m in inj.due(now):
+                    self._service(m)
+            if now >= deadline:
+                return None
+            nxt = deadline if inj is None or inj.lockstep else min(deadline, inj.next_release())
+            msg = recv(max(0.0, nxt - now))
+            if msg is None:
+                continue
+            if inj is not None:
+                m2, consumed = inj.on_frame(msg, self._k, perf())
+                if m2 is None:
+                    continue
+                msg = m2
+            self._service(msg)
+        data, self._sync_rx = self._sync_rx, None
+        return data
 
     def _wait_until(self, until: float) -> None:
         """Real time: collect frames until the wall-clock instant `until` (and release delayed ones)."""

@@ -80,6 +80,7 @@ ERR_NONE = 0x0000
 ERR_RPDO_TIMEOUT = 0x8250
 ERR_HEARTBEAT = 0x8130
 ERR_PLANT = 0x5000
+ERR_SYNC = 0x8100                        # communication, generic: SYNC from the controller lost
 
 
 def state_from_statusword(sw: int) -> int:
