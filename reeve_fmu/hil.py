@@ -85,9 +85,9 @@ def _multicast_dev() -> str | None:
 def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
     """Is udp_multicast usable on this host? As root (and with `ip`), first keep the bench's multicast on
     the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (fmi.md §7.1)
-    unless 239.74.163.2 already routes to lo. Through a real NIC (a default route) frames leave the
-    host and single sends took up to 15 ms on the test VM; through lo the p99 SYNC lateness of the real-time
-    bench was 52 us (docs/hil.md). Then probe with two buses. Returns (ok, what was done or why not)."""
+    unless 239.74.163.2 already routes to lo: through a NIC (default route) the frames leave the host, and
+    on the test VM the real-time bench then had a p99 SYNC lateness of 2.9 ms instead of 52 us (docs/hil.md).
+    Then probe with two buses. Returns (ok, what was done or why not)."""
     note = ""
     ip = shutil.which("ip")
     if setup_route and ip is not None and hasattr(os, "geteuid") and os.geteuid() == 0 \
