@@ -160,7 +160,8 @@ def summarize(t, c, limits, landings=LANDINGS) -> dict:
         "traction_ratio_max": ratio,
         "traction_limit_emergency_braking": limits["emergency_braking"],
         "traction_limit_loading": limits["loading"],
-        "traction_utilisation_max": ratio / limits["emergency_braking"],
+        "traction_utilisation_vs_emergency_braking": ratio / limits["emergency_braking"],
+        "traction_utilisation_vs_loading": ratio / limits["loading"],
         "motor_torque_peak_Nm": s["torque_peak_Nm"],
         "stopping_error_mm": {f"{r['landing_m']:g} m ({r['direction']})": r["stopping_error_mm"]
                               for r in trips},

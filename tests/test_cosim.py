@@ -117,13 +117,13 @@ def test_libcosim_runs_the_ssp_and_matches_fmpy(fmus):
     t_(k+1) - t_k, which is 0.001 s +- 1 ulp on most steps. Fed the same step sizes
     (ns_step_differences=True) the fmpy run is bit-identical; with fmpy's constant 0.001 s the
     one-ulp step changes are amplified by the plant's Newton stopping test (tolerance 1e-4) to
-    ~1e-9 m in 4 s (measured 1.2e-9 m), so 1e-7 m, 1e-5 rad/s and 1e-2 N m are generous."""
+    ~1e-9 m in 3 s (measured 1.2e-9 m), so 1e-7 m, 1e-5 rad/s and 1e-2 N m are generous."""
     pytest.importorskip("libcosimpy", reason="libcosimpy (optional extra 'cosim') is not importable")
     plant_values, drive_values = _ssp_values(fmus)
-    t_end = 4.0
+    t_end = 3.0                                # pre-torque, brake lift at 0.9 s, start of the trip
     lc = job("libcosim_run", fmus["ssp"], t_end, timeout=900)
     n = lc["info"]["steps"]
-    assert n == 4000 and len(lc["time"]) == n and abs(lc["time"][-1] - t_end) < 1e-9
+    assert n == 3000 and len(lc["time"]) == n and abs(lc["time"][-1] - t_end) < 1e-9
     same = job("fmpy_run", fmus["plant"], fmus["drive"], t_end, "jacobi", plant_values, drive_values, True)
     for name in ("car.position", "car.velocity", "motor.speed"):
         assert lc[f"plant.{name}"] == same[name][1:], name
@@ -135,4 +135,4 @@ def test_libcosim_runs_the_ssp_and_matches_fmpy(fmus):
         assert err <= tol, (name, err)
     err = max(abs(a - b) for a, b in zip(lc["drive.motor.torque"], const["motor.torque"][1:]))
     assert err <= 1e-2
-    assert max(lc["plant.car.position"]) > 0.5 and max(lc["drive.brake.command"]) == 1.0
+    assert max(lc["plant.car.position"]) > 0.2 and max(lc["drive.brake.command"]) == 1.0
