@@ -550,7 +550,7 @@ class Bridge:
         enc_status, enc_fb, enc_plant = proto.DriveStatus.encode, proto.DriveFeedback.encode, proto.PlantStatus.encode
         iw, ia, it, ix, iv, ib = self._iw, self._ia, self._it, self._ix, self._iv, self._ib
         Message = self._can.Message
-        send_frames = functools.partial(send_batch, self.bus)
+        send_frames = functools.partial(send_batch, self.bus, reuse=True)
         recv = self.bus.recv
         inj = self.inj
         d = self.drive

@@ -211,7 +211,7 @@ class BuiltinController:
                     # RPDO1 last: in lock-step it closes the bench's cycle
                     frames.append(Msg(arbitration_id=COB_RPDO1, is_extended_id=False,
                                       data=enc_cmd([cw, tau, MODE_CST, 1 if brake > 0.5 else 0, c_prev])))
-                    send_batch(self.bus, frames)
+                    send_batch(self.bus, frames, reuse=True)
                     st.compute_time.append(perf() - t0)
                     st.commands_sent += 1
                     st.cycles = k + 1
