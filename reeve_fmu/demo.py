@@ -196,6 +196,10 @@ def cli_demo(args) -> int:
 
     out = Path(getattr(args, "out", None) or "results")
     step = float(getattr(args, "step", None) or 1e-3)
+    if not (0.0 < step <= 2e-3):
+        raise ValueError(f"--step {step!r}: the communication step must be in (0, 2 ms]; the ride-quality "
+                         f"metrics (ISO 18738 style, Wk weighting) need samples at >= 500 Hz, and beyond "
+                         f"2 ms the co-simulation error grows quickly (docs/cosim.md)")
     dest = fmu_dir()
     plant_fmu, drive_fmu = cosim.ensure_fmus(dest, rebuild=bool(getattr(args, "rebuild", False)))
     scene, payload = cosim.plant_fmu_model(plant_fmu)

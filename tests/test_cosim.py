@@ -35,11 +35,12 @@ def fmus(tmp_path_factory):
     return cosim_jobs.ensure_test_fmus(tmp_path_factory.getbasetemp() / "reeve_cosim_fmus")
 
 
-@pytest.mark.parametrize("scheme", ["gauss-seidel", "jacobi"])
-def test_fmpy_cosim_is_bit_identical_to_in_process_coupling(fmus, scheme):
+@pytest.mark.parametrize("scheme,level", [("gauss-seidel", 1), ("jacobi", 1), ("gauss-seidel", 2)])
+def test_fmpy_cosim_is_bit_identical_to_in_process_coupling(fmus, scheme, level):
     """The FMUs add nothing but the interface: the fmpy co-simulation at 1 ms equals the same Plant and
-    ElectricDrive coupled in one process at 1 ms, bit for bit (pre-torque, brake lift, acceleration)."""
-    r = job("cosim_vs_monolithic", fmus["plant"], fmus["drive"], 4.0, scheme, R1_DRIVE)
+    ElectricDrive coupled in one process at 1 ms, bit for bit (pre-torque, brake lift, acceleration),
+    with the Level 1 drive and with the Level 2 PMSM model."""
+    r = job("cosim_vs_monolithic", fmus["plant"], fmus["drive"], 4.0, scheme, dict(R1_DRIVE, **{"drive.level": level}))
     assert r["n"] == [4001, 4001]
     assert r["diffs"] == {n: 0.0 for n in cosim_jobs.CMP}, r["diffs"]
     assert r["brake_max"] == 1.0 and r["x_end"] > 0.5             # the car is on its way up
