@@ -20,15 +20,42 @@ except ImportError:  # pragma: no cover - exercised only without numba
     JIT = False
 
 
+def _compiled_sources(pkg) -> list:
+    """The package files the compiled code can depend on: every module that uses `njit`, plus the
+    package modules those import (transitively). Front ends (CLI, FMU slaves, HIL, docs tooling) are
+    not in this set, so editing them does not throw away minutes of compiled kernels."""
+    import re
+    rel_import = re.compile(r"^\s*from\s+(\.+)([\w.]*)\s+import\s+([\w, ()]+)", re.M)
+    files = {p for p in pkg.rglob("*.py") if "__pycache__" not in p.parts}
+    todo = [p for p in files if re.search(r"from\s+\.+_jit\s+import|\bnjit\b", p.read_text())]
+    seen = set()
+    while todo:
+        p = todo.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        for dots, mod, names in rel_import.findall(p.read_text()):
+            base = p.parent
+            for _ in range(len(dots) - 1):
+                base = base.parent
+            cands = []
+            if mod:
+                target = base.joinpath(*mod.split("."))
+                cands += [target.with_suffix(".py"), target / "__init__.py"]
+                cands += [target / f"{n.strip(' ()')}.py" for n in names.split(",")]
+            else:
+                cands += [base / f"{n.strip(' ()')}.py" for n in names.split(",")] + [base / "__init__.py"]
+            todo += [c for c in cands if c in files and c not in seen]
+    return sorted(seen)
+
+
 def source_hash() -> str:
-    """sha256[:16] over every .py file of the package (relative path + bytes)."""
+    """sha256[:16] over the sources the compiled code depends on (relative path + bytes)."""
     import hashlib
     from pathlib import Path
     pkg = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for p in sorted(pkg.rglob("*.py")):
-        if "__pycache__" in p.parts:
-            continue
+    for p in _compiled_sources(pkg):
         h.update(p.relative_to(pkg).as_posix().encode())
         h.update(b"\0")
         h.update(p.read_bytes())
@@ -38,8 +65,8 @@ def source_hash() -> str:
 def _cache_dir():
     """numba keys a cached function only on its own file's timestamp: after an edit (or a partial
     upgrade) of a module whose functions are inlined elsewhere, the dependents' stale machine code
-    would be loaded silently. The cache therefore lives in a directory keyed by the hash of all
-    package sources: any change to any module starts a fresh cache. Older directories are pruned
+    would be loaded silently. The cache therefore lives in a directory keyed by the hash of the
+    sources compiled code depends on (`_compiled_sources`): any change to them starts a fresh cache. Older directories are pruned
     (the newest 4 are kept). NUMBA_CACHE_DIR set by the user wins."""
     from pathlib import Path
     import shutil

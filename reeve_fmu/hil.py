@@ -439,6 +439,14 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
         if "traction.tension_in" in cols:
             summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
         summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
+        try:   # the demo's trip metrics (stopping error, ride quality, traction) of the same record
+            from .demo import summarize, traction_limits
+
+            dv = cfg.drive_values or {}
+            lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
+            summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
+        except Exception as exc:  # a record without a complete trip, or an older demo module
+            summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
     if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
         names = ("car.position", "car.velocity", "motor.speed")
         m = st.steps
