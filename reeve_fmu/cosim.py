@@ -673,6 +673,23 @@ def _on_detection(mon: CouplingMonitor, ep: dict, scheme: str, on_instability: s
 
 
 ON_INSTABILITY = ("warn", "stop", "raise")
+#: result fields of the monitor (CouplingMonitor.report), e.g. for a summary.json
+MONITOR_FIELDS = ("coupling_stable", "instability_detected_at", "instability", "instability_episodes",
+                  "coupling_energy_residual_J", "transmitted_energy_J", "torque_chatter_max",
+                  "energy_residual_max_ratio")
+
+
+def monitor_line(info: Mapping) -> str:
+    """One line for a console report of a monitored run."""
+    if info.get("coupling_stable") is None:
+        return "coupling monitor: off"
+    figs = (f"peak torque chatter {info['torque_chatter_max'] * 100:.2f} % of {info['monitor_torque_scale_Nm']:g} "
+            f"N.m, energy residual {info['coupling_energy_residual_J']:.1f} J of "
+            f"{info['transmitted_energy_J']:.0f} J transmitted")
+    if info["coupling_stable"]:
+        return f"coupling monitor: stable ({figs})"
+    n = len(info["instability_episodes"])
+    return f"WARNING: {info['instability']['message']} [{n} episode{'s' if n > 1 else ''}; {figs}]"
 
 
 # ------------------------------------------------------------------------------------------------

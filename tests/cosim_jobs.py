@@ -375,6 +375,36 @@ def cosim_accuracy(plant_fmu, drive_fmu, steps, drive_values, ref_step=1e-4):
     return out
 
 
+def cosim_monitor(plant_fmu, drive_fmu, t_end, drive_values, steps):
+    """fmpy master with the coupling monitor, on_instability="stop", at each step: what it reports
+    (result fields, logged warning, FMU warnings) and where it stopped."""
+    _host_package()
+    import logging
+
+    from reeve_fmu.cosim import MONITOR_FIELDS, cosimulate, monolithic
+
+    logged = []
+
+    class _H(logging.Handler):
+        def emit(self, rec):
+            logged.append((rec.levelname, rec.getMessage()))
+
+    logging.getLogger("reeve_fmu.cosim").addHandler(_H())
+    out = {}
+    for h in steps:
+        del logged[:]
+        c = cosimulate(plant_fmu, drive_fmu, step=h, t_end=t_end, drive_values=drive_values,
+                       on_instability="stop", record=["car.position"])
+        out[str(h)] = {**{k: c.info[k] for k in MONITOR_FIELDS}, "logged": list(logged),
+                       "stopped": c.info["stopped_by_monitor"], "t_last": float(c.time[-1]),
+                       "steps": c.info["steps"], "fmu_warnings": c.info["fmu_warnings"],
+                       "torque": [float(x) for x in c["motor.torque"]]}
+        m = monolithic(step=h, t_end=t_end, record_step=h, drive_values=drive_values, plant_fmu=plant_fmu,
+                       on_instability="stop")
+        out[str(h)]["in_process"] = {k: m.info[k] for k in MONITOR_FIELDS}
+    return out
+
+
 def reference_error(results_csv, summary_json, ref_step=1e-4):
     """Monolithic reference (same plant scene, parameters and drive values as the demo, coupled every
     ref_step) against the car position of the demo's co-simulation (results.csv)."""
