@@ -73,7 +73,7 @@ def main():
     ax[0].set_ylabel("|car position - ref| [mm]")
     ax[0].set_title("R1 round trip, Gauss-Seidel, vs monolithic 0.1 ms (dotted: monitor detection)")
     ax[1].set_ylabel("motor.torque [N m]")
-    ax[1].set_title("brake lift and start (0.9 s)")
+    ax[1].set_title("brake opens (command at 0.71 s), the car starts at 0.9 s")
     ax[2].set_ylabel("motor.torque [N m]")
     ax[2].set_title("top landing: brake drop with the speed loop still closed (28.38 s)")
     for scheme, mk in (("gauss-seidel", "o-"), ("jacobi", "s--")):

@@ -147,9 +147,9 @@ def test_monitor_flags_non_finite_and_alternating_torque():
 
 
 def test_large_communication_step_is_detected_and_reported_by_the_master(fmus):
-    """The fmpy master with the monitor on the first 1.6 s of the trip (pre-torque, brake lift at
-    0.9 s, start): at 1 ms nothing is reported; at 10 ms (Gauss-Seidel) the speed loop chatters at the
-    torque limit right after the brake lifts; the master logs it, names time, criterion and value, and
+    """The fmpy master with the monitor on the first 1.6 s of the trip (pre-torque, brake opening at
+    0.71 s, start at 0.9 s): at 1 ms nothing is reported; at 10 ms (Gauss-Seidel) the speed loop
+    diverges once the brake has opened; the master logs it, names time, criterion and value, and
     stops there. The in-process coupling at the same step (bit-identical to the FMUs) reports the same."""
     r = job("cosim_monitor", fmus["plant"], fmus["drive"], 1.6, R1_DRIVE, [1e-3, 1e-2])
     ok, bad = r["0.001"], r["0.01"]
