@@ -14,7 +14,10 @@ Parameters: reeve_fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in i
 """
 from reeve_fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
 from reeve_fmu.drive import PHASE_NAMES
-from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
+from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
+
+#: largest communication step (s) the speed loop is meant for: beyond it the drive logs a warning (once)
+MAX_DESIGN_STEP = 2e-3
 
 OUTPUTS = (
     # name, unit/type, description
@@ -62,6 +65,7 @@ class ElectricDriveSlave(ReeveSlave):
         self.add_integer("drive.move", "output", description="index of the current move (0-based; -1 "
                                                              "before the first)")
         self.drive = None
+        self._step_warned = False
 
     def initialize(self):
         v = self.values
@@ -84,6 +88,14 @@ class ElectricDriveSlave(ReeveSlave):
         v["drive.move"] = d.move_index
 
     def step(self, t, dt):
+        if dt > MAX_DESIGN_STEP and not self._step_warned:
+            self._step_warned = True
+            self._error(f"communication step {dt * 1e3:g} ms > {MAX_DESIGN_STEP * 1e3:g} ms: the speed loop "
+                        f"(control.Kp = {self.values['control.Kp']:g} N.m.s/rad, designed for measurements "
+                        f"every control.Ts = {self.values['control.Ts'] * 1e6:g} us) gets one measurement per "
+                        f"communication step; measured on R1, the coupled loop chatters at the torque limit "
+                        f"from 10 ms (Gauss-Seidel) / 5 ms (Jacobi) on (docs/hard-cases.md, 'Large "
+                        f"communication steps')", Fmi2Status.warning)
         v = self.values
         tau, brake = self.drive.step(t, dt, v["motor.speed"], v["motor.angle"])
         self._outputs(tau, brake)

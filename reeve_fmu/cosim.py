@@ -493,6 +493,218 @@ def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: fl
 
 
 # ------------------------------------------------------------------------------------------------
+# coupling monitor
+# ------------------------------------------------------------------------------------------------
+class CosimInstability(CosimError):
+    """The coupling monitor detected an unstable or implausible co-simulation (on_instability="raise")."""
+
+
+class CouplingMonitor:
+    """Instability/plausibility monitor of the torque-speed power bond exchanged every communication
+    step (docs/hard-cases.md, "Large communication steps"). Criteria, checked after every step:
+
+    * ``non-finite``: an exchanged value (torque, brake command, speed, angle) is NaN or +-Inf.
+    * ``torque chatter``: RMS over a sliding window (`chatter_window` s, >= 4 steps) of the period-2
+      component of the exchanged torque, |tau_(k+1) - 2 tau_k + tau_(k-1)| / 4, above
+      `chatter_limit` x `torque_scale` (the drive's torque limit). A smooth torque sampled at step h has
+      a second difference ~ tau'' h^2 (a ramp corner: slope x h); a loop that is unstable at the
+      sampling rate alternates from step to step, and its second difference is 4x its amplitude.
+    * ``energy residual``: energy created by the coupling, the standard co-simulation power-bond
+      residual. Over a step the plant receives exactly tau_p (theta_(k+1) - theta_k) (its torque is
+      held); the drive delivered tau_d omega_k h with the speed it was given. Their difference summed
+      over a sliding window (`energy_window` s) above `energy_limit` x the energy transmitted in the
+      window (sum |tau_p dtheta|) + `energy_floor` x `torque_scale` x 1 rad. This also catches slow
+      (sub-Nyquist) oscillations that the chatter criterion attenuates.
+
+    Every detection is an *episode* (start, end, criterion, peak value); the first one is reported with
+    time, criterion, value and threshold. Thresholds are calibrated on the R1 round trip at 1-20 ms
+    (benchmarks/large_steps.py): see the table in docs/hard-cases.md.
+    """
+
+    def __init__(self, step: float, torque_scale: Optional[float] = None, *, chatter_window: float = 0.05,
+                 chatter_limit: float = 0.05, energy_window: float = 0.5, energy_limit: float = 0.02,
+                 energy_floor: float = 0.005):
+        self.h = float(step)
+        self.torque_scale = float(torque_scale) if torque_scale else None
+        self.chatter_limit = chatter_limit
+        self.energy_limit = energy_limit
+        self.energy_floor = energy_floor
+        self.nc = max(4, int(round(chatter_window / step)))
+        self.ne = max(4, int(round(energy_window / step)))
+        self._c2 = [0.0] * self.nc          # ring buffer of the squared period-2 component
+        self._er = [0.0] * self.ne          # ring buffers of the residual and the transmitted energy
+        self._et = [0.0] * self.ne
+        self._sc2 = self._ser = self._set = 0.0
+        self._k = 0
+        self._tau1 = self._tau2 = None
+        self._tau_max = 0.0
+        self.residual_J = 0.0               # total energy created by the coupling
+        self.transmitted_J = 0.0            # total sum |tau_p dtheta|
+        self._chat2_max = 0.0               # peak (chatter RMS / torque scale)^2
+        self._chat2_lim = chatter_limit * chatter_limit
+        self.energy_ratio_max = 0.0         # peak window residual / its threshold
+        self.episodes: list = []
+        self._open: dict = {}               # criterion -> open episode
+        self.merge_gap = 1.0                # s: a detection this soon after an episode continues it
+
+    @property
+    def stable(self) -> bool:
+        return not self.episodes
+
+    @property
+    def first(self) -> Optional[dict]:
+        return min(self.episodes, key=lambda e: e["t_start_s"]) if self.episodes else None
+
+    def _flag(self, crit: str, t: float, value: float, limit: float, unit: str) -> Optional[dict]:
+        t, value, limit = float(t), float(value), float(limit)
+        e = self._open.get(crit)
+        if e is None:
+            last = [x for x in self.episodes if x["criterion"] == crit]
+            if last and t - last[-1]["t_end_s"] <= self.merge_gap:     # the same episode resumes
+                self._open[crit] = e = last[-1]
+        if e is None:
+            e = {"criterion": crit, "t_start_s": t, "t_end_s": t, "value": value, "threshold": limit,
+                 "peak": value, "t_peak_s": t, "unit": unit}
+            self._open[crit] = e
+            self.episodes.append(e)
+            return e
+        e["t_end_s"] = t
+        if value > e["peak"]:
+            e["peak"], e["t_peak_s"] = value, t
+        return None
+
+    def _close(self, crit: str) -> None:
+        self._open.pop(crit, None)
+
+    def update(self, t: float, tau_plant: float, tau_drive: float, brake: float, omega_in: float,
+               theta0: float, theta1: float) -> Optional[dict]:
+        """One communication step ending at `t`: `tau_plant` the torque the plant held, `tau_drive` the
+        drive's new output, `omega_in` the speed the drive was given, theta0/theta1 the plant's angle
+        at the start/end of the step. Returns the new episode if one starts at this step.
+        It runs inside the master's step loop: ~9 us per call measured on a loaded 2-core machine."""
+        s = tau_plant + tau_drive + brake + omega_in + theta0 + theta1
+        if s - s != 0.0:                    # NaN or +-Inf somewhere
+            self._k += 1
+            return self._flag("non-finite", t, math.nan, 0.0, "")
+        k = self._k
+        ts = self.torque_scale
+        if ts is None:
+            a = abs(tau_drive)
+            if a > self._tau_max:
+                self._tau_max = a
+            ts = self._tau_max
+        i = k % self.nc
+        t1 = self._tau1
+        if k >= 2:
+            c = 0.25 * (tau_drive - 2.0 * t1 + self._tau2)
+            c *= c
+        else:
+            c = 0.0
+        buf = self._c2
+        self._sc2 += c - buf[i]
+        buf[i] = c
+        if i == self.nc - 1:                # no drift of the running sum
+            self._sc2 = math.fsum(buf)
+        self._tau2, self._tau1 = t1, tau_drive
+        dth = theta1 - theta0
+        r = tau_plant * dth - tau_drive * omega_in * self.h
+        e = abs(tau_plant * dth)
+        self.residual_J += r
+        self.transmitted_J += e
+        j = k % self.ne
+        er, et = self._er, self._et
+        self._ser += r - er[j]
+        self._set += e - et[j]
+        er[j] = r
+        et[j] = e
+        if j == self.ne - 1:
+            self._ser, self._set = math.fsum(er), math.fsum(et)
+        self._k = k + 1
+        if ts <= 0.0 or k < 2:
+            return None
+        new = None
+        c2 = self._sc2 / (self.nc * ts * ts)          # (chatter RMS / torque scale)^2
+        if c2 > self._chat2_max:
+            self._chat2_max = c2
+        if c2 > self._chat2_lim:
+            new = self._flag("torque chatter", t, math.sqrt(c2), self.chatter_limit, "of the torque scale")
+        elif self._open:
+            self._close("torque chatter")
+        q = self._ser / (self.energy_limit * self._set + self.energy_floor * ts)
+        if q > self.energy_ratio_max:
+            self.energy_ratio_max = q
+        if q > 1.0:
+            new = self._flag("energy residual", t, self._ser, self._ser / q, "J") or new
+        elif self._open:
+            self._close("energy residual")
+        return new
+
+    @property
+    def chatter_max(self) -> float:
+        """Peak chatter RMS / torque scale so far."""
+        return math.sqrt(self._chat2_max)
+
+    @staticmethod
+    def describe(e: dict, step: float, scheme: str) -> str:
+        if e["criterion"] == "non-finite":
+            what = "an exchanged value is not finite"
+        elif e["criterion"] == "torque chatter":
+            what = (f"torque chatter {e['value'] * 100:.1f} % of the torque scale (RMS of the step-to-step "
+                    f"alternating component; limit {e['threshold'] * 100:.0f} %)")
+        else:
+            what = (f"energy residual {e['value']:.1f} J created by the coupling in the last window "
+                    f"(limit {e['threshold']:.1f} J)")
+        return (f"co-simulation coupling unstable at t = {e['t_start_s']:.3f} s "
+                f"({scheme}, step {step * 1e3:g} ms): {what}; use a smaller communication step "
+                f"(docs/hard-cases.md, 'Large communication steps')")
+
+    def report(self, scheme: str) -> dict:
+        """The result fields: coupling_stable, instability_detected_at, the first episode's message, all
+        episodes and the monitored figures."""
+        f = self.first
+        return {"coupling_stable": f is None,
+                "instability_detected_at": None if f is None else f["t_start_s"],
+                "instability": None if f is None else dict(f, message=self.describe(f, self.h, scheme)),
+                "instability_episodes": [dict(e) for e in self.episodes],
+                "coupling_energy_residual_J": float(self.residual_J),
+                "transmitted_energy_J": float(self.transmitted_J),
+                "torque_chatter_max": float(self.chatter_max),
+                "energy_residual_max_ratio": float(self.energy_ratio_max),
+                "monitor_torque_scale_Nm": float(self.torque_scale or self._tau_max)}
+
+
+def _on_detection(mon: CouplingMonitor, ep: dict, scheme: str, on_instability: str) -> bool:
+    """Log the detection; raise for on_instability="raise"; return True to stop the run."""
+    import logging
+
+    msg = CouplingMonitor.describe(ep, mon.h, scheme)
+    logging.getLogger("reeve_fmu.cosim").warning(msg)
+    if on_instability == "raise":
+        raise CosimInstability(msg)
+    return on_instability == "stop"
+
+
+ON_INSTABILITY = ("warn", "stop", "raise")
+#: result fields of the monitor (CouplingMonitor.report), e.g. for a summary.json
+MONITOR_FIELDS = ("coupling_stable", "instability_detected_at", "instability", "instability_episodes",
+                  "coupling_energy_residual_J", "transmitted_energy_J", "torque_chatter_max",
+                  "energy_residual_max_ratio")
+
+
+def monitor_line(info: Mapping) -> str:
+    """One line for a console report of a monitored run."""
+    if info.get("coupling_stable") is None:
+        return "coupling monitor: off"
+    figs = (f"peak torque chatter {info['torque_chatter_max'] * 100:.2f} % of {info['monitor_torque_scale_Nm']:g} "
+            f"N.m, energy residual {info['coupling_energy_residual_J']:.1f} J of "
+            f"{info['transmitted_energy_J']:.0f} J transmitted")
+    if info["coupling_stable"]:
+        return f"coupling monitor: stable ({figs})"
+    n = len(info["instability_episodes"])
+    return f"WARNING: {info['instability']['message']} [{n} episode{'s' if n > 1 else ''}; {figs}]"
+
+
+# ------------------------------------------------------------------------------------------------
 # fmpy master
 # ------------------------------------------------------------------------------------------------
 def _time_grid(step: float):
@@ -531,7 +743,8 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
                record: Optional[Sequence[str]] = None, record_every: int = 1,
                progress: Optional[Callable[[float], None]] = None, progress_every: float = 0.25,
-               timing: bool = False, echo_log: bool = False, ns_step_differences: bool = False) -> CosimResult:
+               timing: bool = False, echo_log: bool = False, ns_step_differences: bool = False,
+               monitor: bool = True, on_instability: str = "warn") -> CosimResult:
     """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (see the module docstring).
 
     step          communication step (s); any value > 0
@@ -546,6 +759,11 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     ns_step_differences   pass communicationStepSize = t_(k+1) - t_k of the nanosecond time grid (it
                   differs from `step` by one ulp on most steps) instead of `step`: what libcosim does;
                   only for bit-for-bit comparisons with it (tests/test_cosim.py)
+    monitor       run the CouplingMonitor on the exchanged torque/speed/angle (info["coupling_stable"],
+                  info["instability_detected_at"], info["instability"], ...); the torque scale is the
+                  drive's torque.max
+    on_instability  "warn": log a warning and continue (the result is flagged); "stop": also end the
+                  run at the detection (result truncated there); "raise": raise CosimInstability
 
     Per step the master makes exactly one setReal, doStep and getReal call per FMU through fmpy's
     ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
@@ -557,6 +775,8 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
         raise ValueError(f"communication step must be a finite number > 0, got {step!r}")
     if scheme not in ("gauss-seidel", "jacobi"):
         raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
+    if on_instability not in ON_INSTABILITY:
+        raise ValueError(f"on_instability must be one of {ON_INSTABILITY}, got {on_instability!r}")
     if t_end is None:
         t_end = trip_end_time(drive_values)
     n = int(math.floor(t_end / step + 1e-9))
@@ -594,6 +814,11 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
         stepp, stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
         _check(getp(cp, P.vr, P.n, P.buf), "plant getReal", handles, 0.0)
         _check(getd(cd, D.vr, D.n, D.buf), "drive getReal", handles, 0.0)
+        mon = None
+        if monitor:
+            scale = drive.get("torque.max") if "torque.max" in drive.variables else None
+            mon = CouplingMonitor(step, scale)
+            upd = mon.update
         # recording
         nrec = n // record_every + 1
         Prec = np.empty((nrec, P.n))
@@ -612,10 +837,13 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
         j = 1
         t_loop0 = time.perf_counter()
         h = step
+        stop = False
         for k in range(n):
             t = tk(k)
             if ns_step_differences:
                 h = tk(k + 1) - t
+            if mon is not None:
+                w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
             if gs:
                 s = setd(cd, DIvr, DIn, Pbuf)
                 if s > 1:
@@ -672,12 +900,19 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                 s = getp(cp, Pvr, Pn, Pbuf)
                 if s > 1:
                     _check(s, "plant getReal", handles, t)
-            if (k + 1) % record_every == 0:
+            if mon is not None:
+                ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
+                if ep is not None:
+                    stop = _on_detection(mon, ep, scheme, on_instability)
+            if (k + 1) % record_every == 0 or stop:
                 Prec[j] = Pv
                 Drec[j] = Dv
                 j += 1
             if (k + 1) % every == 0:
                 progress((k + 1) * step)
+            if stop:
+                n = k + 1
+                break
         loop_wall = time.perf_counter() - t_loop0
         if progress is not None:
             progress(n * step)
@@ -695,9 +930,14 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     for i, name in enumerate(D.names):
         cols[name] = Drec[:j, i]
     tt = np.arange(j) * (step * record_every)
+    if stop and (n % record_every):
+        tt[-1] = n * step
     info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": plant_outputs, "t_end_s": n * step, "steps": n,
             "loop_wall_s": loop_wall, "total_wall_s": total_wall,
-            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf, "fmu_warnings": warnings}
+            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf, "fmu_warnings": warnings,
+            "stopped_by_monitor": stop}
+    if mon is not None:
+        info.update(mon.report(scheme))
     if timing:
         info["plant_doStep_ns"] = tns_p
         info["drive_doStep_ns"] = tns_d
@@ -710,7 +950,8 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
 def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step: float = 1e-3,
                scene=None, plant_fmu=None, plant_values: Optional[Mapping[str, float]] = None,
                drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
-               progress: Optional[Callable[[float], None]] = None) -> CosimResult:
+               progress: Optional[Callable[[float], None]] = None, monitor: bool = True,
+               on_instability: str = "warn") -> CosimResult:
     """The same Plant and ElectricDrive as the FMUs, coupled in this process every `step` seconds
     (Gauss-Seidel: the drive steps first with the measurement at t, the plant then holds the drive's
     torque over [t, t + step]); samples every `record_step` (a multiple of `step`).
@@ -718,9 +959,12 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     With step = the co-simulation's communication step and scheme equal, this is exactly what the FMU
     co-simulation computes (tests compare them bit for bit); with a much finer step it is the
     reference of the co-simulation error (docs/cosim.md). The plant comes from `scene` (default: the
-    shipped elevator_2to1 scene) or, if given, from the scene the plant FMU `plant_fmu` carries."""
+    shipped elevator_2to1 scene) or, if given, from the scene the plant FMU `plant_fmu` carries.
+    `monitor`/`on_instability`: the CouplingMonitor at the coupling step, as in `cosimulate`."""
     if scheme not in ("gauss-seidel", "jacobi"):
         raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
+    if on_instability not in ON_INSTABILITY:
+        raise ValueError(f"on_instability must be one of {ON_INSTABILITY}, got {on_instability!r}")
     payload = None
     if plant_fmu is not None:
         scene, payload = plant_fmu_model(plant_fmu)
@@ -752,28 +996,43 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     j = 1
     every = max(1, int(round(0.25 / step)))
     tk = _time_grid(step)
+    mon = CouplingMonitor(step, drive.params.T_max) if monitor else None
+    stop = False
     t0 = time.perf_counter()
     for k in range(n):
         t = tk(k)
         w, th = y[iw], y[ia]
+        tau0 = tau
         if scheme == "gauss-seidel":
             tau, br = drive.step(t, step, w, th)
             y = plant.step(step, tau, br)
         else:
             y = plant.step(step, tau, br)
             tau, br = drive.step(t, step, w, th)
+        if mon is not None:
+            ep = mon.update(tk(k + 1), tau if scheme == "gauss-seidel" else tau0, tau, br, w, th, y[ia])
+            if ep is not None:
+                stop = _on_detection(mon, ep, scheme, on_instability)
+        if stop:
+            n = k + 1
+            if (k + 1) % m:
+                break
         if (k + 1) % m == 0:
             Y[j] = y[idx]
             D[j] = drive_row(tau, br)
             j += 1
         if progress is not None and (k + 1) % every == 0:
             progress((k + 1) * step)
+        if stop:
+            break
     wall = time.perf_counter() - t0
     cols = {name: Y[:j, i] for i, name in enumerate(names)}
     for i, name in enumerate(DRIVE_EXCHANGE + DRIVE_RECORD):
         cols[name] = D[:j, i]
     info = {"master": "monolithic", "scheme": scheme, "step_s": step, "t_end_s": n * step, "steps": n,
-            "loop_wall_s": wall, "rtf": n * step / wall if wall > 0 else math.inf}
+            "loop_wall_s": wall, "rtf": n * step / wall if wall > 0 else math.inf, "stopped_by_monitor": stop}
+    if mon is not None:
+        info.update(mon.report(scheme))
     return CosimResult(np.arange(j) * (m * step), cols, info)
 
 

@@ -254,12 +254,14 @@ def cli_demo(args) -> int:
         **summary,
         "cosim": {"steps": res.info["steps"], "loop_wall_s": res.info["loop_wall_s"],
                   "real_time_factor": res.info["rtf"], "total_wall_s": time.perf_counter() - t0,
-                  "fmu_warnings": res.info["fmu_warnings"]},
+                  "fmu_warnings": res.info["fmu_warnings"],
+                  **{k: res.info[k] for k in cosim.MONITOR_FIELDS}},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print_table(summary)
     print(f"co-simulation: {res.info['steps']} steps in {res.info['loop_wall_s']:.2f} s "
           f"({res.info['rtf']:.1f}x real time)")
+    print(cosim.monitor_line(res.info))
     print(f"-> {out}/results.csv, results.png, traction.png, motor.png, summary.json")
     return 0
 

@@ -191,6 +191,44 @@ def plant_errors(fmu):
     return res
 
 
+def plant_reset(fmu):
+    """fmi2Reset on the plant FMU: a clean 80-step run of a fresh instance (reference); reset after a
+    normal run, a run with car.load = 0 driven into errors (NaN torque, then a solver failure that
+    leaves the instance faulty); reset from that error state; then the same 80 steps again; and once
+    more after terminate + reset. The runs after each reset must equal the reference bit for bit."""
+    _host_package()
+    r = _runner()
+    res = {}
+    with r.SlaveHandle.open(fmu, "plant") as h:
+        h.setup(0.0)
+        res["init"] = h.get_many(PLANT_OUTS)
+        res["ref"] = _run_plant(h, 0, 80)
+        h.reset()                                      # from stepComplete, without terminate
+        h.setup(0.0, start_values={"car.load": 0.0})   # another model: empty car
+        res["empty_car_init"] = h.get_many(PLANT_OUTS)
+        _run_plant(h, 0, 40)
+        mark = len(h.messages)
+        h.set("motor.torque", float("nan"))
+        res["nan_step"] = h.step(DT)
+        h.set("motor.torque", 1.0e6)                   # 1 MN m for 0.3 s: the car hits the machine
+        res["crash_step"] = h.do_step(h.time, 0.3)
+        h.set("motor.torque", 500.0)
+        res["refused_step"] = h.step(DT)
+        res["error_msgs"] = _msgs(h)[mark:]
+        h.reset()                                      # from the error state
+        mark = len(h.messages)
+        h.setup(0.0)
+        res["load_after_reset"] = h.get("car.load")
+        res["init_after_error"] = h.get_many(PLANT_OUTS)
+        res["after_error"] = _run_plant(h, 0, 80)
+        res["msgs_after_error"] = _msgs(h)[mark:]
+        h.terminate()
+        h.reset()                                      # from terminated
+        h.setup(0.0)
+        res["after_terminate"] = _run_plant(h, 0, 80)
+    return res
+
+
 def plant_step_sizes(fmu):
     """Any communication step: after the brake has opened (100 x 1 ms), a sequence of odd steps covers
     the same time as 0.1 ms steps; the motion must agree up to the integration error."""
@@ -334,6 +372,36 @@ def cosim_accuracy(plant_fmu, drive_fmu, steps, drive_values, ref_step=1e-4):
         err = np.abs(c["car.position"] - xr)
         out[str(h)] = {"max_err_m": float(err.max()), "t_at_max": float(c.time[int(err.argmax())]),
                        "rtf": c.info["rtf"], "warnings": c.info["fmu_warnings"]}
+    return out
+
+
+def cosim_monitor(plant_fmu, drive_fmu, t_end, drive_values, steps):
+    """fmpy master with the coupling monitor, on_instability="stop", at each step: what it reports
+    (result fields, logged warning, FMU warnings) and where it stopped."""
+    _host_package()
+    import logging
+
+    from reeve_fmu.cosim import MONITOR_FIELDS, cosimulate, monolithic
+
+    logged = []
+
+    class _H(logging.Handler):
+        def emit(self, rec):
+            logged.append((rec.levelname, rec.getMessage()))
+
+    logging.getLogger("reeve_fmu.cosim").addHandler(_H())
+    out = {}
+    for h in steps:
+        del logged[:]
+        c = cosimulate(plant_fmu, drive_fmu, step=h, t_end=t_end, drive_values=drive_values,
+                       on_instability="stop", record=["car.position"])
+        out[str(h)] = {**{k: c.info[k] for k in MONITOR_FIELDS}, "logged": list(logged),
+                       "stopped": c.info["stopped_by_monitor"], "t_last": float(c.time[-1]),
+                       "steps": c.info["steps"], "fmu_warnings": c.info["fmu_warnings"],
+                       "torque": [float(x) for x in c["motor.torque"]]}
+        m = monolithic(step=h, t_end=t_end, record_step=h, drive_values=drive_values, plant_fmu=plant_fmu,
+                       on_instability="stop")
+        out[str(h)]["in_process"] = {k: m.info[k] for k in MONITOR_FIELDS}
     return out
 
 

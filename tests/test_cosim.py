@@ -101,6 +101,74 @@ def test_cosim_error_at_1ms_is_below_half_a_millimetre(demo):
     assert r["max_err_m"] <= 0.5e-3, r
 
 
+def test_demo_coupling_monitor_reports_a_stable_run(demo):
+    """1 ms Gauss-Seidel (the demo): the monitor finds nothing; its figures are in summary.json."""
+    c = json.loads((demo["out"] / "summary.json").read_text())["cosim"]
+    assert c["coupling_stable"] is True and c["instability_detected_at"] is None, c["instability"]
+    assert c["torque_chatter_max"] < 0.02 and c["energy_residual_max_ratio"] < 0.2
+    assert 0.0 < c["coupling_energy_residual_J"] < 1e-3 * c["transmitted_energy_J"]
+    assert "coupling monitor: stable" in demo["stdout"]
+
+
+# ------------------------------------------------------------------------------------------------
+# coupling monitor (docs/hard-cases.md, "Large communication steps")
+# ------------------------------------------------------------------------------------------------
+def test_monitor_energy_residual_equals_the_zero_order_hold_error():
+    """Power-bond residual against the analytic value: a torque tau held on a free inertia J for n
+    steps; the plant gains tau * dtheta = tau (w_k h + tau h^2 / 2J), the drive accounted tau w_k h,
+    so the coupling created n tau^2 h^2 / (2J)."""
+    from reeve_fmu.cosim import CouplingMonitor
+
+    J, tau, h, n = 2.5, 300.0, 1e-3, 400
+    m = CouplingMonitor(h, 1000.0)
+    w = th = 0.0
+    for k in range(n):
+        th1 = th + w * h + tau * h * h / (2 * J)
+        m.update((k + 1) * h, tau, tau, 1.0, w, th, th1)
+        w, th = w + tau * h / J, th1
+    assert m.residual_J == pytest.approx(n * tau**2 * h**2 / (2 * J), rel=1e-9)
+    assert m.transmitted_J == pytest.approx(0.5 * J * w * w, rel=1e-9)
+    assert m.stable and m.chatter_max == 0.0
+
+
+def test_monitor_flags_non_finite_and_alternating_torque():
+    from reeve_fmu.cosim import CouplingMonitor
+
+    m = CouplingMonitor(1e-3, 1000.0)
+    for k in range(100):                                    # +-60 N m alternating: 6 % of 1000 N m
+        m.update((k + 1) * 1e-3, 500.0, 500.0 + (60.0 if k % 2 else -60.0), 1.0, 0.0, 0.0, 0.0)
+    r = m.report("gauss-seidel")
+    assert r["coupling_stable"] is False and r["instability"]["criterion"] == "torque chatter"
+    assert r["instability"]["peak"] == pytest.approx(0.06)
+    assert "t = 0.0" in r["instability"]["message"] and "torque chatter 5." in r["instability"]["message"]
+    m = CouplingMonitor(1e-3, 1000.0)
+    m.update(1e-3, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+    assert m.update(2e-3, 0.0, float("nan"), 1.0, 0.0, 0.0, 0.0)["criterion"] == "non-finite"
+
+
+def test_large_communication_step_is_detected_and_reported_by_the_master(fmus):
+    """The fmpy master with the monitor on the first 1.6 s of the trip (pre-torque, brake opening at
+    0.71 s, start at 0.9 s): at 1 ms nothing is reported; at 10 ms (Gauss-Seidel) the speed loop
+    diverges once the brake has opened; the master logs it, names time, criterion and value, and
+    stops there. The in-process coupling at the same step (bit-identical to the FMUs) reports the same."""
+    r = job("cosim_monitor", fmus["plant"], fmus["drive"], 1.6, R1_DRIVE, [1e-3, 1e-2])
+    ok, bad = r["0.001"], r["0.01"]
+    assert ok["coupling_stable"] is True and not ok["stopped"] and ok["logged"] == []
+    assert ok["steps"] == 1600 and all("version mismatch" in w for w in ok["fmu_warnings"])
+    assert 0.0 <= min(ok["torque"]) and max(ok["torque"]) < 850.0   # lifting a full car: 0..839 N m
+    assert bad["coupling_stable"] is False and bad["stopped"]
+    t = bad["instability_detected_at"]
+    assert 0.85 <= t <= 1.0 and bad["t_last"] == pytest.approx(t)
+    assert bad["instability"]["criterion"] == "torque chatter" and bad["instability"]["value"] > 0.05
+    d = [b - a for a, b in zip(bad["torque"][-6:], bad["torque"][-5:])]
+    assert all(x * y < 0 and abs(y) > 1.5 * abs(x) for x, y in zip(d, d[1:])), d  # pole near z = -2
+    (level, msg), = bad["logged"]
+    assert level == "WARNING" and f"t = {t:.3f} s" in msg and "torque chatter" in msg and "10 ms" in msg
+    assert any("communication step 10 ms > 2 ms" in w for w in bad["fmu_warnings"])
+    for k in ("0.001", "0.01"):
+        assert r[k]["in_process"]["instability_episodes"] == r[k]["instability_episodes"]
+
+
 def _ssp_values(fmus):
     from reeve_fmu.cosim import ssp_parameters
 

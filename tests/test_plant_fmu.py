@@ -246,6 +246,21 @@ def test_plant_errors_are_logged_and_discarded(fmus):
     assert r["final"] == 0
 
 
+def test_plant_reset_after_errors_reproduces_a_clean_run(fmus):
+    """fmi2Reset brings the real plant FMU back: after a normal run, and from the error state left by a
+    NaN torque and a solver failure (with another car.load), reset + re-initialization reproduce the
+    fresh instance's first 80 steps bit for bit, and the parameter is back at its default."""
+    r = job("plant_reset", fmus["plant"])
+    errs = "\n".join(m for s, m in r["error_msgs"] if s == 3)
+    assert (r["nan_step"], r["crash_step"], r["refused_step"]) == (2, 2, 2)
+    assert "motor.torque = nan is not finite" in errs and "SolverError" in errs
+    assert r["empty_car_init"] != r["init"]          # car.load = 0 really built another model
+    assert r["load_after_reset"] == 1000.0
+    assert r["init_after_error"] == r["init"]
+    assert r["after_error"] == r["ref"] and r["after_terminate"] == r["ref"]
+    assert [m for s, m in r["msgs_after_error"] if s >= 2] == []
+
+
 def test_drive_errors_are_logged(fmus):
     r = job("drive_errors", fmus["drive"])
     bad = "\n".join(m for s, m in r["bad_param_msgs"] if s == 3)
