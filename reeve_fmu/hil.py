@@ -506,20 +506,7 @@ def cli_hil(args) -> int:
     except HilError as exc:
         print(f"reeve-fmu hil: error: {exc}", file=sys.stderr)
         return 3
-    rc = _print_summary(summary, cfg)
-    if summary.get("plant", {}).get("kind") == "fmu" and _is_cli_process():
-        # results are written: skip interpreter finalisation, where pythonfmu FMUs occasionally corrupt
-        # the heap at exit ("corrupted double-linked list", fmi.md §5.2, PythonFMU #228)
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(rc)
-    return rc
-
-
-def _is_cli_process() -> bool:
-    """True when this process is the `reeve-fmu` console script or `python -m reeve_fmu.cli`."""
-    p = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
-    return p is not None and (p.name == "reeve-fmu" or (p.name == "cli.py" and p.parent.name == "reeve_fmu"))
+    return _print_summary(summary, cfg)
 
 
 def _print_summary(summary: dict, cfg) -> int:
