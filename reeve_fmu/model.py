@@ -197,7 +197,8 @@ def _build(scene: Scene) -> Model:
 
     # ------------------------------------------------------------------ nodes, spans, elements
     nodes = []          # dict(r=_Affine, e=unit span dir, s=(dict q->coef, dict par->coef, const))
-    elements = []       # (node_a, node_b, rope index, span index)
+    elements = []       # (node_a, node_b, rope index, span index; for W2 wrap elements: the stop index)
+    wrap_el = set()     # indices of W2 wrap elements
     rope_info = []
     n_par = len(scene.ropes)
     par0 = np.zeros(n_par)
@@ -259,7 +260,12 @@ def _build(scene: Scene) -> Model:
             if 0 < k < len(stops) - 1:
                 T_in, T_out = spans[k - 1][1], spans[k][0]
                 theta = wrap_angle(c, a, sgn, T_in, T_out)
-                lw = R * theta if rope.wrap_model == "W1" else 0.0
+                lw = R * theta if rope.wrap_model in ("W1", "W2") else 0.0
+                if rope.wrap_model == "W2" and lw / rope.wrap_elements < scene.solver.min_span:
+                    raise SceneError(
+                        f"{scene.source}: [ropes.{rope.name}.wrap_elements] the W2 wrap on sheave "
+                        f"{sh.name!r} ({lw:.4g} m of rope) would have elements shorter than "
+                        f"solver.min_span = {scene.solver.min_span:g} m; use fewer wrap elements or W1")
                 wraps[k] = (lw, T_in, T_out, theta)
             else:
                 wraps[k] = (0.0, None, None, 0.0)
@@ -287,26 +293,29 @@ def _build(scene: Scene) -> Model:
             sheave_dof[sh.name] = j
             dof_R[j] = sh.radius
             lw, T_in, T_out, theta = wraps[k]
+            # W1 lumps the wrap rope's inertia and weight into the sigma and body rows; W2 assembles
+            # them from its wrap elements (below)
+            lump = lw if rope.wrap_model == "W1" else 0.0
             J = sh.inertia + (scene.drive.motor_inertia if scene.drive.sheave == sh.name else 0.0)
             if sh.slip:
                 # the sheave turns on its own (angle coordinate, rad); rope and groove are coupled
                 # by friction (system.traction_force)
                 jt = new_q(f"{sh.name}.theta", "angle", 0.0)
                 M0_terms.append((jt, jt, J))
-                M0_terms.append((j, j, rhoA * lw))
+                M0_terms.append((j, j, rhoA * lump))
                 slip_info.update(sheave=sh, s=j, th=jt, wrap=theta)
             else:
-                M0_terms.append((j, j, J / sh.radius ** 2 + rhoA * lw))
+                M0_terms.append((j, j, J / sh.radius ** 2 + rhoA * lump))
             if sh.kind == "drum":
                 drums.append((j, rhoA, 1.0 if k == 0 else -1.0))
-            if lw > 0 and sh.body is not None:
+            if lump > 0 and sh.body is not None:
                 chord = T_out - T_in
                 for ax, jb in body_dofs[sh.body].items():
                     kk = AXES.index(ax)
-                    M0_terms.append((jb, jb, rhoA * lw))
+                    M0_terms.append((jb, jb, rhoA * lump))
                     M0_terms.append((jb, j, -rhoA * chord[kk]))
                     M0_terms.append((j, jb, -rhoA * chord[kk]))
-                    F0[jb] = F0.get(jb, 0.0) + rhoA * lw * g[kk]
+                    F0[jb] = F0.get(jb, 0.0) + rhoA * lump * g[kk]
             wrap_len_total.append((ir, lw))
 
         def s_row(kind, k):
@@ -323,6 +332,7 @@ def _build(scene: Scene) -> Model:
             return ({}, {ir: 1.0}, 0.0)
 
         span_nodes = []
+        rope_wraps = []    # W2: (stop, element indices) per wrap
         for k, (TA, TB) in enumerate(spans):
             e = (TB - TA) / np.linalg.norm(TB - TA)
             ends = []
@@ -349,6 +359,10 @@ def _build(scene: Scene) -> Model:
                         node["d"] = free_slope(f"{rope.name}.span{k}.{kind}", e)
                 nodes.append(node)
                 ends.append(len(nodes) - 1)
+            if rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and wraps[k][0] > 0:
+                rope_wraps.append((k, _wrap_elements(
+                    nodes, elements, wrap_el, span_nodes[k - 1][1], ends[0], geo[k], wraps[k],
+                    sheaves[stops[k].sheave], sig[k], rope.wrap_elements, ir, k, body_point, world)))
             n_el = rope.elements_per_span
             chain = [ends[0]]
             for m in range(1, n_el):
@@ -393,7 +407,7 @@ def _build(scene: Scene) -> Model:
                 tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(elements) - 1, 1)
         rope_end_taps.append((rope.name, span_nodes[0][2], span_nodes[-1][3]))
         rope_info.append(dict(name=rope.name, spans=span_nodes, wraps=wraps, sig=sig, rhoA=rhoA,
-                              first_drum=first_drum, last_drum=last_drum))
+                              first_drum=first_drum, last_drum=last_drum, wrap_elements=rope_wraps))
 
     nq = len(q_names)
     # bodies: mass and gravity
@@ -467,6 +481,9 @@ def _build(scene: Scene) -> Model:
         else:
             el_g[ie] = g
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in elements]
+    # W2 wrap elements carry no axial strain energy: with no slip the groove holds the rope, the wrap
+    # material cannot stretch and the tension difference goes into the sheave (docs/numerics.md)
+    el_EA = np.array([0.0 if ie in wrap_el else r.EA * r.count for ie, r in enumerate(rope_of_el)], float)
 
     # fixed-width element -> q maps (every p row of B has at most a few non-zeros): the hot gather
     # and scatter loops then have a constant trip count instead of CSR indirection
@@ -571,7 +588,7 @@ def _build(scene: Scene) -> Model:
         nd=nd, nq=nq,
         B_ptr=np.array(ptr, np.int64), B_idx=np.array(idx, np.int64), B_val=np.array(val, float),
         el_idx=el_idx, el_map=el_map, el_coef=el_coef, el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
-        el_EA=np.array([r.EA * r.count for r in rope_of_el], float),
+        el_EA=el_EA,
         el_nu=np.array([r.damping for r in rope_of_el], float),
         el_tonly=np.array([int(r.tension_only) for r in rope_of_el], np.int64),
         el_g=el_g, el_C=el_C, M0=M0, F0=F0v,
@@ -638,7 +655,46 @@ def _build(scene: Scene) -> Model:
                  body_dofs=body_dofs, ropes=tuple(rope_info), statics_unknowns=tuple(unknowns),
                  statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
-                 info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R))
+                 info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R,
+                           wrap_elements=frozenset(wrap_el)))
+
+
+def _rotate(v, a, ang):
+    """v turned by ang about the unit axis a (Rodrigues)."""
+    c, s = math.cos(ang), math.sin(ang)
+    return v * c + np.cross(a, v) * s + a * (a @ v) * (1.0 - c)
+
+
+def _wrap_elements(nodes, elements, wrap_el, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
+                   body_point, world):
+    """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, from the in-tangent node
+    n_in (end of the incoming span) to the out-tangent node n_out (start of the outgoing span), both
+    shared with the spans. Interior nodes sit on the pitch circle at equal angles, fixed to the sheave's
+    body (Eulerian); their slope is the unit tangent of the circle (|d| = 1: the holonomic no-slip
+    model neglects creep, so the wrap rope moves at the rim speed); their material coordinate is tied
+    to the sheave, s = sigma + m lw / n_w. Returns the new element indices."""
+    c, R, a, sgn = geo
+    lw, T_in, T_out, theta = wrap
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    chain = [n_in]
+    for m in range(1, n_w):
+        P = c + _rotate(T_in - c, a, sgn * theta * m / n_w)
+        t = sgn * np.cross(a, P - c) / R
+        node = dict(r=body_point(sh.body, P - world(sh.body, (0, 0, 0))), e=t,
+                    s=({j_sig: 1.0}, {}, lw * m / n_w), d=_Affine(t))
+        nodes.append(node)
+        chain.append(len(nodes) - 1)
+    chain.append(n_out)
+    for node, T in ((nodes[n_in], T_in), (nodes[n_out], T_out)):
+        t = sgn * np.cross(a, T - c) / R
+        if np.linalg.norm(t - node["e"]) > 1e-6:
+            raise GeometryError(f"sheave {sh.name!r}: the span does not leave the pitch circle tangentially")
+    new = []
+    for m in range(n_w):
+        elements.append((chain[m], chain[m + 1], ir, stop))
+        wrap_el.add(len(elements) - 1)
+        new.append(len(elements) - 1)
+    return new
 
 
 def sheaves_kind(scene: Scene, qname: str) -> str:
