@@ -667,28 +667,27 @@ def _rotate(v, a, ang):
 
 def _wrap_elements(nodes, elements, wrap_el, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
                    body_point, world):
-    """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, from the in-tangent node
-    n_in (end of the incoming span) to the out-tangent node n_out (start of the outgoing span), both
-    shared with the spans. Interior nodes sit on the pitch circle at equal angles, fixed to the sheave's
-    body (Eulerian); their slope is the unit tangent of the circle (|d| = 1: the holonomic no-slip
-    model neglects creep, so the wrap rope moves at the rim speed); their material coordinate is tied
-    to the sheave, s = sigma + m lw / n_w. Returns the new element indices."""
+    """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, between the tangent points
+    of the incoming span (node n_in) and the outgoing span (node n_out). The wrap nodes sit on the
+    pitch circle at equal angles, fixed to the sheave's body (Eulerian); their slope is the unit
+    tangent of the circle (|d| = 1: the holonomic no-slip model neglects creep, so the wrap rope
+    moves at the rim speed and keeps its strain-free length R theta); their material coordinate is
+    tied to the sheave, s = sigma + m lw / n_w. The end nodes share position and s with the span
+    nodes but not the slope: the span keeps its own stretch (the groove carries the tension
+    difference), so the path is tangent-continuous and the wrap adds nothing to the spans' equations.
+    Returns the new element indices."""
     c, R, a, sgn = geo
     lw, T_in, T_out, theta = wrap
     a = np.asarray(a, float) / np.linalg.norm(a)
-    chain = [n_in]
-    for m in range(1, n_w):
+    chain = []
+    for m in range(n_w + 1):
         P = c + _rotate(T_in - c, a, sgn * theta * m / n_w)
         t = sgn * np.cross(a, P - c) / R
-        node = dict(r=body_point(sh.body, P - world(sh.body, (0, 0, 0))), e=t,
-                    s=({j_sig: 1.0}, {}, lw * m / n_w), d=_Affine(t))
-        nodes.append(node)
+        if m in (0, n_w) and np.linalg.norm(t - nodes[n_in if m == 0 else n_out]["e"]) > 1e-6:
+            raise GeometryError(f"sheave {sh.name!r}: a span does not meet the pitch circle tangentially")
+        nodes.append(dict(r=body_point(sh.body, P - world(sh.body, (0, 0, 0))), e=t,
+                          s=({j_sig: 1.0}, {}, lw * m / n_w), d=_Affine(t)))
         chain.append(len(nodes) - 1)
-    chain.append(n_out)
-    for node, T in ((nodes[n_in], T_in), (nodes[n_out], T_out)):
-        t = sgn * np.cross(a, T - c) / R
-        if np.linalg.norm(t - node["e"]) > 1e-6:
-            raise GeometryError(f"sheave {sh.name!r}: the span does not leave the pitch circle tangentially")
     new = []
     for m in range(n_w):
         elements.append((chain[m], chain[m + 1], ir, stop))
