@@ -197,8 +197,8 @@ def _build(scene: Scene) -> Model:
 
     # ------------------------------------------------------------------ nodes, spans, elements
     nodes = []          # dict(r=_Affine, e=unit span dir, s=(dict q->coef, dict par->coef, const))
-    elements = []       # (node_a, node_b, rope index, span index; for W2 wrap elements: the stop index)
-    wrap_el = set()     # indices of W2 wrap elements
+    elements = []       # (node_a, node_b, rope index, span index)
+    wrap_elements = []  # W2: (node_a, node_b, rope index, stop index)
     rope_info = []
     n_par = len(scene.ropes)
     par0 = np.zeros(n_par)
@@ -261,11 +261,6 @@ def _build(scene: Scene) -> Model:
                 T_in, T_out = spans[k - 1][1], spans[k][0]
                 theta = wrap_angle(c, a, sgn, T_in, T_out)
                 lw = R * theta if rope.wrap_model in ("W1", "W2") else 0.0
-                if rope.wrap_model == "W2" and lw / rope.wrap_elements < scene.solver.min_span:
-                    raise SceneError(
-                        f"{scene.source}: [ropes.{rope.name}.wrap_elements] the W2 wrap on sheave "
-                        f"{sh.name!r} ({lw:.4g} m of rope) would have elements shorter than "
-                        f"solver.min_span = {scene.solver.min_span:g} m; use fewer wrap elements or W1")
                 wraps[k] = (lw, T_in, T_out, theta)
             else:
                 wraps[k] = (0.0, None, None, 0.0)
@@ -361,7 +356,7 @@ def _build(scene: Scene) -> Model:
                 ends.append(len(nodes) - 1)
             if rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and wraps[k][0] > 0:
                 rope_wraps.append((k, _wrap_elements(
-                    nodes, elements, wrap_el, span_nodes[k - 1][1], ends[0], geo[k], wraps[k],
+                    nodes, wrap_elements, span_nodes[k - 1][1], ends[0], geo[k], wraps[k],
                     sheaves[stops[k].sheave], sig[k], rope.wrap_elements, ir, k, body_point, world)))
             n_el = rope.elements_per_span
             chain = [ends[0]]
@@ -483,7 +478,6 @@ def _build(scene: Scene) -> Model:
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in elements]
     # W2 wrap elements carry no axial strain energy: with no slip the groove holds the rope, the wrap
     # material cannot stretch and the tension difference goes into the sheave (docs/numerics.md)
-    el_EA = np.array([0.0 if ie in wrap_el else r.EA * r.count for ie, r in enumerate(rope_of_el)], float)
 
     # fixed-width element -> q maps (every p row of B has at most a few non-zeros): the hot gather
     # and scatter loops then have a constant trip count instead of CSR indirection
@@ -509,6 +503,10 @@ def _build(scene: Scene) -> Model:
     F0v = np.zeros(nq)
     for j, vv in F0.items():
         F0v[j] += vv
+    wrap_idx = np.zeros((len(wrap_elements), 4 * nd + 2), np.int64)   # W2 wraps: cubic layout
+    for iw, (a, b, _, _) in enumerate(wrap_elements):
+        wrap_idx[iw] = pidx(a) + didx(a) + [sidx(a)] + pidx(b) + didx(b) + [sidx(b)]
+    _fold_wraps(nd, scene, wrap_elements, wrap_idx, B, c0 + Bpar @ par0, q0, g, M0, F0v)
 
     # ------------------------------------------------------------------ drive
     dv = scene.drive
@@ -588,7 +586,7 @@ def _build(scene: Scene) -> Model:
         nd=nd, nq=nq,
         B_ptr=np.array(ptr, np.int64), B_idx=np.array(idx, np.int64), B_val=np.array(val, float),
         el_idx=el_idx, el_map=el_map, el_coef=el_coef, el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
-        el_EA=el_EA,
+        el_EA=np.array([r.EA * r.count for r in rope_of_el], float),
         el_nu=np.array([r.damping for r in rope_of_el], float),
         el_tonly=np.array([int(r.tension_only) for r in rope_of_el], np.int64),
         el_g=el_g, el_C=el_C, M0=M0, F0=F0v,
@@ -656,7 +654,30 @@ def _build(scene: Scene) -> Model:
                  statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
                  info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R,
-                           wrap_elements=frozenset(wrap_el)))
+                           wrap_el_idx=wrap_idx))
+
+
+def _fold_wraps(nd, scene, wrap_elements, wrap_idx, B, c, q0, g, M0, F0):
+    """Add the W2 wrap elements to the constant q-level terms. With no slip every coordinate of a wrap
+    element is fixed to its sheave's body or moves with sigma (positions translate with the body,
+    slopes are constant, s1 and s2 shift together, so l and r2 - r1 are constant): its mass matrix
+    B_e^T M_e B_e is constant, its quadratic-velocity vector vanishes, its gravity is constant and its
+    (bending) strain energy is constant. The element kernel is evaluated once, here, instead of in
+    every residual."""
+    from .elements.cubic import cubic_element
+    if not wrap_elements:
+        return
+    p = B @ np.asarray(q0, float) + c
+    ge = g[[0, 2]] if nd == 2 else g
+    ne = wrap_idx.shape[1]
+    Me, Qe = np.zeros((ne, ne)), np.zeros(ne)
+    for (_, _, ir, _), idx in zip(wrap_elements, wrap_idx):
+        rope = scene.ropes[ir]
+        cubic_element(nd, rope.rhoA * rope.count, 0.0, rope.EI * rope.count, 0.0, False, ge,
+                      p[idx].copy(), np.zeros(ne), Me, Qe)
+        Be = B[idx]
+        M0 += Be.T @ Me @ Be
+        F0 += Be.T @ Qe
 
 
 def _rotate(v, a, ang):
@@ -665,7 +686,7 @@ def _rotate(v, a, ang):
     return v * c + np.cross(a, v) * s + a * (a @ v) * (1.0 - c)
 
 
-def _wrap_elements(nodes, elements, wrap_el, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
+def _wrap_elements(nodes, elements, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
                    body_point, world):
     """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, between the tangent points
     of the incoming span (node n_in) and the outgoing span (node n_out). The wrap nodes sit on the
@@ -691,7 +712,6 @@ def _wrap_elements(nodes, elements, wrap_el, n_in, n_out, geo, wrap, sh, j_sig, 
     new = []
     for m in range(n_w):
         elements.append((chain[m], chain[m + 1], ir, stop))
-        wrap_el.add(len(elements) - 1)
         new.append(len(elements) - 1)
     return new
 
