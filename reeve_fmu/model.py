@@ -12,7 +12,9 @@ ALE mass matrix has no null vector (§6.2). The generalized coordinates q are:
 and every element coordinate p (node positions and s) is linear in them: p = B q + c. c holds the
 constant parts and the rope lengths (s at the far rope end), which the initial statics may solve for.
 Wraps: W0 puts in- and out-node at the same s; W1 gives the wrap a constant material length R*theta
-whose rope mass moves with the sheave (its kinetic energy is lumped into the body and sigma rows).
+whose rope mass moves with the sheave (its kinetic energy is lumped into the body and sigma rows);
+W2 (cubic ropes) represents that wrap by cubic elements on the pitch circle whose constant contributions
+are folded into the same rows (_fold_wraps).
 Tangent points are computed from the initial geometry and stay fixed in the sheave's body frame
 (exact while the span directions keep their initial direction; bodies here only translate).
 

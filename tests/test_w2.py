@@ -8,7 +8,6 @@ energy without damping); none is read back from the engine's formulas.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
