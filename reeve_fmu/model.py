@@ -12,7 +12,9 @@ ALE mass matrix has no null vector (§6.2). The generalized coordinates q are:
 and every element coordinate p (node positions and s) is linear in them: p = B q + c. c holds the
 constant parts and the rope lengths (s at the far rope end), which the initial statics may solve for.
 Wraps: W0 puts in- and out-node at the same s; W1 gives the wrap a constant material length R*theta
-whose rope mass moves with the sheave (its kinetic energy is lumped into the body and sigma rows).
+whose rope mass moves with the sheave (its kinetic energy is lumped into the body and sigma rows);
+W2 (cubic ropes) represents that wrap by cubic elements on the pitch circle whose constant contributions
+are folded into the same rows (_fold_wraps).
 Tangent points are computed from the initial geometry and stay fixed in the sheave's body frame
 (exact while the span directions keep their initial direction; bodies here only translate).
 
@@ -198,6 +200,7 @@ def _build(scene: Scene) -> Model:
     # ------------------------------------------------------------------ nodes, spans, elements
     nodes = []          # dict(r=_Affine, e=unit span dir, s=(dict q->coef, dict par->coef, const))
     elements = []       # (node_a, node_b, rope index, span index)
+    wrap_elements = []  # W2: (node_a, node_b, rope index, stop index)
     rope_info = []
     n_par = len(scene.ropes)
     par0 = np.zeros(n_par)
@@ -259,7 +262,7 @@ def _build(scene: Scene) -> Model:
             if 0 < k < len(stops) - 1:
                 T_in, T_out = spans[k - 1][1], spans[k][0]
                 theta = wrap_angle(c, a, sgn, T_in, T_out)
-                lw = R * theta if rope.wrap_model == "W1" else 0.0
+                lw = R * theta if rope.wrap_model in ("W1", "W2") else 0.0
                 wraps[k] = (lw, T_in, T_out, theta)
             else:
                 wraps[k] = (0.0, None, None, 0.0)
@@ -287,26 +290,29 @@ def _build(scene: Scene) -> Model:
             sheave_dof[sh.name] = j
             dof_R[j] = sh.radius
             lw, T_in, T_out, theta = wraps[k]
+            # W1 lumps the wrap rope's inertia and weight into the sigma and body rows; W2 assembles
+            # them from its wrap elements (below)
+            lump = lw if rope.wrap_model == "W1" else 0.0
             J = sh.inertia + (scene.drive.motor_inertia if scene.drive.sheave == sh.name else 0.0)
             if sh.slip:
                 # the sheave turns on its own (angle coordinate, rad); rope and groove are coupled
                 # by friction (system.traction_force)
                 jt = new_q(f"{sh.name}.theta", "angle", 0.0)
                 M0_terms.append((jt, jt, J))
-                M0_terms.append((j, j, rhoA * lw))
+                M0_terms.append((j, j, rhoA * lump))
                 slip_info.update(sheave=sh, s=j, th=jt, wrap=theta)
             else:
-                M0_terms.append((j, j, J / sh.radius ** 2 + rhoA * lw))
+                M0_terms.append((j, j, J / sh.radius ** 2 + rhoA * lump))
             if sh.kind == "drum":
                 drums.append((j, rhoA, 1.0 if k == 0 else -1.0))
-            if lw > 0 and sh.body is not None:
+            if lump > 0 and sh.body is not None:
                 chord = T_out - T_in
                 for ax, jb in body_dofs[sh.body].items():
                     kk = AXES.index(ax)
-                    M0_terms.append((jb, jb, rhoA * lw))
+                    M0_terms.append((jb, jb, rhoA * lump))
                     M0_terms.append((jb, j, -rhoA * chord[kk]))
                     M0_terms.append((j, jb, -rhoA * chord[kk]))
-                    F0[jb] = F0.get(jb, 0.0) + rhoA * lw * g[kk]
+                    F0[jb] = F0.get(jb, 0.0) + rhoA * lump * g[kk]
             wrap_len_total.append((ir, lw))
 
         def s_row(kind, k):
@@ -323,6 +329,7 @@ def _build(scene: Scene) -> Model:
             return ({}, {ir: 1.0}, 0.0)
 
         span_nodes = []
+        rope_wraps = []    # W2: (stop, element indices) per wrap
         for k, (TA, TB) in enumerate(spans):
             e = (TB - TA) / np.linalg.norm(TB - TA)
             ends = []
@@ -349,6 +356,10 @@ def _build(scene: Scene) -> Model:
                         node["d"] = free_slope(f"{rope.name}.span{k}.{kind}", e)
                 nodes.append(node)
                 ends.append(len(nodes) - 1)
+            if rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and wraps[k][0] > 0:
+                rope_wraps.append((k, _wrap_elements(
+                    nodes, wrap_elements, span_nodes[k - 1][1], ends[0], geo[k], wraps[k],
+                    sheaves[stops[k].sheave], sig[k], rope.wrap_elements, ir, k, body_point, world)))
             n_el = rope.elements_per_span
             chain = [ends[0]]
             for m in range(1, n_el):
@@ -393,7 +404,7 @@ def _build(scene: Scene) -> Model:
                 tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(elements) - 1, 1)
         rope_end_taps.append((rope.name, span_nodes[0][2], span_nodes[-1][3]))
         rope_info.append(dict(name=rope.name, spans=span_nodes, wraps=wraps, sig=sig, rhoA=rhoA,
-                              first_drum=first_drum, last_drum=last_drum))
+                              first_drum=first_drum, last_drum=last_drum, wrap_elements=rope_wraps))
 
     nq = len(q_names)
     # bodies: mass and gravity
@@ -467,6 +478,8 @@ def _build(scene: Scene) -> Model:
         else:
             el_g[ie] = g
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in elements]
+    # W2 wrap elements carry no axial strain energy: with no slip the groove holds the rope, the wrap
+    # material cannot stretch and the tension difference goes into the sheave (docs/numerics.md)
 
     # fixed-width element -> q maps (every p row of B has at most a few non-zeros): the hot gather
     # and scatter loops then have a constant trip count instead of CSR indirection
@@ -492,6 +505,10 @@ def _build(scene: Scene) -> Model:
     F0v = np.zeros(nq)
     for j, vv in F0.items():
         F0v[j] += vv
+    wrap_idx = np.zeros((len(wrap_elements), 4 * nd + 2), np.int64)   # W2 wraps: cubic layout
+    for iw, (a, b, _, _) in enumerate(wrap_elements):
+        wrap_idx[iw] = pidx(a) + didx(a) + [sidx(a)] + pidx(b) + didx(b) + [sidx(b)]
+    _fold_wraps(nd, scene, wrap_elements, wrap_idx, B, c0 + Bpar @ par0, q0, g, M0, F0v)
 
     # ------------------------------------------------------------------ drive
     dv = scene.drive
@@ -638,7 +655,67 @@ def _build(scene: Scene) -> Model:
                  body_dofs=body_dofs, ropes=tuple(rope_info), statics_unknowns=tuple(unknowns),
                  statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
-                 info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R))
+                 info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R,
+                           wrap_el_idx=wrap_idx))
+
+
+def _fold_wraps(nd, scene, wrap_elements, wrap_idx, B, c, q0, g, M0, F0):
+    """Add the W2 wrap elements to the constant q-level terms. With no slip every coordinate of a wrap
+    element is fixed to its sheave's body or moves with sigma (positions translate with the body,
+    slopes are constant, s1 and s2 shift together, so l and r2 - r1 are constant): its mass matrix
+    B_e^T M_e B_e is constant, its quadratic-velocity vector vanishes, its gravity is constant and its
+    (bending) strain energy is constant. The element kernel is evaluated once, here, instead of in
+    every residual."""
+    from .elements.cubic import cubic_element
+    if not wrap_elements:
+        return
+    p = B @ np.asarray(q0, float) + c
+    ge = g[[0, 2]] if nd == 2 else g
+    ne = wrap_idx.shape[1]
+    Me, Qe = np.zeros((ne, ne)), np.zeros(ne)
+    for (_, _, ir, _), idx in zip(wrap_elements, wrap_idx):
+        rope = scene.ropes[ir]
+        cubic_element(nd, rope.rhoA * rope.count, 0.0, rope.EI * rope.count, 0.0, False, ge,
+                      p[idx].copy(), np.zeros(ne), Me, Qe)
+        Be = B[idx]
+        M0 += Be.T @ Me @ Be
+        F0 += Be.T @ Qe
+
+
+def _rotate(v, a, ang):
+    """v turned by ang about the unit axis a (Rodrigues)."""
+    c, s = math.cos(ang), math.sin(ang)
+    return v * c + np.cross(a, v) * s + a * (a @ v) * (1.0 - c)
+
+
+def _wrap_elements(nodes, elements, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
+                   body_point, world):
+    """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, between the tangent points
+    of the incoming span (node n_in) and the outgoing span (node n_out). The wrap nodes sit on the
+    pitch circle at equal angles, fixed to the sheave's body (Eulerian); their slope is the unit
+    tangent of the circle (|d| = 1: the holonomic no-slip model neglects creep, so the wrap rope
+    moves at the rim speed and keeps its strain-free length R theta); their material coordinate is
+    tied to the sheave, s = sigma + m lw / n_w. The end nodes share position and s with the span
+    nodes but not the slope: the span keeps its own stretch (the groove carries the tension
+    difference), so the path is tangent-continuous and the wrap adds nothing to the spans' equations.
+    Returns the new element indices."""
+    c, R, a, sgn = geo
+    lw, T_in, T_out, theta = wrap
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    chain = []
+    for m in range(n_w + 1):
+        P = c + _rotate(T_in - c, a, sgn * theta * m / n_w)
+        t = sgn * np.cross(a, P - c) / R
+        if m in (0, n_w) and np.linalg.norm(t - nodes[n_in if m == 0 else n_out]["e"]) > 1e-6:
+            raise GeometryError(f"sheave {sh.name!r}: a span does not meet the pitch circle tangentially")
+        nodes.append(dict(r=body_point(sh.body, P - world(sh.body, (0, 0, 0))), e=t,
+                          s=({j_sig: 1.0}, {}, lw * m / n_w), d=_Affine(t)))
+        chain.append(len(nodes) - 1)
+    new = []
+    for m in range(n_w):
+        elements.append((chain[m], chain[m + 1], ir, stop))
+        new.append(len(elements) - 1)
+    return new
 
 
 def sheaves_kind(scene: Scene, qname: str) -> str:

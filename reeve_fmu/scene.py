@@ -73,7 +73,8 @@ class Rope:
     tension_only: bool = False
     length: float | None = None      # m, unstretched length (needed for statics = "rope-length")
     elements_per_span: int = 1
-    wrap_model: str = "W1"           # W0: zero-length wraps, W1: constant-material wraps
+    wrap_model: str = "W1"           # W0: zero-length wraps, W1: constant-material wraps, W2: cubic wrap elements
+    wrap_elements: int = 2           # W2: cubic elements per wrap (1-4)
     element: str = "linear"          # linear | cubic (ALE-ANCF with bending; planar/spatial models)
     EI: float = 0.0                  # N m^2 per rope, bending stiffness (cubic elements)
 
@@ -161,7 +162,7 @@ SCHEMA_KEYS = {
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
-              "wrap_model", "route", "element", "EI"},
+              "wrap_model", "wrap_elements", "route", "element", "EI"},
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
               "table", "torque", "motor_inertia"},
@@ -418,9 +419,18 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                           damping=r.number(rp, path, "damping", 0.0, nonneg=True),
                           tension_only=r.boolean(rp, path, "tension_only", False), length=length,
                           elements_per_span=r.integer(rp, path, "elements_per_span", 1),
-                          wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1")),
+                          wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1", "W2")),
+                          wrap_elements=r.integer(rp, path, "wrap_elements", 2),
                           element=r.string(rp, path, "element", "linear", ("linear", "cubic")),
                           EI=r.number(rp, path, "EI", 0.0, nonneg=True)))
+        if ropes[-1].wrap_model == "W2" and ropes[-1].element != "cubic":
+            r.fail(f"{path}.wrap_model", "'W2' (cubic elements on the sheave wraps) needs element = 'cubic' "
+                                         "(planar or spatial model); linear ropes use 'W0' or 'W1'")
+        if "wrap_elements" in rp:
+            if ropes[-1].wrap_model != "W2":
+                r.fail(f"{path}.wrap_elements", "only used with wrap_model = 'W2'")
+            if ropes[-1].wrap_elements > 4:
+                r.fail(f"{path}.wrap_elements", f"must be 1-4, got {ropes[-1].wrap_elements}")
         if ropes[-1].element == "cubic" and model == "axial-1d":
             r.fail(f"{path}.element", "cubic elements bend: use scene.model = 'planar' or 'spatial'")
         if ropes[-1].element != ropes[0].element:

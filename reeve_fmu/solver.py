@@ -517,7 +517,7 @@ class Simulator:
             nd = m.nd
             o2 = 2 * nd + 1 if m.K.el_type == 1 else nd    # start of r2 in the element layout
             for ie, idx in enumerate(m.K.el_idx):
-                if not m.K.el_tonly[ie]:
+                if not m.K.el_tonly[ie] or ie in m.info.get("wrap_elements", ()):
                     continue
                 r1, r2 = p[idx[:nd]], p[idx[o2:o2 + nd]]
                 l = p[idx[-1]] - p[idx[2 * nd]]
