@@ -29,14 +29,16 @@ def cmd_simulate(args) -> int:
     from .solver import Simulator
 
     scene = load_scene(args.scene)
-    model = build_model(scene)
-    sim = Simulator(model, method=args.method, step=args.step)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
+    out = Path(args.out)
+    scene, chosen_step = _fidelity(args, scene, t_end, dt, out)
+    step = chosen_step if chosen_step is not None else args.step
+    model = build_model(scene)
+    sim = Simulator(model, method=args.method, step=step)
     t0 = time.perf_counter()
     res = sim.run(t_end, dt)
     wall = time.perf_counter() - t0
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cols = res.as_dict()
     time_ = cols.pop("time")
@@ -47,6 +49,28 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def _fidelity(args, scene, t_end, dt, out):
+    """Fidelity selection (docs/fidelity.md) when the scene has [accuracy] or --accuracy-* is given:
+    print and write the report, return the configured scene and the chosen step."""
+    if args.no_fidelity:
+        return scene, None
+    from .fidelity import accuracy_for, configure, select
+    outputs = None
+    if args.accuracy_outputs is not None:
+        outputs = [o.strip() for o in args.accuracy_outputs.split(",") if o.strip()]
+    acc = accuracy_for(scene, outputs=outputs, tol=args.accuracy_tol)
+    if acc is None:
+        return scene, None
+    if args.method not in (None, "gen-alpha"):
+        raise ValueError(f"fidelity selection chooses a generalized-alpha step; --method {args.method} "
+                         f"needs --no-fidelity")
+    report = select(scene, acc, t_end=t_end, out_dt=dt, step=args.step)
+    path = report.write_json(out / "fidelity.json")
+    print(report.text())
+    print(f"fidelity report -> {path}")
+    return configure(scene, report.chosen.config), report.chosen.config.step
+
+
 def _add_simulate(sub):
     p = sub.add_parser("simulate", help="simulate a scene file and write results.csv and results.png")
     p.add_argument("scene", help="scene TOML file")
@@ -55,6 +79,13 @@ def _add_simulate(sub):
     p.add_argument("--step", type=float, default=None, help="solver step [s] (default: scene solver.step)")
     p.add_argument("--method", choices=("gen-alpha", "radau", "dop853"), default=None)
     p.add_argument("--out", default="results", help="output directory (default: results/)")
+    p.add_argument("--accuracy-outputs", default=None, metavar="NAMES",
+                   help="fidelity selection: comma-separated outputs (overrides [accuracy].outputs)")
+    p.add_argument("--accuracy-tol", type=float, default=None, metavar="TOL",
+                   help="fidelity selection: tolerance, m or rad for positions/angles, fraction of the peak "
+                        "otherwise (overrides [accuracy].tol; docs/fidelity.md)")
+    p.add_argument("--no-fidelity", action="store_true",
+                   help="ignore [accuracy] and run the scene as written")
     p.set_defaults(func=cmd_simulate)
 
 
