@@ -32,12 +32,11 @@ def cmd_simulate(args) -> int:
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
     out = Path(args.out)
-    scene, chosen_step = _fidelity(args, scene, t_end, dt, out)
-    step = chosen_step if chosen_step is not None else args.step
-    model = build_model(scene)
-    sim = Simulator(model, method=args.method, step=step)
+    scene, chosen_step, res = _fidelity(args, scene, t_end, dt, out)
     t0 = time.perf_counter()
-    res = sim.run(t_end, dt)
+    if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
+        step = chosen_step if chosen_step is not None else args.step
+        res = Simulator(build_model(scene), method=args.method, step=step).run(t_end, dt)
     wall = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     cols = res.as_dict()
@@ -51,16 +50,17 @@ def cmd_simulate(args) -> int:
 
 def _fidelity(args, scene, t_end, dt, out):
     """Fidelity selection (docs/fidelity.md) when the scene has [accuracy] or --accuracy-* is given:
-    print and write the report, return the configured scene and the chosen step."""
+    print and write the report, return the configured scene, the chosen step and its full run (if the
+    selection's full-run check made it)."""
     if args.no_fidelity:
-        return scene, None
+        return scene, None, None
     from .fidelity import accuracy_for, configure, select
     outputs = None
     if args.accuracy_outputs is not None:
         outputs = [o.strip() for o in args.accuracy_outputs.split(",") if o.strip()]
     acc = accuracy_for(scene, outputs=outputs, tol=args.accuracy_tol)
     if acc is None:
-        return scene, None
+        return scene, None, None
     if args.method not in (None, "gen-alpha"):
         raise ValueError(f"fidelity selection chooses a generalized-alpha step; --method {args.method} "
                          f"needs --no-fidelity")
@@ -68,7 +68,10 @@ def _fidelity(args, scene, t_end, dt, out):
     path = report.write_json(out / "fidelity.json")
     print(report.text())
     print(f"fidelity report -> {path}")
-    return configure(scene, report.chosen.config), report.chosen.config.step
+    res = report.chosen_result
+    if res is not None and abs(res.time[-1] - t_end) > 1e-9:
+        res = None
+    return configure(scene, report.chosen.config), report.chosen.config.step, res
 
 
 def _add_simulate(sub):

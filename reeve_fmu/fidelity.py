@@ -38,7 +38,7 @@ RELIABLE = 0.2                                   # finest candidate vs reference
 SETTLE = 1.0                                     # s after the acceleration phase in the default probe
 OTHER_PROBE = 2.0                                # s, default probe without an S-curve drive
 ACCURACY_KEYS = {"outputs", "tol", "tols", "probe", "models", "elements", "wraps", "steps", "margin",
-                 "search"}
+                 "search", "full_check"}
 
 
 class FidelityError(ValueError):
@@ -63,6 +63,7 @@ class Accuracy:
     steps: tuple | None = None      # s; None: output interval / (1, 2, 4, 8)
     margin: float = DEFAULT_MARGIN
     search: str = "first"           # first: stop at the first cost level that passes; all: run every rung
+    full_check: bool = True         # verify the choice over the whole run against its next rung
 
 
 def default_mode(name: str) -> str:
@@ -143,6 +144,7 @@ def parse_accuracy(raw: dict, source: str) -> Accuracy:
         steps=_number_list(r, raw, "steps") if "steps" in raw else None,
         margin=r.number(raw, "accuracy", "margin", DEFAULT_MARGIN, positive=True),
         search=r.string(raw, "accuracy", "search", "first", ("first", "all")),
+        full_check=r.boolean(raw, "accuracy", "full_check", True),
     )
 
 
@@ -273,9 +275,12 @@ class Candidate:
     n_steps: int = 0
     cost: float | None = None           # nq * n_steps (deterministic proxy)
     wall: float | None = None           # s, measured (reported only)
-    errors: dict = field(default_factory=dict)   # output -> max |candidate - reference| [SI]
-    ratios: dict = field(default_factory=dict)   # output -> error / tolerance
-    status: str = "not run"             # chosen | rejected | failed | not run | reference
+    errors: dict = field(default_factory=dict)   # output -> direct: max |candidate - reference| [SI]
+    bounds: dict = field(default_factory=dict)   # output -> axis bound (select) [SI]
+    ratios: dict = field(default_factory=dict)   # output -> max(direct, bound) / tolerance
+    full_check: dict = field(default_factory=dict)  # output -> full run |this - next rung| / tolerance
+    full_next: str = ""                 # the next rung of the full-run check
+    status: str = "not run"             # chosen | passed | rejected | failed | costlier | reference
     reason: str = ""
 
     @property
@@ -284,7 +289,9 @@ class Candidate:
 
     def as_dict(self) -> dict:
         return dict(config=self.config.as_dict(), label=self.config.label(), n_dof=self.nq, n_steps=self.n_steps,
-                    cost=self.cost, wall_s=self.wall, errors=self.errors, error_over_tol=self.ratios,
+                    cost=self.cost, wall_s=self.wall, errors=self.errors, bounds=self.bounds,
+                    estimate_over_tol=self.ratios, full_run_check_over_tol=self.full_check,
+                    full_run_check_against=self.full_next,
                     status=self.status, reason=self.reason)
 
 
@@ -326,16 +333,14 @@ def _columns(res, outputs) -> dict:
     return {o.name: np.asarray(res[resolve_output(o.name, res.names)], float) for o in outputs}
 
 
-def _score(cand: Candidate, cols: dict, ref: dict, allowed: dict):
-    for name, y in cols.items():
-        e = float(np.max(np.abs(y - ref[name]))) if len(y) == len(ref[name]) else math.inf
-        cand.errors[name] = e
-        cand.ratios[name] = e / allowed[name]
+def _diff(a: dict, b: dict) -> dict:
+    return {n: float(np.max(np.abs(a[n] - b[n]))) for n in a}
 
 
 def _rejection(cand: Candidate, margin: float) -> str:
-    bad = [f"{n} {cand.errors[n]:.3g} = {r:.3g} tol" for n, r in cand.ratios.items() if r > margin]
-    return f"estimated error above {margin:g} tol: " + ", ".join(bad)
+    bad = [f"{n} {cand.ratios[n]:.3g} tol" for n, r in cand.ratios.items() if r > margin]
+    what = "estimate" if cand.errors else "axis bound (not run)"
+    return f"{what} above {margin:g} tol: " + ", ".join(bad)
 
 
 # ------------------------------------------------------------------------------------- selection
@@ -359,6 +364,7 @@ class Report:
     why: str
     wall_total: float
     notes: list = field(default_factory=list)
+    chosen_result: object = None       # the chosen configuration's full run (solver Result), if made
 
     def as_dict(self) -> dict:
         return dict(scene=self.scene, outputs=self.outputs, probe_s=self.probe, probe_why=self.probe_why,
@@ -385,11 +391,12 @@ class Report:
                  f"  reference {self.reference.config.label()} ({self.reference.nq} dof, "
                  f"{self.reference.wall:.2f} s); {self.reliability}"]
         names = [o["name"] for o in self.outputs]
+        lines.append(f"  estimate / tol = max(direct error, axis bound) / tol")
         lines.append(f"  {'candidate':<34} {'dof':>4} {'cost':>9} {'wall s':>7}  "
                      + "  ".join(f"{n[:22]:>22}" for n in names) + "  status")
-        skipped = [c for c in self.candidates if c.status == "not run"]
+        skipped = [c for c in self.candidates if c.status == "costlier"]
         for c in self.candidates:
-            if c.status == "not run":
+            if c.status == "costlier":
                 continue
             errs = "  ".join(f"{c.ratios[n]:>17.3g} tol" if n in c.ratios else f"{'-':>22}" for n in names)
             cost = f"{c.cost:9.3g}" if c.cost is not None else f"{'-':>9}"
@@ -397,10 +404,10 @@ class Report:
             lines.append(f"  {c.config.label():<34} {c.nq if c.nq is not None else '-':>4} {cost} {wall}  "
                          f"{errs}  {c.status}{': ' + c.reason if c.status != 'chosen' else ''}")
         if skipped:
-            lines.append(f"  ({len(skipped)} costlier candidates not run; listed in the JSON report)")
+            lines.append(f"  ({len(skipped)} costlier candidates within the tolerance not shown; see the JSON report)")
         lines.append(f"  chosen: {self.chosen.config.label()} - {self.why}")
         lines += [f"  note: {n}" for n in self.notes]
-        lines.append(f"  probe runs took {self.wall_total:.2f} s in total")
+        lines.append(f"  probe runs and full-run checks took {self.wall_total:.2f} s in total")
         return "\n".join(lines)
 
 
@@ -478,72 +485,152 @@ def select(scene: Scene, acc: Accuracy, t_end: float | None = None, out_dt: floa
                          unit_note="SI" if o.mode == "abs" else "fraction of peak |value|"))
 
     cands = [Candidate(c) for c in ladder]
-    prepared = {}
-    for c in cands:
-        prepared[c.config] = _prepare(scene, c, n_out, out_dt)
+    by_cfg = {c.config: c for c in cands}
+    prepared = {c.config: _prepare(scene, c, n_out, out_dt) for c in cands}
     rank_w = {w: i for i, w in enumerate(("W1", "W0"))}
+    runs = {}   # config -> output columns of its probe run (None: failed)
 
     def order(c: Candidate):
         return (c.cost if c.cost is not None else math.inf, MODEL_RANK[c.config.model], -c.config.step,
                 c.config.elements, rank_w[c.config.wrap])
     cands.sort(key=order)
 
+    def probe(cfg: Config):
+        if cfg not in runs:
+            c = by_cfg[cfg]
+            runs[cfg] = None
+            if prepared[cfg] is not None:
+                say(f"fidelity: probe {cfg.label()} ...")
+                r = _run(prepared[cfg], c, t_probe, out_dt)
+                if r is not None:
+                    runs[cfg] = _columns(r, acc.outputs)
+                    c.errors = _diff(runs[cfg], ref_cols)
+        return runs[cfg]
+
+    # The finest candidate, and the axis runs: the finest with one axis set to each of its rungs
+    finest = by_cfg[fin_cfg]
+    fin_cols = probe(fin_cfg)
+    if fin_cols is None:
+        raise FidelityError(f"{src}: the finest candidate {fin_cfg.label()} failed ({finest.reason}); "
+                            f"restrict [accuracy] models/elements/steps")
+    worst_name = max(acc.outputs, key=lambda o: finest.errors[o.name] / allowed[o.name]).name
+    fin_ratio = finest.errors[worst_name] / allowed[worst_name]
+    reliable = fin_ratio <= RELIABLE
+    reliability = (f"finest candidate vs reference: {fin_ratio:.3g} tol on {worst_name} "
+                   f"({'<=' if reliable else '>'} {RELIABLE:g} tol: "
+                   + ("the reference is converged enough)" if reliable else
+                      "ESTIMATE UNRELIABLE, the reference is not converged)"))
+    axes = {"model": models, "elements": elems, "wrap": wraps, "step": steps}
+    axis_dev = {}   # (axis, value) -> {output: max |axis run - finest|} or None (run failed)
+    for ax, values in axes.items():
+        for v in values:
+            cols = probe(replace(fin_cfg, **{ax: v}))
+            axis_dev[ax, v] = None if cols is None else _diff(cols, fin_cols)
+
+    # Estimate = max(direct error, axis bound). The bound |finest - ref| + sum over axes of
+    # |finest with this candidate's rung - finest| does not credit a cancellation of space and time
+    # errors that holds at one rope length and not at another (docs/fidelity.md).
+    for c in cands:
+        devs = [axis_dev[ax, getattr(c.config, ax)] for ax in axes]
+        if c.status == "failed" or any(d is None for d in devs):
+            c.status = "failed"
+            c.reason = c.reason or "an axis run with one of its rungs failed: no estimate"
+            continue
+        c.bounds = {o.name: finest.errors[o.name] + sum(d[o.name] for d in devs) for o in acc.outputs}
+        c.ratios = {n: max(b, c.errors.get(n, 0.0)) / allowed[n] for n, b in c.bounds.items()}
+
     def evaluate(c: Candidate):
-        if c.status != "not run" or prepared[c.config] is None:
+        if c.status == "failed" or c.status in ("passed", "rejected"):
             return
-        say(f"fidelity: probe {c.config.label()} ...")
-        r = _run(prepared[c.config], c, t_probe, out_dt)
-        if r is None:
+        if c.worst > acc.margin:        # the bound alone rejects it: no run needed
+            c.status, c.reason = "rejected", _rejection(c, acc.margin)
             return
-        _score(c, _columns(r, acc.outputs), ref_cols, allowed)
+        if probe(c.config) is None:
+            c.status = "failed"
+            return
+        c.ratios = {n: max(b, c.errors[n]) / allowed[n] for n, b in c.bounds.items()}
         if c.worst <= acc.margin:
             c.status, c.reason = "passed", ""
         else:
             c.status, c.reason = "rejected", _rejection(c, acc.margin)
 
-    finest = next(c for c in cands if c.config == fin_cfg)
-    evaluate(finest)
-    if finest.ratios:
-        reliable = finest.worst <= RELIABLE
-        worst_name = max(finest.ratios, key=finest.ratios.get)
-        reliability = (f"finest candidate vs reference: {finest.worst:.3g} tol on {worst_name} "
-                       f"({'<=' if reliable else '>'} {RELIABLE:g} tol: "
-                       f"{'the reference is converged enough' if reliable else 'ESTIMATE UNRELIABLE, the reference is not converged'})")
-    else:
-        reliable, reliability = False, f"ESTIMATE UNRELIABLE: the finest candidate failed ({finest.reason})"
-
-    # cost order, one cost level at a time
-    chosen = None
+    # cost order, one cost level at a time; a passing candidate must then pass the full-run check
     levels = [list(g) for _, g in itertools.groupby(cands, key=lambda c: c.cost)]
+    if acc.search == "all":
+        for c in cands:
+            evaluate(c)
+    n_full = max(1, int(round(t_end / out_dt)))
+    full_runs = {}
+
+    def full(cfg: Config):
+        if cfg not in full_runs:
+            from .solver import Simulator, SolverError
+            from .model import build_model
+            say(f"fidelity: full-run check {cfg.label()} over 0-{n_full * out_dt:g} s ...")
+            try:
+                res = Simulator(build_model(configure(scene, cfg)), method="gen-alpha",
+                                step=cfg.step).run(n_full * out_dt, out_dt)
+                full_runs[cfg] = (res, _columns(res, acc.outputs))
+            except (SceneError, SolverError, ValueError, np.linalg.LinAlgError) as exc:
+                full_runs[cfg] = (None, str(exc))
+        return full_runs[cfg]
+
+    def full_check(c: Candidate) -> bool:
+        nxt = Config(c.config.model, 2 * c.config.elements, "W1", c.config.step / 2)
+        (_, a), (_, b) = full(c.config), full(nxt)
+        if isinstance(a, str) or isinstance(b, str):
+            c.status, c.reason = "rejected", f"full-run check failed to run: {a if isinstance(a, str) else b}"
+            return False
+        d = _diff(a, b)
+        lim = {o.name: o.tol if o.mode == "abs" else o.tol * float(np.max(np.abs(b[o.name])))
+               for o in acc.outputs}
+        c.full_check = {n: d[n] / lim[n] for n in d}
+        c.full_next = nxt.label()
+        bad = [f"{n} {r:.3g} tol" for n, r in c.full_check.items() if r > acc.margin]
+        if bad:
+            c.status, c.reason = "rejected", (f"full-run check: differs from the next rung {nxt.label()} by "
+                                              + ", ".join(bad) + f" > {acc.margin:g} tol over 0-{n_full * out_dt:g} s")
+            return False
+        return True
+
+    chosen = None
     for level in levels:
         for c in level:
             evaluate(c)
-        passed = [c for c in level if c.status == "passed"]
-        if passed and chosen is None:
-            chosen = min(passed, key=lambda c: (c.worst, order(c)))
-            if acc.search == "first":
+        for c in sorted((c for c in level if c.status == "passed"), key=lambda c: (c.worst, order(c))):
+            if not acc.full_check or full_check(c):
+                chosen = c
                 break
+        if chosen is not None:
+            break
     if chosen is None:
         chosen = ref
+        ref.status = "chosen"
         why = (f"no candidate met {acc.margin:g} tol on every output; running the reference configuration "
                f"(its own error is not estimated beyond the reliability check)")
     else:
         cheaper = [c for c in cands if c.cost is not None and c.cost < chosen.cost]
         why = (f"cheapest candidate (cost {chosen.cost:.3g} = {chosen.nq} dof x {chosen.n_steps} steps) whose "
-               f"estimated error meets {acc.margin:g} tol on every output (worst {chosen.worst:.3g} tol); "
-               f"{len(cheaper)} cheaper candidate(s) rejected or failed")
+               f"estimate meets {acc.margin:g} tol on every output (worst {chosen.worst:.3g} tol); "
+               f"{len(cheaper)} cheaper candidate(s) rejected or failed"
+               + (f"; full-run check vs {chosen.full_next}: {max(chosen.full_check.values()):.3g} tol"
+                  if chosen.full_check else ""))
     for c in cands:
         if c is chosen:
             c.status, c.reason = "chosen", ""
-        elif c.status == "passed":
-            c.status = "passed"
+        elif c.status == "passed" and c.cost <= chosen.cost and chosen is not ref:
             c.reason = ("meets the tolerance, costlier than the chosen" if c.cost > chosen.cost else
-                        f"meets the tolerance at the same cost, larger error ({c.worst:.3g} tol)")
-        elif c.status == "not run":
-            c.reason = "costlier than the chosen" if c.cost is not None else c.reason
+                        f"meets the tolerance at the same cost, larger estimate ({c.worst:.3g} tol)")
+        elif c.status not in ("rejected", "failed"):
+            if c.worst > acc.margin:
+                c.status, c.reason = "rejected", _rejection(c, acc.margin)
+            else:
+                c.status = "costlier"
+                c.reason = "costlier than the chosen" + ("" if c.errors else " (not run; axis bound passes)")
     if not reliable:
         notes.append("the estimate is unreliable: refine the ladder (accuracy.elements/steps) or loosen tol")
     return Report(scene=scene.name, outputs=outs, probe=t_probe, probe_why=why_probe, out_dt=out_dt, t_end=t_end,
                   margin=acc.margin, search=acc.search, models=models, reference=ref, finest=finest,
                   reliable=reliable, reliability=reliability, candidates=cands, chosen=chosen, why=why,
-                  wall_total=time.perf_counter() - wall0, notes=notes)
+                  wall_total=time.perf_counter() - wall0, notes=notes,
+                  chosen_result=full_runs.get(chosen.config, (None,))[0])
