@@ -98,7 +98,7 @@ BASE = (ROOT / "tests" / "scenes" / "atwood.toml").read_text()
     ('outputs = ["A.position"]\ntols = { "A.position" = { abs = 1e-3, rel = 1e-3 } }', "[accuracy.tols.A.position]"),
     ('outputs = ["A.position"]\ntol = 1e-3\nsteps = [0.01]', "[accuracy.steps]"),
     ('outputs = ["A.position", "A.positon"]\ntol = 1e-3', "[accuracy.outputs[1]] unknown output 'A.positon'"),
-    ('outputs = ["A.position"]\ntol = 1e-3\nmodels = ["planar", "spatial"]', "[accuracy.models[1]]"),
+    ('outputs = ["A.position"]\ntol = 1e-3\nmodels = ["axial-1d", "torsion"]', "[accuracy.models]"),
 ])
 def test_bad_accuracy_section_names_the_key(section, key):
     sc = loads_scene(BASE + "\n[accuracy]\n" + section + "\n", "bad.toml")
