@@ -33,6 +33,7 @@ def cmd_simulate(args) -> int:
     dt = args.dt if args.dt is not None else scene.output_step
     out = Path(args.out)
     scene, chosen_step, res = _fidelity(args, scene, t_end, dt, out)
+    reused = res is not None
     t0 = time.perf_counter()
     if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
         step = chosen_step if chosen_step is not None else args.step
@@ -43,8 +44,9 @@ def cmd_simulate(args) -> int:
     time_ = cols.pop("time")
     write_csv(out / "results.csv", time_, cols)
     plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})")
-    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s in {wall:.2f} s "
-          f"(incl. statics and JIT load; {t_end / wall:.0f}x real time) -> {out}/results.csv, results.png")
+    how = ("(the run of the fidelity full-run check)" if reused else
+           f"in {wall:.2f} s (incl. statics and JIT load; {t_end / wall:.0f}x real time)")
+    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, results.png")
     return 0
 
 
