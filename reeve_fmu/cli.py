@@ -30,22 +30,51 @@ def cmd_simulate(args) -> int:
     from .solver import Simulator
 
     scene = load_scene(args.scene)
-    model = build_model(scene)
-    sim = Simulator(model, method=args.method, step=args.step)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
-    t0 = time.perf_counter()
-    res = sim.run(t_end, dt)
-    wall = time.perf_counter() - t0
     out = Path(args.out)
+    scene, chosen_step, res = _fidelity(args, scene, t_end, dt, out)
+    reused = res is not None
+    t0 = time.perf_counter()
+    if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
+        step = chosen_step if chosen_step is not None else args.step
+        res = Simulator(build_model(scene), method=args.method, step=step).run(t_end, dt)
+    wall = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     cols = res.as_dict()
     time_ = cols.pop("time")
     write_csv(out / "results.csv", time_, cols)
     plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})")
-    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s in {wall:.2f} s "
-          f"(incl. statics and JIT load; {t_end / wall:.0f}x real time) -> {out}/results.csv, results.png")
+    how = ("(the run of the fidelity full-run check)" if reused else
+           f"in {wall:.2f} s (incl. statics and JIT load; {t_end / wall:.0f}x real time)")
+    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, results.png")
     return 0
+
+
+def _fidelity(args, scene, t_end, dt, out):
+    """Fidelity selection (docs/fidelity.md) when the scene has [accuracy] or --accuracy-* is given:
+    print and write the report, return the configured scene, the chosen step and its full run (if the
+    selection's full-run check made it)."""
+    if args.no_fidelity:
+        return scene, None, None
+    from .fidelity import accuracy_for, configure, select
+    outputs = None
+    if args.accuracy_outputs is not None:
+        outputs = [o.strip() for o in args.accuracy_outputs.split(",") if o.strip()]
+    acc = accuracy_for(scene, outputs=outputs, tol=args.accuracy_tol)
+    if acc is None:
+        return scene, None, None
+    if args.method not in (None, "gen-alpha"):
+        raise ValueError(f"fidelity selection chooses a generalized-alpha step; --method {args.method} "
+                         f"needs --no-fidelity")
+    report = select(scene, acc, t_end=t_end, out_dt=dt, step=args.step)
+    path = report.write_json(out / "fidelity.json")
+    print(report.text())
+    print(f"fidelity report -> {path}")
+    res = report.chosen_result
+    if res is not None and abs(res.time[-1] - t_end) > 1e-9:
+        res = None
+    return configure(scene, report.chosen.config), report.chosen.config.step, res
 
 
 def _add_simulate(sub):
@@ -56,6 +85,13 @@ def _add_simulate(sub):
     p.add_argument("--step", type=float, default=None, help="solver step [s] (default: scene solver.step)")
     p.add_argument("--method", choices=("gen-alpha", "radau", "dop853"), default=None)
     p.add_argument("--out", default="results", help="output directory (default: results/)")
+    p.add_argument("--accuracy-outputs", default=None, metavar="NAMES",
+                   help="fidelity selection: comma-separated outputs (overrides [accuracy].outputs)")
+    p.add_argument("--accuracy-tol", type=float, default=None, metavar="TOL",
+                   help="fidelity selection: tolerance, m or rad for positions/angles, fraction of the peak "
+                        "otherwise (overrides [accuracy].tol; docs/fidelity.md)")
+    p.add_argument("--no-fidelity", action="store_true",
+                   help="ignore [accuracy] and run the scene as written")
     p.set_defaults(func=cmd_simulate)
 
 
