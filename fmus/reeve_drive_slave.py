@@ -70,6 +70,7 @@ class ElectricDriveSlave(ReeveSlave):
     def initialize(self):
         v = self.values
         self.drive = make_drive({name: v[name] for name, *_ in DRIVE_PARAMETERS})
+        self.drive.warm_up()     # JIT load/compile here, not inside the first doStep
         self._outputs()
 
     def _outputs(self, torque=None, brake=None):

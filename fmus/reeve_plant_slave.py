@@ -69,6 +69,7 @@ class ReevingPlantSlave(ReeveSlave):
                                f"(resources out of date?)")
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
+        self.plant.warm_up()     # JIT load/compile here, not inside the first doStep
 
     def _write(self, y):
         self.values.update(zip(self._all, y if type(y) is list else y.tolist()))

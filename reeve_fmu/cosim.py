@@ -835,6 +835,7 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
         perf = time.perf_counter_ns
         tk = _time_grid(step)
         j = 1
+        t_first = 0.0
         t_loop0 = time.perf_counter()
         h = step
         stop = False
@@ -910,6 +911,8 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                 j += 1
             if (k + 1) % every == 0:
                 progress((k + 1) * step)
+            if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
+                t_first = time.perf_counter() - t_loop0
             if stop:
                 n = k + 1
                 break
@@ -933,9 +936,11 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     if stop and (n % record_every):
         tt[-1] = n * step
     info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": plant_outputs, "t_end_s": n * step, "steps": n,
-            "loop_wall_s": loop_wall, "total_wall_s": total_wall,
-            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf, "fmu_warnings": warnings,
-            "stopped_by_monitor": stop}
+            "loop_wall_s": loop_wall, "total_wall_s": total_wall, "first_step_wall_s": t_first,
+            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf,
+            "rtf_after_first_step": ((n - 1) * step / (loop_wall - t_first)
+                                     if n > 1 and loop_wall > t_first else math.inf),
+            "fmu_warnings": warnings, "stopped_by_monitor": stop}
     if mon is not None:
         info.update(mon.report(scheme))
     if timing:

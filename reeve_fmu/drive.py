@@ -490,6 +490,12 @@ class ElectricDrive:
                        float(motor_speed), float(motor_angle))
         return float(tau), self.brake_command
 
+    def warm_up(self) -> None:
+        """Load (or compile) the step kernel now with a throw-away step on copies of the state, so that
+        an FMU's first doStep costs what every other one costs (a cold numba cache takes seconds)."""
+        t = float(self._xs[_X_TIME])
+        _advance(self._xs.copy(), self._xi.copy(), self._P, self._sched, self._prof, t, t + 1e-3, 0.0, 0.0)
+
     # -- FMU state ------------------------------------------------------------------------------------
     def get_state(self) -> dict:
         """All hidden state as builtin Python types (JSON/pickle-safe)."""

@@ -84,6 +84,16 @@ class Plant:
         self._y = self.sim.step(self.state, self.state.t + dt, float(torque), float(brake_command)).copy()
         return self._y
 
+    def warm_up(self) -> None:
+        """Load (or compile) the step kernels now with a throw-away step on a copy of the state, so that
+        an FMU's first doStep costs what every other one costs (a cold numba cache takes ~40 s here).
+        A failure is left to the real step to report."""
+        st = self.state.copy()
+        try:
+            self.sim.step(st, st.t + 1e-4, 0.0, 0.0)
+        except Exception:  # noqa: BLE001 - the first real step raises it again, with context
+            pass
+
     def outputs(self) -> dict:
         return dict(zip(self.output_names, self._y.tolist()))
 
