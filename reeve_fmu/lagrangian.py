@@ -60,7 +60,7 @@ LK = namedtuple("LK", [
     "nb", "m",
     "node_dof", "node_off", "node_left", "node_right", "node_prev", "node_next", "node_x0",
     "el_a", "el_b", "el_s1", "el_l", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g",
-    "sh_dof", "sh_off", "sh_R", "sh_mu", "sh_kn", "sh_cn", "sh_w", "sh_kt", "sh_ct", "sh_th", "sh_presc",
+    "sh_dof", "sh_off", "sh_R", "sh_mu", "sh_kn", "sh_cn", "sh_w", "sh_kt", "sh_th", "sh_presc",
     "sh_lo", "sh_hi", "sh_J",
     "bd_M", "bd_F", "bd_c",
     "hs_node", "hs_dof", "hs_off", "hs_k", "hs_c",
@@ -175,26 +175,30 @@ def _route_tangent(LK, X, i, nx, nz):
 
 @njit(cache=True, inline="always")
 def _contact(LK, k, i, X, V, cx, cz, vcx, vcz):
-    """Normal contact of node i with sheave k: (active, nx, nz, ux, uz, rho, Fn, f').
-    n: outward normal, u: circle tangent along the route, Fn >= 0: normal force on the node."""
+    """Normal contact of node i with sheave k: (active, nx, nz, ux, uz, rho, Fn, dFn/dp, dFn/dp-dot).
+    n: outward normal, u: circle tangent along the route, Fn >= 0: normal force on the node,
+    Hunt-Crossley form k_n f(p) (1 + d p-dot): the damping force vanishes with the penetration, so
+    the force is continuous when a node arrives on the sheave (a damper k-independent of p kicks
+    arriving nodes back out, and they chatter on and off the rim from step to step)."""
     dx = X[i, 0] - cx
     dz = X[i, 1] - cz
     R = LK.sh_R[k]
     if abs(dx) > R or abs(dz) > R:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     rho = math.sqrt(dx * dx + dz * dz)
     p = R - rho
     if p <= 0.0 or rho <= 0.0:
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     nx = dx / rho
     nz = dz / rho
     f, fp = _ramp(p, LK.sh_w[k])
     pdot = -(nx * (V[i, 0] - vcx) + nz * (V[i, 1] - vcz))
-    Fn = LK.sh_kn[k] * f + LK.sh_cn[k] * fp * pdot
-    if Fn < 0.0:
-        Fn = 0.0
+    damp = 1.0 + LK.sh_cn[k] * pdot
+    if damp <= 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     ux, uz = _route_tangent(LK, X, i, nx, nz)
-    return True, nx, nz, ux, uz, rho, Fn, fp
+    kn = LK.sh_kn[k]
+    return True, nx, nz, ux, uz, rho, kn * f * damp, kn * fp * damp, kn * f * LK.sh_cn[k]
 
 
 @njit(cache=True, inline="always")
@@ -219,7 +223,7 @@ def _sat(z, zmax):
 def _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn, xo, co, tho, zo, static):
     """Tangential force on node i along u (Ft), the stick deflection z and dz_sat/dz.
     Dynamic: elasto-plastic stick spring z = z_old + (unstretched rope displacement relative to the
-    rim since the step start), |k_t z| <= mu Fn, plus a viscous part c_t w. Static: a spring to the
+    rim since the step start), |k_t z| <= mu Fn. Static: a spring to the
     laid-out position on speed-driven sheaves with the same capacity (static friction), nothing on
     idlers."""
     if static:
@@ -231,8 +235,7 @@ def _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn, xo, co
     slip = kap * (ux * ((X[i, 0] - xo[i, 0]) - (cx - co[k, 0]))
                   + uz * ((X[i, 1] - xo[i, 1]) - (cz - co[k, 1]))) - R * (th - tho[k])
     zs, dzs, dzm = _sat(zo[i] + slip, LK.sh_mu[k] * Fn / LK.sh_kt[k])
-    w = kap * (ux * (V[i, 0] - vcx) + uz * (V[i, 1] - vcz)) - R * thd
-    return -LK.sh_kt[k] * zs - LK.sh_ct[k] * w, zs, dzs, dzm
+    return -LK.sh_kt[k] * zs, zs, dzs, dzm
 
 
 @njit(cache=True)
@@ -311,7 +314,7 @@ def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, s
         th, thd = _sheave_angle(LK, k, q, v, t)
         R = LK.sh_R[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
-            act, nx, nz, ux, uz, rho, Fn, fp = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
             kap = _node_feed(LK, lam, i, R)
@@ -431,24 +434,16 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
             jt = -1
         R = LK.sh_R[k]
         kt = LK.sh_kt[k]
-        ct = LK.sh_ct[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
-            act, nx, nz, ux, uz, rho, Fn, fp = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
             kap = _node_feed(LK, lam, i, R)
             Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
                                          xo, co, tho, zo, static)
-            kn = LK.sh_kn[k] * fp
-            cn = LK.sh_cn[k] * fp
             nv = (nx, nz)
             uv = (ux, uz)
-            if static:
-                ktu = kt * dzs      # spring to the layout (speed-driven sheaves), 0 on idlers
-                ctu = 0.0
-            else:
-                ktu = kt * dzs * kap
-                ctu = ct * kap
+            ktu = kt * dzs if static else kt * dzs * kap   # static: spring to the layout
             # a saturated (sliding) node: friction = mu Fn follows the normal force
             mk = LK.sh_mu[k] * dzm if Fn > 0.0 else 0.0
             for a_ in range(2):
@@ -457,10 +452,10 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
                     kab = (kn * nv[a_] * nv[b_] - Fn / rho * (idm - nv[a_] * nv[b_])
                            + ktu * uv[a_] * uv[b_] - mk * kn * uv[a_] * nv[b_]
                            + Ft / rho * nv[a_] * uv[b_])
-                    cab = cn * nv[a_] * nv[b_] + ctu * uv[a_] * uv[b_] + mk * cn * uv[a_] * nv[b_]
+                    cab = cn * nv[a_] * nv[b_] + mk * cn * uv[a_] * nv[b_]
                     Knn[a_, b_] = bq * kab + gv * cab
-                Cin[a_] = -(bq * kt * dzs + gv * ct) * R * uv[a_]
-                Cni[a_] = (-(bq * kt * dzs + gv * ct) * R * kap * uv[a_]
+                Cin[a_] = -bq * kt * dzs * R * uv[a_]
+                Cni[a_] = (-bq * kt * dzs * R * kap * uv[a_]
                            + R * mk * (bq * kn - gv * cn) * nv[a_])
             dn0 = LK.node_dof[i, 0]
             dn1 = LK.node_dof[i, 1]
@@ -476,7 +471,7 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
                     _add(J, C, D, E, nb, dc[a_], dnl[b_], -kab)
                     _add(J, C, D, E, nb, dc[a_], dc[b_], kab)
             if jt >= 0 and not static:
-                _add(J, C, D, E, nb, jt, jt, (bq * kt * dzs + gv * ct) * R * R)
+                _add(J, C, D, E, nb, jt, jt, bq * kt * dzs * R * R)
                 for a_ in range(2):
                     _add(J, C, D, E, nb, dnl[a_], jt, Cin[a_])
                     _add(J, C, D, E, nb, dc[a_], jt, -Cin[a_])
@@ -1047,8 +1042,8 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
     element_length: elements on every stretch of rope that touches a sheave during [0, t_end]
     (default t_end: the scene's); coarse_length: elsewhere. fine_everywhere meshes the whole rope
     finely. penalty: normal contact stiffness in units of EA/element_length (per node);
-    contact_damping: fraction of the critical damping of a node on that spring (normal and
-    tangential); stick: tangential (stick) stiffness in units of the normal one; probe: distance of the
+    contact_damping: normal (Hunt-Crossley) damping as a fraction of the critical damping of a node
+    at the static wrap force; stick: tangential (stick) stiffness in units of the normal one; probe: distance of the
     tension taps from the tangent point in element lengths; margin [m]: added on both sides of the
     touched material intervals; statics: the scene's [initial] statics mode for the configuration the
     mesh is laid out on (default: the scene's; 'none' = the unloaded geometry)."""
@@ -1339,7 +1334,6 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
     sh_cn = np.zeros(ns)
     sh_w = np.zeros(ns)
     sh_kt = np.zeros(ns)
-    sh_ct = np.zeros(ns)
     sh_th = -np.ones(ns, np.int64)
     sh_presc = np.zeros(ns, np.int64)
     sh_lo = np.zeros(ns, np.int64)
@@ -1367,13 +1361,14 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
         EA = rope.EA * rope.count
         rhoA = rope.rhoA * rope.count
         sh_kn[k] = penalty * EA / element_length
-        sh_cn[k] = contact_damping * 2.0 * math.sqrt(sh_kn[k] * rhoA * element_length)
         # onset width of the penalty: half the static penetration of a wrap node (C1 contact onset;
         # a sharper kink makes Newton cycle when nodes enter the sheave)
         T_ref = max(sheave_Tw.get(name, 0.0), 1e-4 * EA)
         sh_w[k] = 0.5 * T_ref * element_length / (sh.radius * sh_kn[k])
         sh_kt[k] = stick * sh_kn[k]
-        sh_ct[k] = contact_damping * 2.0 * math.sqrt(sh_kt[k] * rhoA * element_length)
+        # Hunt-Crossley coefficient: contact_damping x critical for a node at the static wrap force
+        sh_cn[k] = contact_damping * 2.0 * math.sqrt(sh_kn[k] * rhoA * element_length) / (
+            T_ref * element_length / sh.radius)
         sh_lo[k], sh_hi[k] = rope_node_range[ir]
         if name in sheave_th:
             sh_th[k] = nb + sheave_th[name]
@@ -1565,7 +1560,7 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
         el_a=el_a, el_b=el_b, el_s1=el_s1, el_l=el_l, el_rhoA=el_rhoA, el_EA=el_EA, el_nu=el_nu,
         el_tonly=el_tonly, el_g=el_g,
         sh_dof=sh_dof, sh_off=sh_off, sh_R=sh_R, sh_mu=sh_mu, sh_kn=sh_kn, sh_cn=sh_cn, sh_w=sh_w,
-        sh_kt=sh_kt, sh_ct=sh_ct, sh_th=sh_th, sh_presc=sh_presc, sh_lo=sh_lo, sh_hi=sh_hi,
+        sh_kt=sh_kt, sh_th=sh_th, sh_presc=sh_presc, sh_lo=sh_lo, sh_hi=sh_hi,
         sh_J=sh_J,
         bd_M=np.array([b[1] for b in border], float), bd_F=np.array([b[2] for b in border], float),
         bd_c=np.array([b[3] for b in border], float),
