@@ -314,6 +314,8 @@ def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, s
         th, thd = _sheave_angle(LK, k, q, v, t)
         R = LK.sh_R[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
+            if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
+                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
             act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
@@ -435,6 +437,8 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
         R = LK.sh_R[k]
         kt = LK.sh_kt[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
+            if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
+                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
             act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
@@ -1035,7 +1039,8 @@ def _material_ranges(scene: Scene, t_end: float):
 
 def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: float = 1.0,
                      t_end: float | None = None, fine_everywhere: bool = False, penalty: float = 1.0,
-                     contact_damping: float = 1.0, stick: float = 1.0, probe: float = 1.5,
+                     contact_damping: float = 1.0, stick: float = 1.0, contact_onset: float = 0.5,
+                     probe: float = 1.5,
                      margin: float = 0.25, statics: str | None = None) -> LagrangianModel:
     """Lagrangian planar model of a scene (see the module docstring).
 
@@ -1043,8 +1048,10 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
     (default t_end: the scene's); coarse_length: elsewhere. fine_everywhere meshes the whole rope
     finely. penalty: normal contact stiffness in units of EA/element_length (per node);
     contact_damping: normal (Hunt-Crossley) damping as a fraction of the critical damping of a node
-    at the static wrap force; stick: tangential (stick) stiffness in units of the normal one; probe: distance of the
-    tension taps from the tangent point in element lengths; margin [m]: added on both sides of the
+    at the static wrap force; stick: tangential (stick) stiffness in units of the normal one;
+    contact_onset: width of the C1 onset of the penalty in units of the static penetration of a
+    wrap node (wider: smoother arrivals, fewer Newton iterations); probe: distance of the tension
+    taps from the tangent point in element lengths; margin [m]: added on both sides of the
     touched material intervals; statics: the scene's [initial] statics mode for the configuration the
     mesh is laid out on (default: the scene's; 'none' = the unloaded geometry)."""
     if scene.model == "spatial":
@@ -1361,8 +1368,8 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
         EA = rope.EA * rope.count
         rhoA = rope.rhoA * rope.count
         sh_kn[k] = penalty * EA / element_length
-        # onset width of the penalty: half the static penetration of a wrap node (C1 contact onset;
-        # a sharper kink makes Newton cycle when nodes enter the sheave)
+        # onset width of the penalty, in units of the static penetration of a wrap node (C1 contact
+        # onset; a sharp kink makes Newton cycle when nodes enter the sheave)
         T_ref = max(sheave_Tw.get(name, 0.0), 1e-4 * EA)
         sh_w[k] = 0.5 * T_ref * element_length / (sh.radius * sh_kn[k])
         sh_kt[k] = stick * sh_kn[k]
@@ -1471,6 +1478,10 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
                     j = node_dof[i, kk]
                     if 0 <= j < nb:
                         q0[j] = X0[i, kk]
+
+    # the dynamics get the requested onset width (the layout above is made with half the static
+    # penetration: a relaxation from a layout with a wide onset fails in its first step)
+    sh_w *= contact_onset / 0.5
 
     # hitch springs
     nh = len(hitches)
