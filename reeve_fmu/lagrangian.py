@@ -319,6 +319,9 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
             lam_e = 1.0 + tension(total) / EA
             ls[-2:] = [float(np.linalg.norm(xs[-1] - xs[-2])) / lam_e]
             fine_flags.pop()
+        # the material lengths above come from chords and a tension estimate: scale them to the
+        # continuum's rope length exactly (relative change ~1e-8)
+        ls = list(np.asarray(ls) * ((path[-1]["sA0"] + path[-1]["sA_len"] - path[0]["sA0"]) / sum(ls)))
         s_nodes = np.concatenate([[0.0], np.cumsum(ls)])
         n_fine = int(sum(fine_flags))
         L = float(s_nodes[-1])
