@@ -213,14 +213,17 @@ def trip_study(scene_path, quick=True, window=None, log=print):
         log(f"{case}: reference {rinfo}")
         records.append(dict(case=case, method="reference", t_end_s=t_end, **rinfo))
         eps_list = (1, 2) if quick else (1, 2, 4)
-        steps = (2e-3, 1e-3) if quick else (4e-3, 2e-3, 1e-3, 5e-4)
+        # steps <= the 1 ms output step (Simulator.run never steps over an output time)
+        steps = (1e-3, 5e-4) if quick else (1e-3, 5e-4, 2.5e-4)
         for n in eps_list:
             for h in steps:
                 res, rec = _ale_run(scene, t_end, out_dt, eps=n, step=h, repeat=1 if quick else 3)
                 records.append(_finish(rec, case, t_end, res, ref, "car.position", TRIP_TENSIONS))
                 log(_fmt(records[-1]))
         if not quick and case == "trip_2to1_window":
-            for kw in (dict(method="radau"), dict(model="planar"), dict(model="planar", eps=4)):
+            # scipy Radau (rtol 1e-8) took 207 s for this 4 s window in a first run: left out
+            # (the planar ALE model with 4 linear elements per span ran > 3 min on it: left out too)
+            for kw in (dict(rho_inf=1.0), dict(rho_inf=0.5)):
                 res, rec = _ale_run(scene, t_end, out_dt, **kw)
                 records.append(_finish(rec, case, t_end, res, ref, "car.position", TRIP_TENSIONS))
                 log(_fmt(records[-1]))
@@ -250,7 +253,8 @@ def headline(records, case, tension_key="err_tension_rel"):
     runs = [r for r in records if r["case"] == case and r["method"] in ("ale", "lagrangian")]
     ale = [r for r in runs if r["method"] == "ale" and ok(r)]
     lag_ok = [r for r in runs if r["method"] == "lagrangian" and ok(r)]
-    lag_any = [r for r in runs if r["method"] == "lagrangian"]
+    # lower bound: the fastest Lagrangian run that completed (a finer mesh costs more)
+    lag_any = [r for r in runs if r["method"] == "lagrangian" and r.get("err_position_m") is not None]
     out = dict(case=case, tension_error=tension_key, tol_position_m=TOL_POSITION, tol_tension_rel=TOL_TENSION)
     if ale:
         best = min(ale, key=lambda r: r["wall_s"])

@@ -1,7 +1,7 @@
 """Lagrangian finite-element baseline: the rope as a material mesh sliding over sheaves by contact.
 
 This is how a conventional (non-ALE) multibody code models a reeving system, and it is the yardstick
-for the claim that ALE needs far fewer elements (issue 5, docs/fidelity.md §"Lagrangian baseline"):
+for the claim that ALE needs far fewer elements (issue 5, docs/performance.md §"Speed against error"):
 
   * Planar (x-z). The rope is a chain of the same linear two-node elements as the ALE model
     (`elements.linear.linear_element_at`) with every material coordinate fixed (s-dot = 0: the
@@ -12,15 +12,17 @@ for the claim that ALE needs far fewer elements (issue 5, docs/fidelity.md §"La
     that passes over each sheave (plus a margin) and meshes it with `element_length`; the rest of the
     rope gets elements of up to `coarse_length`.
   * Rope-sheave interaction by node-to-circle contact (as Exudyn's ObjectContactFrictionCircleCable2D,
-    method.md §4.4 "contact-based alternative"): a penalty normal force k_n f(p) + c_n f'(p) p-dot on
-    every node that penetrates the pitch circle (p = R - |x - c|, f a C1 quadratic-onset ramp), and a
-    regularised Coulomb friction F_t = -mu F_n w / sqrt(w^2 + v_reg^2) against the rim. The slip
-    velocity is w = u.(v - v_c)/lambda - R theta-dot: the rate of *unstretched* rope passing a
-    point of the rim minus the rim speed, so that stick means s-dot = R theta-dot, the same no-slip
-    kinematics as the ALE sheave node (s = s0 + R theta, method.md §4.4, creep neglected). mu is the
-    groove's equivalent friction (EN 81-50, `traction.equivalent_friction`). Idler sheaves have their
-    own angle (inertia J) driven only by this friction; a speed-driven traction sheave turns with the
-    prescribed profile and the friction carries the rope.
+    method.md §4.4 "contact-based alternative"): a penalty normal force on every node that
+    penetrates the pitch circle, Hunt-Crossley form F_n = k_n f(p) (1 + d p-dot) (p = R - |x - c|,
+    f a C1 ramp of width `contact_onset` x the static penetration; the damping vanishes with p, so
+    the force is continuous when a node arrives), and Coulomb friction as an elasto-plastic stick
+    spring: z = z_old + (unstretched rope displacement relative to the rim during the step),
+    F_t = -k_t sat(z), |F_t| <= mu F_n (sliding when saturated). The slip is measured in
+    unstretched rope, w = u.(v - v_c)/lambda - R theta-dot, so that stick means s-dot = R theta-dot,
+    the same no-slip kinematics as the ALE sheave node (s = s0 + R theta, method.md §4.4, creep
+    neglected). mu is the groove's equivalent friction (EN 81-50, `traction.equivalent_friction`).
+    Idler sheaves have their own angle (inertia J) driven only by this friction; a speed-driven
+    traction sheave turns with the prescribed profile and the friction carries the rope.
   * Bodies translate along their free axes (border unknowns); rope ends are fixed, on hitch springs
     (isotropic, k and c of the scene) or attached to a body.
   * Generalized-alpha (same parameters as the engine) with Newton on the accelerations. The Newton
@@ -28,9 +30,10 @@ for the claim that ALE needs far fewer elements (issue 5, docs/fidelity.md §"La
     (nodes in rope order, half-bandwidth 3) plus a dense border (bodies, sheave angles) and solved by
     a banded LU and a Schur complement: O(n) per step.
   * Initial state: the ALE statics gives the static configuration of the continuum (straight spans
-    with the linear tension of the rope weight, arcs on the sheaves); the mesh is laid out on it and
-    polished by Newton statics, the rope held on speed-driven sheaves by tangential springs (static
-    friction) and free on idlers.
+    with the linear tension of the rope weight, arcs on the sheaves); the mesh is laid out on it
+    (material lengths scaled to the continuum's rope length) and relaxed dynamically with the drive
+    held (`LagrangianSimulator.static_state`); without sheaves, Newton statics.
+  * Compiled kernels in lagrangian_kernels.py.
 
 Outputs carry the engine's names: `<body>.position/.velocity/.acceleration` (no axis suffix for a
 body with one free axis), `<sheave>.tension_in/.tension_out` (the rope force in the free span next to
