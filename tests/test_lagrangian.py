@@ -1,0 +1,103 @@
+"""Lagrangian finite-element baseline (reeve_fmu/lagrangian.py) and the work-precision bench, against
+exact results (method.md §7) and the ALE engine. Short runs only: speed is measured by the bench, not here."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.linalg import eigh
+from scipy.optimize import brentq
+
+from reeve_fmu import bench
+from reeve_fmu import lagrangian as lag
+from reeve_fmu.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+HANGING = ROOT / "scenes" / "hanging_rope.toml"
+
+
+def _hanging(statics=None):
+    sc = load_scene(HANGING)
+    return sc if statics is None else sc.with_overrides(statics=statics)
+
+
+def test_hanging_static_elongation_exact():
+    """method.md §7 item 1: linear elements with consistent gravity give the exact elongation."""
+    sc = _hanging()
+    m = lag.build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
+    sim = lag.LagrangianSimulator(m)
+    st = sim.initial_state()
+    y = dict(zip(m.output_names, sim.outputs(st)))
+    r, b = sc.ropes[0], sc.bodies[0]
+    g = 9.81
+    delta = (b.mass * g * r.length + r.rhoA * g * r.length ** 2 / 2) / r.EA
+    assert y["mass.position"] == pytest.approx(-delta, rel=1e-9)
+    assert y["rope.tension_end"] == pytest.approx(b.mass * g, rel=1e-9)
+    assert y["rope.tension_start"] == pytest.approx(b.mass * g + r.rhoA * g * r.length, rel=1e-9)
+
+
+def test_hanging_first_axial_frequency_beta_tan_beta():
+    """method.md §7 item 2: first axial frequency from beta tan beta = rhoA L / m (Newton matrices of
+    the baseline at the static state; the planar mesh also has transverse string modes, the axial
+    one is picked by its motion)."""
+    sc = _hanging()
+    m = lag.build_lagrangian(sc, element_length=2.5, coarse_length=2.5)
+    sim = lag.LagrangianSimulator(m)
+    st = sim.initial_state()
+    n = m.n_dof
+    M, K, _ = lag.dense_matrices(m.LK, st.q, st.v, 0.0, st.z, np.zeros(n, bool), False)
+    w2, vec = eigh(K, M)
+    zrow = np.array([nm.endswith(".z") for nm in m.q_names])
+    axial = [i for i in range(n) if np.sum(vec[zrow, i] ** 2) > 0.99 * np.sum(vec[:, i] ** 2)]
+    w1 = math.sqrt(w2[axial[0]])
+    r, b = sc.ropes[0], sc.bodies[0]
+    beta = brentq(lambda x: x * math.tan(x) - r.rhoA * r.length / b.mass, 1e-9, math.pi / 2 - 1e-9)
+    exact = beta * math.sqrt(r.EA / r.rhoA) / r.length
+    assert w1 == pytest.approx(exact, rel=1e-4)
+
+
+def test_modal_series_reference_meets_its_initial_condition():
+    """The bench's exact reference for the release case: u = 0 at t = 0 (mass at its position, no
+    tension at the top), and the late-time mean is the static elongation."""
+    sc = _hanging("none")
+    z, N = bench.hanging_release_exact(sc, np.array([0.0]))
+    assert abs(z[0]) < 1e-7
+    assert abs(N[0]) < 1e-3 * 500 * 9.81
+    t = np.linspace(0.0, 60.0, 120001)
+    zt, _ = bench.hanging_release_exact(sc, t, n_modes=50)
+    r, b = sc.ropes[0], sc.bodies[0]
+    delta = (b.mass * 9.81 * r.length + r.rhoA * 9.81 * r.length ** 2 / 2) / r.EA
+    assert np.mean(zt) == pytest.approx(-delta, rel=2e-3)
+
+
+def test_lagrangian_release_follows_the_modal_series():
+    sc = _hanging("none").with_overrides(ropes=tuple(
+        r.__class__(**{**r.__dict__, "damping": 0.0}) for r in _hanging().ropes))
+    m = lag.build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
+    sim = lag.LagrangianSimulator(m, step=2.5e-4, rho_inf=1.0, newton_tol=1e-8)
+    res = sim.run(0.6, 1e-3)
+    z, _ = bench.hanging_release_exact(sc, res.time)
+    delta = 0.0857
+    assert np.max(np.abs(res["mass.position"] - z)) < 0.01 * 2 * delta
+
+
+def test_bench_records_schema(tmp_path):
+    recs = bench.hanging_study(HANGING, quick=True, eps_list=(2,), steps=(1e-3,), t_end=0.05,
+                               log=lambda s: None)
+    assert {r["method"] for r in recs} == {"ale", "lagrangian"}
+    for r in recs:
+        for key in ("case", "method", "n_dof", "wall_s", "rtf", "err_position_m", "err_tension_rel"):
+            assert key in r, key
+        assert r["case"] == "hanging_release"
+        assert r["err_position_m"] >= 0 and r["err_tension_rel"] >= 0
+    h = bench.headline(recs, "hanging_release")
+    assert h["case"] == "hanging_release"
+    figs = bench.plot(recs, tmp_path)
+    assert all((tmp_path / f).stat().st_size > 0 for f in figs)
+
+
+def test_bad_scene_for_the_baseline_names_the_problem():
+    sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml").with_overrides(model="spatial")
+    with pytest.raises(Exception, match="planar"):
+        lag.build_lagrangian(sc)
+
