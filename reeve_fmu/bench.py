@@ -97,8 +97,9 @@ def hanging_release_exact(scene, t, n_modes=4000):
 
 # ------------------------------------------------------------------------------------ runs
 def _ale_run(scene, t_end, out_dt, eps=1, method="gen-alpha", step=1e-3, rho_inf=None, newton_tol=None,
-             repeat=1, model=None):
-    ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": eps}) for r in scene.ropes)
+             repeat=1, model=None, element=None):
+    ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": eps,
+                                 **({"element": element} if element else {})}) for r in scene.ropes)
     sc = scene.with_overrides(ropes=ropes, model=model or scene.model)
     t0 = time.perf_counter()
     model = build_model(sc)
@@ -116,7 +117,8 @@ def _ale_run(scene, t_end, out_dt, eps=1, method="gen-alpha", step=1e-3, rho_inf
         t0 = time.perf_counter()
         res = sim.run(t_end, out_dt, state=st)
         wall = min(wall, time.perf_counter() - t0)
-    return res, dict(method="ale", model=sc.model, integrator=method, elements_per_span=eps, step_s=step,
+    return res, dict(method="ale", model=sc.model, element=sc.ropes[0].element, integrator=method,
+                     elements_per_span=eps, step_s=step,
                      rho_inf=sim.rho_inf, newton_tol=sim.tol,
                      n_dof=int(model.nq), wall_s=wall, setup_s=setup)
 
@@ -188,6 +190,11 @@ def hanging_study(scene_path, quick=True, eps_list=None, steps=None, t_end=1.0, 
             records.append(_finish(rec, "hanging_release", t_end, res, ref, "mass.position", ["rope.tension_start"]))
             for r in records[-2:]:
                 log(_fmt(r))
+    if not quick:   # other integrators on the same ALE discretisation (scipy, adaptive: rtol 1e-8)
+        for method, n in (("dop853", 2), ("dop853", 8), ("radau", 2)):
+            res, rec = _ale_run(scene, t_end, out_dt, eps=n, method=method)
+            records.append(_finish(rec, "hanging_release", t_end, res, ref, "mass.position", ["rope.tension_start"]))
+            log(_fmt(records[-1]))
     return records
 
 
@@ -227,7 +234,8 @@ def trip_study(scene_path, quick=True, window=None, log=print):
         if not quick and case == "trip_2to1_window":
             # scipy Radau (rtol 1e-8) took 207 s for this 4 s window in a first run: left out
             # (the planar ALE model with 4 linear elements per span ran > 3 min on it: left out too)
-            for kw in (dict(rho_inf=1.0), dict(rho_inf=0.5)):
+            for kw in (dict(rho_inf=1.0), dict(rho_inf=0.5), dict(model="planar"),
+                       dict(model="planar", element="cubic")):
                 res, rec = _ale_run(scene, t_end, out_dt, **kw)
                 records.append(_finish(rec, case, t_end, res, ref, "car.position", TRIP_TENSIONS))
                 log(_fmt(records[-1]))
@@ -241,8 +249,8 @@ def trip_study(scene_path, quick=True, window=None, log=print):
 
 
 def _fmt(r):
-    size = (f"{r['model']} {r['elements_per_span']} el/span" if r["method"] == "ale"
-            else f"l={r['element_length_m']:g} m ({r['n_elements']} el)")
+    size = (f"{r['model']}{' cubic' if r.get('element') == 'cubic' else ''} {r['elements_per_span']} el/span"
+            if r["method"] == "ale" else f"l={r['element_length_m']:g} m ({r['n_elements']} el)")
     err = ("FAILED: " + r["failed"]) if r.get("failed") else \
         f"err pos {r['err_position_m']:.3g} m, tension {r['err_tension_rel']:.3g}"
     return (f"  {r['case']:17s} {r['method']:10s} {r['integrator']:9s} {size:22s} h={r['step_s']:g} "
