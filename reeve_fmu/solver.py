@@ -495,8 +495,14 @@ class Simulator:
             try:
                 step = np.linalg.solve(J, -r)
             except np.linalg.LinAlgError:
-                raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations "
-                                  f"(a body or sheave is not held by any rope?)") from None
+                # Exactly singular: e.g. interior nodes of a straight, still unstretched span in the
+                # planar model have no transverse stiffness until the rope carries tension. The
+                # minimum-norm step leaves those directions alone (their residual is zero) and loads
+                # the rope; a residual outside J's range means a body that nothing holds.
+                step = np.linalg.lstsq(J, -r, rcond=None)[0]
+                if np.max(np.abs(J @ step + r)) > 1e-6 * max(rn, 1e-9 * fscale):
+                    raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations "
+                                      f"(a body or sheave is not held by any rope?)") from None
             lam = 1.0
             while lam > 1e-4:
                 rt = resid(x + lam * step)[0]

@@ -8,7 +8,7 @@ import pytest
 from reeve_fmu.geometry import tangent, wrap_angle
 from reeve_fmu.model import build_model
 from reeve_fmu.scene import load_scene, loads_scene
-from reeve_fmu.solver import Simulator
+from reeve_fmu.solver import Simulator, SolverError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -145,3 +145,26 @@ def test_3d_tangent_far_from_the_origin():
     TA, TB = tangent(cA, 0.3, np.array([0.0, 1.0, 0.0]), 1.0, cB, 0.4, aB, -1.0)
     D = TB - TA
     assert abs(D @ (TA - cA)) < 1e-9 and abs(D @ (TB - cB)) < 1e-9
+
+
+def test_planar_linear_multi_element_spans_match_1d():
+    """Interior nodes of a straight, unstretched span in the planar model have no transverse
+    stiffness before the rope is loaded: the statics must still start (minimum-norm Newton step) and,
+    with no lateral excitation, the planar 2:1 elevator with 2 linear elements per span equals the 1D
+    model with 2 elements per span."""
+    sc = load_scene(str(ROOT / "scenes" / "elevator_2to1.toml"))
+    runs = {}
+    for model in ("axial-1d", "planar"):
+        ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": 2}) for r in sc.ropes)
+        sim = Simulator(build_model(sc.with_overrides(model=model, ropes=ropes)))
+        res = sim.run(1.0, 1e-2)
+        runs[model] = res["car.position"] if "car.position" in res.names else res["car.position.z"]
+    assert abs(runs["axial-1d"][-1] - runs["axial-1d"][0]) > 1e-3        # the car has moved
+    assert np.max(np.abs(runs["planar"] - runs["axial-1d"])) < 1e-8
+
+
+def test_statics_names_a_body_no_rope_holds():
+    txt = (ROOT / "scenes" / "hanging_rope.toml").read_text() + (
+        '\n[[bodies]]\nname = "loose"\nmass = 10.0\nposition = [5.0, 0.0, 0.0]\nfree = ["z"]\n')
+    with pytest.raises(SolverError, match="loose.toml: initial statics: singular .* not held by any rope"):
+        Simulator(build_model(loads_scene(txt, "loose.toml"))).initial_state()
