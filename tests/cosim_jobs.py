@@ -140,7 +140,9 @@ def plant_serialize_source(fmu):
                 "errors": [str(m) for m in h.errors()]}
 
 
-def plant_serialize_target(fmu, blob, t):
+def _continue_serialized(fmu, blob, t, run):
+    """A new instance in this (new) process restores a serialized FMU state at t and continues with
+    run(handle); returns (run's result, logged errors)."""
     _host_package()
     r = _runner()
     with r.SlaveHandle.open(fmu, "dst") as h:
@@ -148,7 +150,12 @@ def plant_serialize_target(fmu, blob, t):
         st = h.deserialize_state(blob.encode("latin-1"))
         h.set_state(st, time=t)
         h.free_state(st)
-        return {"cont": _run_plant(h, 60, 120), "errors": [str(m) for m in h.errors()]}
+        return run(h), [str(m) for m in h.errors()]
+
+
+def plant_serialize_target(fmu, blob, t):
+    cont, errors = _continue_serialized(fmu, blob, t, lambda h: _run_plant(h, 60, 120))
+    return {"cont": cont, "errors": errors}
 
 
 def plant_errors(fmu):
@@ -302,14 +309,8 @@ def drive_state(fmu, level):
 
 
 def drive_state_target(fmu, blob, t):
-    _host_package()
-    r = _runner()
-    with r.SlaveHandle.open(fmu, "dst") as h:
-        h.setup(0.0)
-        st = h.deserialize_state(blob.encode("latin-1"))
-        h.set_state(st, time=t)
-        h.free_state(st)
-        return {"c": _run_drive(h, 700, 300), "errors": [str(m) for m in h.errors()]}
+    c, errors = _continue_serialized(fmu, blob, t, lambda h: _run_drive(h, 700, 300))
+    return {"c": c, "errors": errors}
 
 
 def drive_errors(fmu):
