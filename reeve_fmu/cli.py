@@ -100,9 +100,28 @@ def _lazy(sub, name, module, func, help_, configure):
     p.set_defaults(func=run)
 
 
+def _add_set(p):
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key (rope.EA=90e6, bodies.car.mass=1200, drive.v_max=1.0), a drive "
+                        "parameter (torque.max=1500, control.Kp=900, sis.enabled=1) or the load (load=800); "
+                        "repeatable (docs/studies.md)")
+
+
 def _cfg_demo(p):
+    p.add_argument("--scene", default=None, help="elevator scene (default: scenes/elevator_2to1.toml)")
+    p.add_argument("--load", type=float, default=None, help="payload in the car [kg] (default: rated load)")
+    p.add_argument("--landings", default=None, metavar="X1,X2,...",
+                   help="car positions [m] visited in order (default: lowest, highest, lowest landing)")
+    p.add_argument("--dwell", type=float, default=None, help="rest between moves [s] (default 3)")
+    _add_set(p)
+    p.add_argument("--levelling", choices=("both", "encoder"), default="both",
+                   help="both (default): also run the trip with the shaft information system and compare "
+                        "the stopping errors; encoder: motor encoder only")
     p.add_argument("--out", default="results", help="output directory (default: results/)")
     p.add_argument("--step", type=float, default=1e-3, help="communication step [s]")
+    p.add_argument("--output-dt", type=float, default=None, help="output interval of results.csv [s] "
+                                                                  "(default: every step)")
+    p.add_argument("--parquet", action="store_true", help="also write results.parquet")
     p.add_argument("--rebuild", action="store_true", help="rebuild the FMUs even if up to date")
     p.add_argument("--no-progress", action="store_true")
 
@@ -111,6 +130,7 @@ def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml)")
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
+    _add_set(p)
 
 
 def _cfg_bench(p):

@@ -124,7 +124,7 @@ class DriveParams:
     sis: bool = False
     sis_resolution: float = 0.5e-3     # m, position quantum
     sis_delay: float = 2e-3            # s, measurement age
-    sis_zone: float = 0.3              # m before the target over which the loop blends encoder -> SIS
+    sis_zone: float = 1.0              # m before the target over which the loop blends encoder -> SIS
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad parameter."""

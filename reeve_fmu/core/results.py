@@ -7,11 +7,13 @@ import numpy as np
 
 
 def write_csv(path, time, columns: dict):
-    """CSV with a `time` column first, then the named columns (SI units, '%.10g')."""
+    """CSV with a `time` column first, then the named columns (SI units, '%.10g'); values with
+    |x| < 1e-300 (denormals, solver round-off of a zero) are written as 0."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = list(columns)
     data = np.column_stack([np.asarray(time, float)] + [np.asarray(columns[n], float) for n in names])
+    data[np.abs(data) < 1e-300] = 0.0
     header = ",".join(["time"] + names)
     np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
     return path
