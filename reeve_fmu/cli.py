@@ -1,4 +1,4 @@
-"""Command line: reeve-fmu simulate | demo | build | bench | crane | hil.
+"""Command line: reeve-fmu simulate | demo | build | sweep | bench | crane | hil.
 
 Front ends import the layers below them; each subcommand's implementation lives in its own module and
 is imported only when used, so `reeve-fmu simulate` does not load fmpy or python-can.
@@ -23,7 +23,7 @@ def cmd_simulate(args) -> int:
     from .core.scene import load_scene
     from .core.solver import Simulator
 
-    scene = load_scene(args.scene)
+    scene = _scene_with_sets(args.scene, getattr(args, "set", None))
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
     out = Path(args.out)
@@ -37,12 +37,45 @@ def cmd_simulate(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     cols = res.as_dict()
     time_ = cols.pop("time")
-    write_csv(out / "results.csv", time_, cols)
+    from .studies.report import write_tables
+    write_tables(out, time_, cols, output_dt=getattr(args, "output_dt", None),
+                 parquet=bool(getattr(args, "parquet", False)))
     plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})")
+    _simulate_verdicts(scene, time_, cols, out)
     how = ("(the run of the fidelity full-run check)" if reused else
            f"in {wall:.2f} s (incl. statics and JIT load; {t_end / wall:.0f}x real time)")
     print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, results.png")
     return 0
+
+
+def _scene_with_sets(path, items):
+    """The scene file with --set overrides (scene keys, and the load of an elevator scene)."""
+    from .studies.overrides import OverrideError, parse_sets, scene_with, split
+
+    scene_sets, drive_sets, load = split(parse_sets(items))
+    if drive_sets:
+        raise OverrideError(f"--set {next(iter(drive_sets))}: drive parameters apply to demo and sweep; "
+                            f"simulate runs the scene's own [drive]")
+    scene, _ = scene_with(path, scene_sets)
+    if load is not None:
+        from .core.elevator import with_load
+        scene = with_load(scene, load)
+    return scene
+
+
+def _simulate_verdicts(scene, time_, cols, out):
+    """Checks of any scene run (slack rope, buffer contact, traction against EN 81-50): console,
+    DIR/summary.json, DIR/report.md."""
+    from .studies import report
+    from .studies.verdicts import print_verdicts, scene_verdicts, worst
+
+    vs = [v.as_dict() for v in scene_verdicts(scene, time_, cols)]
+    report.write_summary(out, {"scene": scene.name, "source": scene.source, "t_end_s": float(time_[-1]),
+                               "verdict": worst(vs), "verdicts": vs})
+    report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
+                                                           "t_end_s": float(time_[-1])},
+                        [], vs, ["results.png"], command="reeve-fmu simulate")
+    print_verdicts(vs)
 
 
 def _fidelity(args, scene, t_end, dt, out):
@@ -86,6 +119,10 @@ def _add_simulate(sub):
                         "otherwise (overrides [accuracy].tol; docs/fidelity.md)")
     p.add_argument("--no-fidelity", action="store_true",
                    help="ignore [accuracy] and run the scene as written")
+    _add_set(p)
+    p.add_argument("--output-dt", type=float, default=None, help="output interval of results.csv [s] (thins "
+                                                                  "the --dt samples)")
+    p.add_argument("--parquet", action="store_true", help="also write results.parquet")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -126,6 +163,15 @@ def _cfg_demo(p):
     p.add_argument("--no-progress", action="store_true")
 
 
+def _cfg_sweep(p):
+    p.add_argument("study", help="study TOML file (docs/studies.md)")
+    p.add_argument("--out", default="results/sweep", help="output directory (default: results/sweep/)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of an existing Dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None, help="local cluster size (default: every core)")
+    p.add_argument("--no-progress", action="store_true")
+
+
 def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml)")
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
@@ -160,6 +206,8 @@ def main(argv=None) -> int:
     _add_simulate(sub)
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
     _lazy(sub, "build", "demo", "cli_build", "build the plant and electric-drive FMUs into fmus/", _cfg_build)
+    _lazy(sub, "sweep", "studies.sweep", "cli_sweep", "parameter/load-case sweep of elevator trips on Dask",
+          _cfg_sweep)
     _lazy(sub, "bench", "bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
     _lazy(sub, "crane", "crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
     _lazy(sub, "hil", "hil", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)

@@ -253,3 +253,19 @@ def print_verdicts(verdicts, file=None) -> None:
         v = v if isinstance(v, Verdict) else Verdict(**v)
         print("  " + v.line(), file=f)
     print(f"  overall: {worst(verdicts)}", file=f)
+
+
+def scene_verdicts(scene, t, c) -> list:
+    """Verdicts of a `reeve-fmu simulate` run of any scene: slack rope, buffer contact and, for a traction
+    sheave, the traction ratio against the EN 81-50 limits of its groove."""
+    out = generic_verdicts(t, c)
+    for sh in scene.sheaves:
+        name = f"{sh.name}.traction_ratio"
+        if sh.kind != "traction" or name not in c or scene.drive.sheave != sh.name:
+            continue
+        from .trip import traction_limits
+
+        lim = traction_limits(scene, sh.name)
+        r = float(np.nanmax(c[name]))
+        out.append(_trip_traction({"traction_ratio_max": r}, lim))
+    return out
