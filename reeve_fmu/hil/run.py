@@ -146,7 +146,7 @@ def demo_scenario() -> tuple[dict, dict]:
 
         scene = load_scene(cosim.default_scene_path())
         plant_values = {"car.load": float(demo.RATED_LOAD_KG)}
-        pre = cosim.holding_torques(scene, demo.LANDINGS, cosim.scene_payload(scene), params=plant_values)
+        pre = cosim.holding_torques(scene, demo.LANDINGS, plant_values["car.load"])
         drive_values = {"landing[1]": demo.LANDINGS[0], "landing[2]": demo.LANDINGS[1], "trip.moves": 2,
                         "pretorque[1]": pre[0], "pretorque[2]": pre[1], "drive.level": 1}
         _DEMO_SCENARIO = (plant_values, drive_values)
@@ -446,6 +446,14 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             dv = cfg.drive_values or {}
             lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
             summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
+            from ..studies.trip import trip_case
+            from ..studies.verdicts import trip_verdicts, worst
+
+            case = trip_case(sequence=lands + lands[:1] if lands else None)
+            case.drive_values.update({k: v for k, v in dv.items() if k in ("torque.max", "torque.power_max")})
+            vs = [v.as_dict() for v in trip_verdicts(case, time_, cols, summary["trip_metrics"],
+                                                     traction_limits(case.scene), {})]
+            summary["verdict"], summary["verdicts"] = worst(vs), vs
         except Exception as exc:  # a record without a complete trip, or an older demo module
             summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
     if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
