@@ -23,35 +23,12 @@ RATED_SPEED = 1.6       # m/s car
 ROPING = 2.0
 LANDINGS = (0.0, 39.0)  # m
 
+from .analysis import traction_limits  # noqa: E402,F401  (re-exported)
+
 #: DriveParams field of `core.elevator.size_drive` -> drive FMU parameter
 SIZED = {"sheave_radius": "machine.sheave_radius", "roping": "machine.roping", "J_ff": "control.J_ff",
          "T_max": "torque.max", "P_max": "torque.power_max", "Kp": "control.Kp", "Ti": "control.Ti",
          "Kpos": "control.Kpos", "v_max": "trip.v_max", "a_max": "trip.a_max", "jerk": "trip.jerk"}
-
-
-def traction_limits(scene=None, sheave: str | None = None) -> dict:
-    """e^(f alpha) of the traction sheave for the EN 81-50 loading (mu = 0.1), emergency-braking
-    (mu = 0.1 / (1 + v_rope/10) at the rated rope speed) and stalled (mu = 0.2) cases. Without a scene:
-    the R1 groove (U-undercut, beta = 95 deg, gamma = 30 deg, 180 deg wrap, 3.2 m/s rope speed)."""
-    from .analysis import en81_mu, equivalent_friction
-
-    if scene is None:
-        beta, gamma, groove, wrap, v_rope = GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, "u-undercut", WRAP_DEG, \
-            ROPING * RATED_SPEED
-    else:
-        name = sheave or scene.drive.sheave
-        sh = next(s for s in scene.sheaves if s.name == name)
-        beta, gamma, groove = sh.undercut_angle, sh.groove_angle, sh.groove
-        wrap = WRAP_DEG       # single wrap (the shipped scenes); docs/studies.md
-        v_rope = scene.drive.roping * scene.drive.v_max
-    out = {}
-    for case, key in (("loading", "loading"), ("emergency", "emergency_braking"), ("stalled", "stalled")):
-        mu = en81_mu(case, v_rope)
-        out[key] = math.exp(equivalent_friction(mu, beta, gamma, groove) * math.radians(wrap))
-        out[f"mu_{key}"] = mu
-    out["groove"] = {"kind": groove, "beta_deg": beta, "gamma_deg": gamma, "wrap_deg": wrap,
-                     "rope_speed_m_s": v_rope}
-    return out
 
 
 def jerk_of(t, a, cutoff: float = 10.0):

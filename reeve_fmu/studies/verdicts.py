@@ -263,7 +263,7 @@ def scene_verdicts(scene, t, c) -> list:
         name = f"{sh.name}.traction_ratio"
         if sh.kind != "traction" or name not in c or scene.drive.sheave != sh.name:
             continue
-        from .trip import traction_limits
+        from .analysis import traction_limits
 
         lim = traction_limits(scene, sh.name)
         r = float(np.nanmax(c[name]))
