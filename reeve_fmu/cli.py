@@ -188,6 +188,7 @@ def _cfg_crane(p):
     p.add_argument("scene", help="crane scene TOML (e.g. scenes/crane_8fall.toml)")
     p.add_argument("--out", default="results/crane", help="output directory")
     p.add_argument("--heights", type=int, default=None, help="number of hoist heights (default: scene)")
+    _add_set(p)
 
 
 def _cfg_hil(p):

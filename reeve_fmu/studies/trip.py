@@ -113,6 +113,11 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
         raise ValueError(f"landings: give at least two finite positions (m) to visit, got {sequence!r}")
     if any(a == b for a, b in zip(sequence, sequence[1:])):
         raise ValueError(f"landings {sequence!r}: consecutive landings must differ")
+    lo, hi = min(spec.landings), max(spec.landings)
+    out = [x for x in sequence if not lo - 1e-9 <= x <= hi + 1e-9]
+    if out:
+        raise ValueError(f"landings: {out[0]:g} m is outside the travel of {scene.name}, {lo:g} .. {hi:g} m "
+                         f"([elevator].landings)")
     lands = sorted(set(sequence))
     if len(lands) > MAX_LANDINGS or len(sequence) - 1 > MAX_MOVES:
         raise ValueError(f"landings: at most {MAX_LANDINGS} distinct landings and {MAX_MOVES} moves")
