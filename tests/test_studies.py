@@ -113,16 +113,24 @@ def test_csv_denormals_and_thinning(tmp_path):
     assert thin_index(np.arange(11) * 1e-3, 4e-3).tolist() == [0, 4, 8, 10]
 
 
-def test_levelling_with_shaft_information_system():
+def test_levelling_with_shaft_information_system(tmp_path):
     """The drive levels the car, not the sheave, when the SIS closes the position loop on the approach:
-    both stops within the SIS resolution and a few mm (measured +1.39 / -0.80 mm; motor encoder only:
-    +26.8 mm at the top, the car-side rope stretch the encoder cannot see)."""
+    both stops within a few mm (measured +1.39 / -0.80 mm; motor encoder only: +26.8 mm at the top, the
+    car-side rope stretch the encoder cannot see). The run's report carries every verdict."""
     import reeve_fmu
+    from reeve_fmu.studies import report
+    from reeve_fmu.studies.analysis import traction_limits
 
     r = reeve_fmu.cosimulate(R1, sis=True)
     errs = list(r.summary["stopping_error_mm"].values())
     assert len(errs) == 2 and max(abs(e) for e in errs) < 5.0
     assert r.to_pandas().shape[0] == r.time.size
+    stops = [(tr["t_stop_s"], tr["landing_m"]) for tr in r.summary["trips"]]
+    pngs = report.plot_trip(tmp_path, r.time, r.columns, limits=traction_limits(load_scene(R1)), title="t",
+                            stops=stops)
+    md = report.write_report(tmp_path, "t", {"scene": "elevator_2to1"}, [], r.summary["verdicts"], pngs).read_text()
+    assert pngs == ["results.png", "traction.png", "motor.png", "levelling.png"]
+    assert md.count("| **PASS** |") + md.count("| **WARN** |") + md.count("| **FAIL** |") == len(r.summary["verdicts"])
 
 
 def test_sweep_on_a_local_cluster_records_failed_runs(tmp_path):
