@@ -246,6 +246,31 @@ def plot_sweep(rows: list, keys: list, out: Path) -> Path | None:
     return p
 
 
+def write_report(rows: list, study: dict, out: Path, png: Path | None, wall: float) -> Path:
+    """DIR/report.md: counts per verdict, failed runs with their errors, a row per run (up to 200)."""
+    counts = {s: sum(r["verdict"] == s for r in rows) for s in ("PASS", "WARN", "FAIL", "ERROR")}
+    keys = [f"param.{k}" for k in study["keys"]]
+    mets = [m for m in METRICS if any(m in r for r in rows)]
+    lines = [f"# Sweep: {Path(study['file']).name}", "",
+             f"{len(rows)} runs ({study['mode']} over {', '.join(study['keys'])}) of `{study['scene']}` in "
+             f"{wall:.1f} s: " + ", ".join(f"{v} {k}" for k, v in counts.items()), ""]
+    failed = [r for r in rows if r.get("error")]
+    if failed:
+        lines += ["## Failed runs", ""] + [f"- run {r['run']}: {r['error'].splitlines()[0]}" for r in failed] + [""]
+    lines += ["## Runs", "", "| run | " + " | ".join(keys + mets) + " | verdict |",
+              "|---" * (len(keys) + len(mets) + 2) + "|"]
+    for r in rows[:200]:
+        cells = [r.get(k) for k in keys + mets]
+        lines.append(f"| {r['run']} | " + " | ".join("—" if c is None or (isinstance(c, float) and math.isnan(c))
+                                                      else (f"{c:.4g}" if isinstance(c, float) else str(c))
+                                                      for c in cells) + f" | {r['verdict']} |")
+    if png is not None:
+        lines += ["", f"![metrics against parameters]({png.name})"]
+    p = out / "report.md"
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
 def cli_sweep(args) -> int:
     study = load_study(args.study)
     out = Path(args.out)
@@ -265,10 +290,11 @@ def cli_sweep(args) -> int:
     wall = time.perf_counter() - t0
     p = write_results(rows, out)
     png = plot_sweep(rows, study["keys"], out)
+    write_report(rows, study, out, png, wall)
     counts = {s: sum(r["verdict"] == s for r in rows) for s in ("PASS", "WARN", "FAIL", "ERROR")}
     print(f"{n} runs in {wall:.1f} s ({n / wall:.2f} runs/s): " + ", ".join(f"{v} {k}" for k, v in counts.items()))
     for r in rows:
         if r["error"]:
             print(f"  run {r['run']} failed: {r['error'].splitlines()[0]}")
-    print(f"-> {p}" + (f", {png}" if png else ""))
+    print(f"-> {p}" + (f", {png}" if png else "") + f", {out / 'report.md'}")
     return 0
