@@ -199,6 +199,7 @@ def _cfg_hil(p):
                    help="loss=P | delay=MS | controller-dies-at=T (repeatable)")
     p.add_argument("--out", default="results/hil", help="output directory")
     p.add_argument("--t-end", type=float, default=None, help="stop after T seconds of trip")
+    _add_set(p)
 
 
 def main(argv=None) -> int:

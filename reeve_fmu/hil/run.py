@@ -502,12 +502,42 @@ SUMMARY_KEYS = ("mode", "steps", "wall_s", "steps_per_s", "watchdog_trips", "bra
                 "step_time_p50_us", "step_time_p99_us", "sync_jitter_p99_us")
 
 
+def _hil_sets(items) -> dict:
+    """--set for hil: the load, the plant FMU's parameters (rope.EA, ...) and drive parameters on top of
+    the demo's scenario; other scene keys need a plant FMU built with them (reeve-fmu build --set)."""
+    from ..fmu.cosim import PLANT_PARAMETERS
+    from ..studies.overrides import OverrideError, parse_sets, split
+
+    sets = parse_sets(items)
+    plant = {k: float(sets.pop(k)) for k in list(sets) if k in PLANT_PARAMETERS}
+    scene_sets, drive_sets, load = split(sets)
+    if scene_sets:
+        raise OverrideError(f"--set {next(iter(scene_sets))}: hil runs the built plant FMU; its parameters are "
+                            f"{', '.join(PLANT_PARAMETERS)} (other scene keys: reeve-fmu build --set)")
+    pv, dv = demo_scenario()
+    if load is not None:
+        plant["car.load"] = load
+    pv.update(plant)
+    if "car.load" in plant:      # load weighing: the pre-torque follows the load
+        from ..core.scene import load_scene
+        from ..fmu import cosim
+        from ..studies import trip as demo
+
+        pre = cosim.holding_torques(load_scene(cosim.default_scene_path()), demo.LANDINGS, pv["car.load"],
+                                    params={k: v for k, v in pv.items() if k != "car.load"})
+        dv.update({"pretorque[1]": pre[0], "pretorque[2]": pre[1]})
+    dv.update(drive_sets)
+    return {"plant_values": pv, "drive_values": dv}
+
+
 def cli_hil(args) -> int:
     """reeve-fmu hil (arguments from reeve_fmu.cli)."""
     from .bridge import HilError
 
     cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
                     t_end=args.t_end, out=args.out)
+    if getattr(args, "set", None):
+        cfg = replace(cfg, **_hil_sets(args.set))
     print(f"HIL: {'real time' if cfg.realtime else 'lock-step'} over {cfg.bus}, {cfg.controller} controller"
           + (f", faults {' '.join(cfg.inject)}" if cfg.inject else ""))
     try:
