@@ -10,9 +10,9 @@ Sign convention: positive motor speed, angle and torque move the car UP. Car pos
 in metres, increasing upward. The measured car position is inferred from the motor angle,
 x = x_landing + (theta - theta_at_move_start) * R / roping, so the drive controls the sheave, not the car
 (rope stretch is the plant's business). Optionally (`sis = True`) a shaft information system gives the
-absolute car position (quantized to `sis_resolution`, `sis_delay` old); over the last `sis_zone` metres
-of each approach the position loop blends from the encoder's position error to the SIS's, so the car,
-not the sheave, is levelled at the landing.
+absolute car position (quantized to `sis_resolution`, `sis_delay` old); the offset between it and the
+encoder's car position (the rope stretch) is low-passed (`sis_filter`) and blended into the position
+loop over the last `sis_zone` metres of each approach, so the car, not the sheave, is levelled.
 
 Brake command: 1.0 = release (open) the brake, 0.0 = apply (close) it.
 
@@ -52,13 +52,14 @@ _NS = 10
 # parameter vector layout for the kernel
 (_P_HB, _P_NSP, _P_LEVEL, _P_R, _P_ROP, _P_JFF, _P_TMAX, _P_PMAX, _P_TAU, _P_ND, _P_KP, _P_KI,
  _P_KPOS, _P_TPRE, _P_TRAMP, _P_NPP, _P_PSI, _P_RS, _P_LD, _P_LQ, _P_VMAX, _P_KPD, _P_KID, _P_KPQ,
- _P_KIQ, _P_SIS) = range(26)
-_NP = 26
+ _P_KIQ, _P_SIS, _P_SISTAU) = range(27)
+_NP = 27
 
 # float state layout (integer state: _I_*); the dead-time buffer follows _X_BUF0
 (_X_TM, _X_TT, _X_INT, _X_TH0, _X_TREF, _X_TR0, _X_TIME, _X_TMEAN, _X_WCMD, _X_EPOS, _X_XREF,
- _X_VREF, _X_AREF, _X_ID, _X_IQ, _X_VDA, _X_VQA, _X_VDN, _X_VQN, _X_ITD, _X_ITQ, _X_IQREF) = range(22)
-_X_BUF0 = 22
+ _X_VREF, _X_AREF, _X_ID, _X_IQ, _X_VDA, _X_VQA, _X_VDN, _X_VQN, _X_ITD, _X_ITQ, _X_IQREF, _X_SOFF,
+ _X_SINIT) = range(24)
+_X_BUF0 = 24
 _I_K, _I_MOVE, _I_PHASE, _I_HEAD = range(4)
 _NI = 4
 
@@ -124,7 +125,9 @@ class DriveParams:
     sis: bool = False
     sis_resolution: float = 0.5e-3     # m, position quantum
     sis_delay: float = 2e-3            # s, measurement age
-    sis_zone: float = 1.0              # m before the target over which the loop blends encoder -> SIS
+    sis_zone: float = 0.0              # m before the target over which the loop blends encoder -> SIS;
+                                       # 0: the braking distance v_max²/(2 a_max), at least 0.3 m
+    sis_filter: float = 0.2            # s, time constant of the low-pass on the SIS - encoder offset
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad parameter."""
@@ -148,8 +151,9 @@ class DriveParams:
                   "brake_lift_delay", "hold_time", "brake_drop_delay", "torque_ramp_time", "dwell_time"):
             nonneg(n)
         if self.sis:
-            for n in ("sis_resolution", "sis_zone"):
+            for n in ("sis_resolution", "sis_filter"):
                 pos(n)
+            nonneg("sis_zone")
             nonneg("sis_delay")
         if self.level not in (1, 2):
             raise ValueError(f"DriveParams.level must be 1 or 2, got {self.level!r}")
@@ -278,6 +282,7 @@ def _speed_tick(xs, xi, P, sched, prof, tk, w, th, xsis):
         xi[_I_MOVE] = move
         xs[_X_TH0] = th
         xs[_X_INT] = 0.0
+        xs[_X_SINIT] = 0.0
         prev_phase = PHASE_IDLE
     x_ref, v_ref, a_ref = profile_eval(prof, tk)
     xs[_X_XREF] = x_ref
@@ -289,13 +294,23 @@ def _speed_tick(xs, xi, P, sched, prof, tk, w, th, xsis):
         th_ref = xs[_X_TH0] + (x_ref - sched[move, _S_X0]) * g
         epos = th_ref - th
         if P[_P_SIS] > 0.0 and xsis == xsis:
-            # blend to the car-position error over the last sis_zone metres of the approach (smooth:
-            # the two errors differ by the rope stretch, tens of mm)
+            # car position = encoder position + rope stretch offset; the offset (SIS - encoder) is
+            # low-passed with sis_filter so that the loop stays collocated on the sheave: feeding the
+            # car position back directly excites the rope's bounce mode (measured: a sustained
+            # +-25 mm, 1.3 Hz oscillation at the bottom of the 200 m high-rise)
+            raw = xsis - (sched[move, _S_X0] + (th - xs[_X_TH0]) / g)
+            if xs[_X_SINIT] == 0.0:
+                xs[_X_SOFF] = raw
+                xs[_X_SINIT] = 1.0
+            else:
+                f = P[_P_HB] * P[_P_NSP] / P[_P_SISTAU]
+                xs[_X_SOFF] += (raw - xs[_X_SOFF]) * (f if f < 1.0 else 1.0)
+            # applied over the last sis_zone metres of the approach (a smooth blend)
             wgt = 1.0 - abs(sched[move, _S_X1] - x_ref) / P[_P_SIS]
             if wgt > 0.0:
                 if wgt > 1.0:
                     wgt = 1.0
-                epos += wgt * ((x_ref - xsis) * g - epos)
+                epos -= wgt * g * xs[_X_SOFF]
         wcmd = g * v_ref + P[_P_KPOS] * epos
         e = wcmd - w
         Tpre = sched[move, _S_PRE]
@@ -444,7 +459,9 @@ class ElectricDrive:
         P[_P_NPP], P[_P_PSI], P[_P_RS], P[_P_LD], P[_P_LQ] = p.pole_pairs, p.psi, p.Rs, p.Ld, p.Lq
         P[_P_VMAX] = p.V_dc / math.sqrt(3.0)
         P[_P_KPD], P[_P_KID], P[_P_KPQ], P[_P_KIQ] = kpd, kid, kpq, kiq
-        P[_P_SIS] = p.sis_zone if p.sis else 0.0
+        zone = p.sis_zone if p.sis_zone > 0 else max(0.3, p.v_max ** 2 / (2.0 * p.a_max))
+        P[_P_SIS] = zone if p.sis else 0.0
+        P[_P_SISTAU] = p.sis_filter
         self._P = P
         self._sis_hist: list = []          # (t, car position) samples not yet older than sis_delay
         self._xs = np.zeros(_X_BUF0 + max(nd, 1))

@@ -298,7 +298,8 @@ def _index(name: str) -> int:
 SIS_PARAMETERS = {"sis.enabled": ("sis", "1", "1: car-position feedback for the approach"),
                   "sis.resolution": ("sis_resolution", "m", "SIS position quantum"),
                   "sis.delay": ("sis_delay", "s", "SIS measurement age"),
-                  "sis.zone": ("sis_zone", "m", "approach length over which the loop blends to the SIS")}
+                  "sis.zone": ("sis_zone", "m", "approach length over which the loop blends to the SIS (0: braking distance)"),
+                  "sis.filter": ("sis_filter", "s", "low-pass time constant of the SIS - encoder offset")}
 
 
 def drive_defaults() -> dict:

@@ -118,6 +118,19 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
     if out:
         raise ValueError(f"landings: {out[0]:g} m is outside the travel of {scene.name}, {lo:g} .. {hi:g} m "
                          f"([elevator].landings)")
+    car0 = next(b for b in scene.bodies if b.name == spec.car)
+    if abs(car0.position[2] - sequence[0]) > 1e-9:
+        # the trip starts elsewhere than the scene's car: move car and counterweight there (in the scene
+        # file's data too, so that a plant FMU built from it starts there)
+        if path is None:
+            raise ValueError(f"landings start at {sequence[0]:g} m but the scene's car is at "
+                             f"{car0.position[2]:g} m: pass the scene file's path")
+        from ..core.elevator import car_at
+
+        moved = {b.name: b.position for b in car_at(scene, sequence[0]).bodies}
+        for name in (spec.car, spec.counterweight):
+            scene_sets[f"bodies.{name}.position"] = list(moved[name])
+        scene, _ = scene_with(path, scene_sets)
     lands = sorted(set(sequence))
     if len(lands) > MAX_LANDINGS or len(sequence) - 1 > MAX_MOVES:
         raise ValueError(f"landings: at most {MAX_LANDINGS} distinct landings and {MAX_MOVES} moves")
