@@ -115,7 +115,7 @@ def test_csv_denormals_and_thinning(tmp_path):
 
 def test_levelling_with_shaft_information_system(tmp_path):
     """The drive levels the car, not the sheave, when the SIS closes the position loop on the approach:
-    both stops within a few mm (measured +1.39 / -0.80 mm; motor encoder only: +26.8 mm at the top, the
+    both stops within a few mm (measured +0.91 / +0.01 mm; motor encoder only: +26.8 mm at the top, the
     car-side rope stretch the encoder cannot see). The run's report carries every verdict."""
     import reeve_fmu
     from reeve_fmu.studies import report
