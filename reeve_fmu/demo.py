@@ -147,7 +147,8 @@ def cli_demo(args) -> int:
             "relevelling_needed_sis": any(abs(e) > 20 for e in ss["stopping_error_mm"].values()),
             "sis": {"resolution_m": case.drive_values.get("sis.resolution", 0.5e-3),
                     "delay_s": case.drive_values.get("sis.delay", 2e-3),
-                    "zone_m": case.drive_values.get("sis.zone", 1.0),
+                    "zone_m": case.drive_values.get("sis.zone", 0.0) or "braking distance",
+                    "filter_s": case.drive_values.get("sis.filter", 0.2),
                     "run": "in process (Plant + ElectricDrive at the same step; the drive FMU has no "
                            "car-position input)"}}
     out.mkdir(parents=True, exist_ok=True)
