@@ -23,7 +23,7 @@ class ReevingPlantSlave(ReeveSlave):
     description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
 
     def define(self):
-        with open(self.resource_path(PLANT_CONFIG)) as fh:
+        with open(self.resource_path(PLANT_CONFIG), encoding="utf-8") as fh:
             cfg = json.load(fh)
         self.config = cfg
         self.modelName = cfg["name"]

@@ -109,7 +109,7 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
     from reeve_fmu.fmu.build import FmuBuildError, build_fmu
 
     generic = tmp_path / "model.py"
-    generic.write_text("x = 1\n")
+    generic.write_text("x = 1\n", encoding="utf-8")
     with pytest.raises(FmuBuildError, match="too generic"):
         build_fmu(generic, tmp_path / "out")
     body = ("from reeve_fmu.fmu.slave import ReeveSlave\n"
@@ -134,7 +134,7 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
     (out / "ReeveBadnameProbe.fmu").write_bytes(b"previous good build")
     for stem, (line, err) in cases.items():
         src = tmp_path / f"{stem}.py"
-        src.write_text(body.format(cls=stem.title().replace("_", ""), line=line))
+        src.write_text(body.format(cls=stem.title().replace("_", ""), line=line), encoding="utf-8")
         with pytest.raises(FmuBuildError, match=err):
             build_fmu(src, out)
         assert stem not in sys.modules and str(tmp_path) not in sys.path

@@ -450,7 +450,7 @@ class ReeveSlave(Fmi2Slave):
         path = os.path.join(res, STAMP_NAME)
         if not os.path.isfile(path):
             return
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             stamp = json.load(fh)
         loaded, location, warning = _loaded_package_info()
         self.package_info = {"fmu_sha256": stamp.get("sha256"), "loaded_sha256": loaded,
