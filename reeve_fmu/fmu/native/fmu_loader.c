@@ -415,10 +415,13 @@ static int load_python(char *err, size_t esize)
     if (resolve_python(err, esize) != 0) return -1;
     if (sscanf(py.GetVersion(), "%d.%d", &major, &minor) != 2 || major != 3 ||
         minor < REEVE_MIN_PY_MINOR) {
-        snprintf(err, esize, "wrong Python version: %s is Python %.20s, but this FMU needs Python >= "
+        char version[32];
+        snprintf(version, sizeof version, "%s", py.GetVersion());
+        version[strcspn(version, " ")] = 0;
+        snprintf(err, esize, "wrong Python version: %s is Python %s, but this FMU needs Python >= "
                  "3.%d (it was built with %s). Use a newer Python (set REEVE_FMU_LIBPYTHON to its "
                  "libpython3.X.so.1.0 in a non-Python host).",
-                 python_where, py.GetVersion(), REEVE_MIN_PY_MINOR, REEVE_PY_VERSION);
+                 python_where, version, REEVE_MIN_PY_MINOR, REEVE_PY_VERSION);
         return -1;
     }
     if (!py.IsInitialized()) {
