@@ -69,7 +69,8 @@ def test_model_description_units_structure_and_resources(toy):
     assert "resources/reeve_fmu_vendor/reeve_fmu/fmu/slave.py" in names
     assert not any("__pycache__" in n or n.endswith((".pyc", ".nbi", ".nbc")) for n in names)
     assert stamp["sha256"] == toy["hash"] and stamp["entry"]["name"] == "reeve_toy_slave.py"
-    assert "numpy" in reqs and "scipy" in reqs and scene == SCENE
+    assert "numpy>=1.24" in reqs and "scipy" not in reqs and scene == SCENE   # only what the model imports
+    assert "tomli>=2.0; python_version < '3.11'" in reqs
     # capability flags
     cs = xml.find("CoSimulation").attrib
     assert cs["canGetAndSetFMUstate"] == "true" and cs["canSerializeFMUstate"] == "true"
