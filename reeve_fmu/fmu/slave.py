@@ -244,6 +244,8 @@ class ReeveSlave(Fmi2Slave):
         self._real_names: list = []            # vr -> name of a Real kept in self.values (else None)
         self._user_setters: dict[str, Callable] = {}
         self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
+        self._deferred: Optional[Callable] = None  # writes the outputs step() left for later
+        self._eager_vrs: frozenset = frozenset()   # Reals step() always writes (see defer_outputs)
         self._mode = "instantiated"
         self._initialized = False
         self.start_time: Optional[float] = None
@@ -424,6 +426,26 @@ class ReeveSlave(Fmi2Slave):
     def vr(self, name: str) -> int:
         return self._by_name[name].vr
 
+    # ------------------------------------------------------------------ deferred outputs (speed)
+    def set_eager_outputs(self, names: Iterable[str]) -> None:
+        """The Real outputs step() writes into self.values on every step (typically what the master
+        exchanges); all others may be left to `defer_outputs`."""
+        self._eager_vrs = frozenset(self._by_name[n].vr for n in names)
+
+    def defer_outputs(self, write: Optional[Callable[[], None]]) -> None:
+        """Called by step(): `write()` puts the remaining outputs into self.values. It runs only when
+        something reads them (a getReal of another variable, getInteger/Boolean/String, getFMUstate),
+        at most once per step, so a master that reads only the eager outputs never pays for it.
+        `write` must use a snapshot taken in step() (the next step replaces it unrun), never live
+        model state."""
+        self._deferred = write
+
+    def _flush(self) -> None:
+        write = self._deferred
+        if write is not None:
+            self._deferred = None
+            write()
+
     def resource_path(self, name: str) -> str:
         """Absolute path of a file shipped with build_fmu(resources={name: ...})."""
         if not self.resources:
@@ -602,6 +624,7 @@ class ReeveSlave(Fmi2Slave):
     def _get_values(self, kind, vrs, conv, bad):
         g = self._get[kind]
         try:
+            self._flush()
             return [conv(g[vr]()) for vr in vrs]
         except Exception:
             out = []
@@ -628,6 +651,8 @@ class ReeveSlave(Fmi2Slave):
         # no getter call per variable (the plant's 25 outputs: ~3x faster); anything else (a user
         # getter, a bad value reference, a non-float value) takes the checked path
         try:
+            if self._deferred is not None and not self._eager_vrs.issuperset(vrs):
+                self._flush()
             vals = self.values
             names = self._real_names
             out = [vals[names[vr]] for vr in vrs]
@@ -745,6 +770,7 @@ class ReeveSlave(Fmi2Slave):
     # ------------------------------------------------------------------ FMU state
     def _get_fmu_state(self):
         try:
+            self._flush()
             hidden = self.get_hidden_state() if self._initialized else {}
             return canonical_state({
                 "format": STATE_FORMAT,
@@ -783,6 +809,7 @@ class ReeveSlave(Fmi2Slave):
             if self._fault is not None and state["initialized"]:
                 raise RuntimeError("cannot restore into a faulty instance (reset it first):\n"
                                    + self._fault)
+            self._deferred = None
             self.values.update(values)
             self.time = state["time"]
             self.start_time = state["start_time"]
