@@ -318,3 +318,46 @@ def test_fmpy_container_runs_in_the_c_host_like_the_jacobi_master(fmus, host, tm
         err = max(abs(a - b) for a, b in zip(cols[i], ref[name]))
         assert err <= tol, (name, err)
     assert max(cols[4]) == 1.0 and cols[1][-1] > 0.1
+
+
+TOOLBOX_CSV = """rule;from_fmu;from_port;to_fmu;to_port
+FMU;ElectricDrive.fmu;;;
+FMU;ReevingPlant.fmu;;;
+LINK;ElectricDrive.fmu;motor.torque;ReevingPlant.fmu;motor.torque
+LINK;ElectricDrive.fmu;brake.command;ReevingPlant.fmu;brake.command
+LINK;ReevingPlant.fmu;motor.speed;ElectricDrive.fmu;motor.speed
+LINK;ReevingPlant.fmu;motor.angle;ElectricDrive.fmu;motor.angle
+OUTPUT;ReevingPlant.fmu;car.position;;car.position
+OUTPUT;ElectricDrive.fmu;motor.torque;;motor.torque
+OUTPUT;ElectricDrive.fmu;brake.command;;brake.command
+START;ElectricDrive.fmu;pretorque[1];522.5;
+START;ElectricDrive.fmu;pretorque[2];331.5;
+"""
+
+
+def test_fmu_manipulation_toolbox_container_runs_in_the_c_host(fmus, host, tmp_path):
+    """The same system combined by fmu-manipulation-toolbox's `fmucontainer` (optional package): its
+    default (parallel) schedule is the Jacobi master's; the C host runs it."""
+    pytest.importorskip("fmu_manipulation_toolbox", reason="fmu-manipulation-toolbox is not installed")
+    for k in ("plant", "drive"):
+        shutil.copy2(fmus[k], tmp_path)
+    (tmp_path / "system.csv").write_text(TOOLBOX_CSV, encoding="utf-8")
+    code = ("import sys\nfrom fmu_manipulation_toolbox.cli.fmucontainer import fmucontainer\n"
+            f"sys.argv = ['fmucontainer', '-container', 'system.csv:0.001', '-fmu-directory', {str(tmp_path)!r}, "
+            "'-no-auto-input', '-no-auto-output', '-no-auto-link']\nfmucontainer()\n")
+    p = _run_script(code, tmp_path, "make_container.py")
+    fmu = tmp_path / "system.fmu"
+    assert fmu.is_file(), p.stdout + p.stderr
+    ident, guid, v = chost.model_info(fmu)
+    d = chost.extract(fmu, tmp_path / "unzipped")
+    names = ["car.position", "motor.torque", "brake.command"]
+    plan = "\n".join([f"fmu sys {d} {ident} {guid}"] + [f"output sys {v[n][1]}" for n in names]
+                     + ["step 0.001", "steps 1000", "stoptime 1.0"]) + "\n"
+    r = chost.run_host(host, plan, tmp_path)
+    assert r["returncode"] == 0, r["stdout"] + r["stderr"]
+    ref = run_in_subprocess(f"{JOBS}:fmpy_run", fmus["plant"], fmus["drive"], 1.0, "jacobi", {}, R1_DRIVE, False,
+                            timeout=600)
+    cols = list(zip(*r["rows"]))
+    for i, (name, tol) in enumerate(zip(names, (1e-12, 1e-9, 0.0)), start=1):
+        err = max(abs(a - b) for a, b in zip(cols[i], ref[name]))
+        assert err <= tol, (name, err)
