@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from reeve_fmu import cosim  # noqa: E402
+from reeve_fmu.fmu import cosim  # noqa: E402
 
 
 def _pct(a):

@@ -1,7 +1,7 @@
 """The floor of an fmpy co-simulation step with two pythonfmu FMUs on this machine.
 
 Two *trivial* pythonfmu slaves (do_step copies two inputs to two outputs) are stepped the way
-`reeve_fmu.cosim` steps the drive and the plant: per 1 ms step, setReal(2) + doStep + getReal(2) on
+`reeve_fmu.fmu.cosim` steps the drive and the plant: per 1 ms step, setReal(2) + doStep + getReal(2) on
 each, raw fmi2* functions with preallocated ctypes arrays. Whatever this costs is spent before any
 model runs: it bounds the real-time factor of any 1 ms co-simulation of two Python FMUs here.
 

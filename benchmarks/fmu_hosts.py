@@ -1,7 +1,7 @@
 """What one 1 ms co-simulation step of the plant and drive FMUs costs, against the floor of two trivial
 pythonfmu slaves measured in the same run, in fmpy (Python host) and in the native C host.
 
-Per step both masters make the calls of reeve_fmu.cosim's Gauss-Seidel master: drive setReal(2) +
+Per step both masters make the calls of reeve_fmu.fmu.cosim's Gauss-Seidel master: drive setReal(2) +
 doStep + getReal(2), plant setReal(2) + doStep + getReal(2) (only the exchanged values, so the real
 FMUs and the trivial ones move the same data). Reported (best of --repeat runs of --steps steps over
 the start of the R1 trip: pre-torque, brake lift, acceleration):
@@ -141,7 +141,7 @@ class Pair:
 
 def bare_models(steps, repeat, h=1e-3):
     """The FMUs' Plant and ElectricDrive objects, coupled in-process like the master (no FMI)."""
-    from reeve_fmu.cosim import default_scene_path, make_drive, make_plant
+    from reeve_fmu.fmu.cosim import default_scene_path, make_drive, make_plant
 
     best = float("inf")
     for _ in range(repeat):
@@ -178,7 +178,7 @@ def main() -> int:
     from fmpy import read_model_description
 
     from fmu_host import chost
-    from reeve_fmu.cosim import build_drive_fmu, build_plant_fmu
+    from reeve_fmu.fmu.cosim import build_drive_fmu, build_plant_fmu
 
     n, R = args.steps, args.repeat
     out = {"steps": n, "repeat": R}

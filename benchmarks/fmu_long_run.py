@@ -30,7 +30,7 @@ def main():
     ap.add_argument("--dt", type=float, default=1e-3)
     ap.add_argument("--out", default=None, help="write the figures as JSON here")
     args = ap.parse_args()
-    from reeve_fmu.cosim import ensure_fmus
+    from reeve_fmu.fmu.cosim import ensure_fmus
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 

@@ -15,9 +15,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from reeve_fmu.model import build_model  # noqa: E402
-from reeve_fmu.scene import load_scene  # noqa: E402
-from reeve_fmu.solver import SolverError, Simulator  # noqa: E402
+from reeve_fmu.core.model import build_model  # noqa: E402
+from reeve_fmu.core.scene import load_scene  # noqa: E402
+from reeve_fmu.core.solver import SolverError, Simulator  # noqa: E402
 
 IMG = ROOT / "docs" / "img"
 HARD = ROOT / "scenes" / "hard"

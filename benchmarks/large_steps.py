@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from reeve_fmu import cosim  # noqa: E402
+from reeve_fmu.fmu import cosim  # noqa: E402
 
 IMG = ROOT / "docs" / "img"
 STEPS = (1e-3, 2e-3, 5e-3, 1e-2, 2e-2)

@@ -7,7 +7,7 @@ from pathlib import Path
 import sys
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from reeve_fmu.bench import time_trip  # noqa: E402
+from reeve_fmu.studies.bench import time_trip  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parents[1]

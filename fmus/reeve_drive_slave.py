@@ -1,6 +1,6 @@
 """FMU entry of the electric drive (FMI 2.0 co-simulation): `reeve-fmu build` -> fmus/ElectricDrive.fmu.
 
-Wraps reeve_fmu.drive.ElectricDrive: trip sequencer (pre-torque, brake lift, jerk-limited S-curve
+Wraps reeve_fmu.core.drive.ElectricDrive: trip sequencer (pre-torque, brake lift, jerk-limited S-curve
 from landing to landing, zero-speed hold, brake drop, torque ramp-down, dwell, next move), speed PI
 with torque feed-forward and position loop, torque and power limits, and the torque path: Level 1
 first-order lag + dead time (default) or Level 2 PMSM dq model with current PI (drive.level = 2).
@@ -10,10 +10,11 @@ Inputs  motor.speed [rad/s], motor.angle [rad] (from the plant, held over the st
 Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end of the step, plus
         the references and the sequencer phase. No output depends directly on an input (the drive
         samples at the start of the step).
-Parameters: reeve_fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
+Parameters: reeve_fmu.fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
 """
-from reeve_fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
-from reeve_fmu.drive import _I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF, _X_XREF, PHASE_NAMES
+from reeve_fmu.core.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
+                                  _X_XREF, PHASE_NAMES)
+from reeve_fmu.fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 #: largest communication step (s) the speed loop is meant for: beyond it the drive logs a warning (once)

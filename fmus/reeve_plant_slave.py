@@ -8,14 +8,14 @@ Parameters (fixed: the model is built in exitInitializationMode) car.load, rope.
         brake.static_torque, motor.inertia.
 
 The scene and the output declarations come from the FMU's resources (scene.toml, reeve_plant.json,
-written by reeve_fmu.cosim.plant_build_inputs). Any communication step is accepted: the plant
+written by reeve_fmu.fmu.cosim.plant_build_inputs). Any communication step is accepted: the plant
 sub-steps internally with the scene's solver step (generalized-alpha, steps <= solver.step).
 A solver failure raises inside step(): ReeveSlave logs the traceback through the FMU logger and
 returns fmi2Discard; further steps are refused until the master restores an FMU state or resets.
 """
 import json
 
-from reeve_fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
+from reeve_fmu.fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
 from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
 
 

@@ -14,20 +14,14 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 
 
-def default_scene(name: str) -> Path:
-    """A shipped scene: ./scenes/<name> in a checkout, else the copy inside the package."""
-    for base in (Path.cwd() / "scenes", PACKAGE_DIR.parent / "scenes", PACKAGE_DIR / "data" / "scenes"):
-        p = base / name
-        if p.exists():
-            return p
-    return Path("scenes") / name
+from .core.scene import default_scene  # noqa: E402,F401  (re-exported)
 
 
 def cmd_simulate(args) -> int:
-    from .model import build_model
-    from .results import plot_overview, write_csv
-    from .scene import load_scene
-    from .solver import Simulator
+    from .core.model import build_model
+    from .core.results import plot_overview, write_csv
+    from .core.scene import load_scene
+    from .core.solver import Simulator
 
     scene = load_scene(args.scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
@@ -57,7 +51,7 @@ def _fidelity(args, scene, t_end, dt, out):
     selection's full-run check made it)."""
     if args.no_fidelity:
         return scene, None, None
-    from .fidelity import accuracy_for, configure, select
+    from .studies.fidelity import accuracy_for, configure, select
     outputs = None
     if args.accuracy_outputs is not None:
         outputs = [o.strip() for o in args.accuracy_outputs.split(",") if o.strip()]
@@ -146,12 +140,12 @@ def main(argv=None) -> int:
     _add_simulate(sub)
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
     _lazy(sub, "build", "demo", "cli_build", "build the plant and electric-drive FMUs into fmus/", _cfg_build)
-    _lazy(sub, "bench", "bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
-    _lazy(sub, "crane", "crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
-    _lazy(sub, "hil", "hil", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
+    _lazy(sub, "bench", "studies.bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
+    _lazy(sub, "crane", "studies.crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
+    _lazy(sub, "hil", "hil.run", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
     args = ap.parse_args(argv)
-    from .scene import SceneError
-    from .solver import SolverError
+    from .core.scene import SceneError
+    from .core.solver import SolverError
     try:
         rc = int(args.func(args) or 0)
     except (SceneError, SolverError, ValueError, FileNotFoundError) as exc:

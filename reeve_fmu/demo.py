@@ -2,7 +2,7 @@
 
 demo: builds fmus/ReevingPlant.fmu and fmus/ElectricDrive.fmu if they are missing or stale, then
 co-simulates the R1 2:1 elevator (scenes/elevator_2to1.toml, rated load 1000 kg) driven by the
-electric drive (Level 1) with the fmpy master of reeve_fmu.cosim: bottom landing -> top landing,
+electric drive (Level 1) with the fmpy master of reeve_fmu.fmu.cosim: bottom landing -> top landing,
 dwell, and back. Writes DIR/results.csv, DIR/results.png (car kinematics), DIR/traction.png (rope
 forces at the traction sheave, traction ratio against the EN 81-50 limits e^(f alpha)),
 DIR/motor.png (motor torque and speed) and DIR/summary.json, and prints the summary table.
@@ -17,46 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-# R1 traction sheave (domain.md §1.3): U-undercut groove beta = 95 deg, gamma = 30 deg, single wrap
-GROOVE_BETA_DEG = 95.0
-GROOVE_GAMMA_DEG = 30.0
-WRAP_DEG = 180.0
-RATED_LOAD_KG = 1000.0
-RATED_SPEED = 1.6       # m/s car
-ROPING = 2.0
-LANDINGS = (0.0, 39.0)  # m
+from .studies.trip import (GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, LANDINGS, RATED_LOAD_KG, RATED_SPEED,  # noqa: F401
+                          ROPING, WRAP_DEG, jerk_of, summarize, traction_limits)
 
 
-def fmu_dir() -> Path:
-    """Where the demo keeps its FMUs: $REEVE_FMU_FMUS, else fmus/ of the source checkout."""
-    env = os.environ.get("REEVE_FMU_FMUS")
-    if env:
-        return Path(env)
-    from .cosim import repo_root
 
-    return repo_root() / "fmus"
-
-
-def traction_limits() -> dict:
-    """e^(f alpha) of the R1 groove for the EN 81-50 loading (mu = 0.1) and emergency-braking cases."""
-    from .analysis import en81_mu, traction_limit
-
-    rope_speed = ROPING * RATED_SPEED
-    mu_b = en81_mu("emergency", rope_speed)
-    return {
-        "loading": traction_limit(en81_mu("loading"), GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, WRAP_DEG),
-        "emergency_braking": traction_limit(mu_b, GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, WRAP_DEG),
-        "mu_loading": en81_mu("loading"),
-        "mu_emergency_braking": mu_b,
-    }
-
-
-def jerk_of(t, a, cutoff: float = 10.0):
-    """Jerk as ISO 18738 takes it: derivative of the acceleration low-passed at 10 Hz."""
-    from .analysis import lowpass
-
-    fs = 1.0 / float(t[1] - t[0])
-    return np.gradient(lowpass(a, fs, cutoff), t)
+from .fmu.cosim import fmu_dir  # noqa: E402,F401  (re-exported)
 
 
 def _plots(out: Path, t, c, limits, title):
@@ -129,45 +95,6 @@ def _plots(out: Path, t, c, limits, title):
     plt.close(fig)
 
 
-def summarize(t, c, limits, landings=LANDINGS) -> dict:
-    """Trip metrics of a demo record (see analysis.trip_summary)."""
-    from .analysis import trip_summary
-
-    s = trip_summary(t, c["car.position"], c["car.velocity"], c["car.acceleration"], landings=landings,
-                     torque=c["motor.torque"], traction_ratio=c["traction.traction_ratio"],
-                     traction_limit=limits["emergency_braking"])
-    trips = []
-    for r in s["trips"]:
-        trips.append({
-            "direction": "up" if r["direction"] > 0 else "down",
-            "t_start_s": r["t_start_s"], "t_stop_s": r["t_stop_s"], "trip_time_s": r["trip_time_s"],
-            "landing_m": r["landing_m"], "stopping_error_mm": r["stopping_error_m"] * 1e3,
-            "v_max_m_s": r["v_max_m_s"], "a_max_m_s2": r["a_max_m_s2"], "d_max_m_s2": r["d_max_m_s2"],
-            "a95_acceleration_m_s2": r["a95_acc_m_s2"], "a95_deceleration_m_s2": r["a95_dec_m_s2"],
-            "jerk_max_m_s3": r["jerk_max_m_s3"], "vibration_pp_max_m_s2": r["vib_pp_max_m_s2"],
-            "vibration_pp_a95_m_s2": r["vib_pp_a95_m_s2"],
-            "constant_speed_region_s": list(r["cs_region_s"]),
-        })
-    ratio = float(np.max(c["traction.traction_ratio"]))
-    return {
-        "trips": trips,
-        "trip_time_s": [r["trip_time_s"] for r in trips],
-        "max_acceleration_m_s2": max(s["max_acceleration_m_s2"], s["max_deceleration_m_s2"]),
-        "max_jerk_m_s3": s["max_jerk_m_s3"],
-        "a95_acceleration_m_s2": s["a95_acceleration_m_s2"],
-        "a95_deceleration_m_s2": s["a95_deceleration_m_s2"],
-        "vibration_pp_max_m_s2": s["vib_pp_max_m_s2"],
-        "traction_ratio_max": ratio,
-        "traction_limit_emergency_braking": limits["emergency_braking"],
-        "traction_limit_loading": limits["loading"],
-        "traction_utilisation_vs_emergency_braking": ratio / limits["emergency_braking"],
-        "traction_utilisation_vs_loading": ratio / limits["loading"],
-        "motor_torque_peak_Nm": s["torque_peak_Nm"],
-        "stopping_error_mm": {f"{r['landing_m']:g} m ({r['direction']})": r["stopping_error_mm"]
-                              for r in trips},
-    }
-
-
 def print_table(summary: dict) -> None:
     rows = [("trip time (up / down)", " / ".join(f"{x:.2f}" for x in summary["trip_time_s"]), "s")]
     rows += [
@@ -192,7 +119,7 @@ def print_table(summary: dict) -> None:
 
 
 def cli_demo(args) -> int:
-    from . import cosim
+    from .fmu import cosim
 
     out = Path(getattr(args, "out", None) or "results")
     step = float(getattr(args, "step", None) or 1e-3)
@@ -240,7 +167,7 @@ def cli_demo(args) -> int:
         if n == "motor.speed":
             order.append("motor.torque")
     order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order]
-    from .results import write_csv
+    from .core.results import write_csv
 
     write_csv(out / "results.csv", t, {n: c[n] for n in order})
     limits = traction_limits()
@@ -273,7 +200,7 @@ def cli_demo(args) -> int:
 
 
 def cli_build(args) -> int:
-    from . import cosim
+    from .fmu import cosim
 
     dest = Path(getattr(args, "dest", None) or "fmus")
     name = getattr(args, "name", None) or cosim.PLANT_NAME

@@ -346,7 +346,7 @@ CMP = ["car.position", "car.velocity", "car.acceleration", "motor.speed", "motor
 def cosim_vs_monolithic(plant_fmu, drive_fmu, t_end, scheme, drive_values):
     """fmpy co-simulation of the FMUs against the same models coupled in-process at the same step."""
     pkg = _host_package()
-    from reeve_fmu.cosim import cosimulate, monolithic
+    from reeve_fmu.fmu.cosim import cosimulate, monolithic
 
     c = cosimulate(plant_fmu, drive_fmu, step=DT, t_end=t_end, scheme=scheme, drive_values=drive_values)
     m = monolithic(step=DT, t_end=t_end, record_step=DT, scheme=scheme, drive_values=drive_values,
@@ -362,7 +362,7 @@ def cosim_accuracy(plant_fmu, drive_fmu, steps, drive_values, ref_step=1e-4):
     _host_package()
     import numpy as np
 
-    from reeve_fmu.cosim import cosimulate, monolithic
+    from reeve_fmu.fmu.cosim import cosimulate, monolithic
 
     ref = monolithic(step=ref_step, record_step=1e-3, drive_values=drive_values, plant_fmu=plant_fmu)
     out = {"ref_rtf": ref.info["rtf"], "t_end": float(ref.time[-1])}
@@ -382,7 +382,7 @@ def cosim_monitor(plant_fmu, drive_fmu, t_end, drive_values, steps):
     _host_package()
     import logging
 
-    from reeve_fmu.cosim import MONITOR_FIELDS, cosimulate, monolithic
+    from reeve_fmu.fmu.cosim import MONITOR_FIELDS, cosimulate, monolithic
 
     logged = []
 
@@ -390,7 +390,7 @@ def cosim_monitor(plant_fmu, drive_fmu, t_end, drive_values, steps):
         def emit(self, rec):
             logged.append((rec.levelname, rec.getMessage()))
 
-    logging.getLogger("reeve_fmu.cosim").addHandler(_H())
+    logging.getLogger("reeve_fmu.fmu.cosim").addHandler(_H())
     out = {}
     for h in steps:
         del logged[:]
@@ -414,7 +414,7 @@ def reference_error(results_csv, summary_json, ref_step=1e-4):
 
     import numpy as np
 
-    from reeve_fmu.cosim import monolithic
+    from reeve_fmu.fmu.cosim import monolithic
 
     with open(summary_json, encoding="utf-8") as fh:
         sc = json.load(fh)["scenario"]
@@ -435,7 +435,7 @@ def reference_error(results_csv, summary_json, ref_step=1e-4):
 def fmpy_run(plant_fmu, drive_fmu, t_end, scheme, plant_values, drive_values, ns_step_differences=False):
     """fmpy master run (FMUs via their own package) for the comparison with libcosim."""
     _fmu_package(plant_fmu)
-    from reeve_fmu.cosim import cosimulate
+    from reeve_fmu.fmu.cosim import cosimulate
 
     c = cosimulate(plant_fmu, drive_fmu, step=DT, t_end=t_end, scheme=scheme, plant_values=plant_values,
                    drive_values=drive_values, ns_step_differences=ns_step_differences)

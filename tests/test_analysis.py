@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu import analysis as A
-from reeve_fmu.profiles import scurve, trip_sequence
+from reeve_fmu.studies import analysis as A
+from reeve_fmu.core.profiles import scurve, trip_sequence
 
 # ---------------------------------------------------------------------------------------------------
 # EN 81-50 traction

@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 from reeve_fmu.cli import main
-from reeve_fmu.results import read_csv
+from reeve_fmu.core.results import read_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -117,7 +117,7 @@ def test_monitor_energy_residual_equals_the_zero_order_hold_error():
     """Power-bond residual against the analytic value: a torque tau held on a free inertia J for n
     steps; the plant gains tau * dtheta = tau (w_k h + tau h^2 / 2J), the drive accounted tau w_k h,
     so the coupling created n tau^2 h^2 / (2J)."""
-    from reeve_fmu.cosim import CouplingMonitor
+    from reeve_fmu.fmu.cosim import CouplingMonitor
 
     J, tau, h, n = 2.5, 300.0, 1e-3, 400
     m = CouplingMonitor(h, 1000.0)
@@ -132,7 +132,7 @@ def test_monitor_energy_residual_equals_the_zero_order_hold_error():
 
 
 def test_monitor_flags_non_finite_and_alternating_torque():
-    from reeve_fmu.cosim import CouplingMonitor
+    from reeve_fmu.fmu.cosim import CouplingMonitor
 
     m = CouplingMonitor(1e-3, 1000.0)
     for k in range(100):                                    # +-60 N m alternating: 6 % of 1000 N m
@@ -170,7 +170,7 @@ def test_large_communication_step_is_detected_and_reported_by_the_master(fmus):
 
 
 def _ssp_values(fmus):
-    from reeve_fmu.cosim import ssp_parameters
+    from reeve_fmu.fmu.cosim import ssp_parameters
 
     p = ssp_parameters(fmus["ssp"])
     strip = lambda d: {k: v for k, v in d.items() if not k.startswith("__")}  # noqa: E731

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reeve_fmu.crane import CraneSolver, load_crane, sweep
-from reeve_fmu.elements.torsion import LAWS, coupling_law, torsion_span, transport_angle, transport_angle_grad
-from reeve_fmu.scene import SceneError
+from reeve_fmu.studies.crane import CraneSolver, load_crane, sweep
+from reeve_fmu.core.elements.torsion import LAWS, coupling_law, torsion_span, transport_angle, transport_angle_grad
+from reeve_fmu.core.scene import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
 TWO = ROOT / "scenes" / "crane_two_fall.toml"

@@ -20,7 +20,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import eigh
 
-from reeve_fmu.elements.cubic import (cubic_element, cubic_element_at, cubic_kinetic, cubic_mass,
+from reeve_fmu.core.elements.cubic import (cubic_element, cubic_element_at, cubic_kinetic, cubic_mass,
                                       cubic_mass_gauss, layout)
 
 

@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, load_scene, loads_scene
-from reeve_fmu.solver import Simulator
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
+from reeve_fmu.core.solver import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu.drive import (PHASE_DONE, PHASE_IDLE, PHASE_RUN, DriveParams, ElectricDrive)
+from reeve_fmu.core.drive import (PHASE_DONE, PHASE_IDLE, PHASE_RUN, DriveParams, ElectricDrive)
 
 R, ROPING = 0.16, 2.0
 G = ROPING / R                      # motor rad per metre of car travel

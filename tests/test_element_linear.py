@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reeve_fmu.elements import linear as lin
-from reeve_fmu.elements.linear import linear_element
+from reeve_fmu.core.elements import linear as lin
+from reeve_fmu.core.elements.linear import linear_element
 
 
 def _kernel_1d(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
@@ -154,7 +154,7 @@ def test_tension_only_has_no_force_in_compression(nd, name, fn):
     """tension_only and lambda < 1: the smoothed law (SLACK_STRAIN d, see linear.axial_law) leaves
     at most EA d^2/(4 |eps|) of elastic force and EA d in total (damping clipped), i.e. ~1e-7 of EA
     here, and a strain energy of order EA d^2."""
-    from reeve_fmu.elements.linear import SLACK_STRAIN as d
+    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d
     EA = 1e5
     rng = np.random.default_rng(500 + nd)
     for _ in range(N_STATES):
@@ -169,7 +169,7 @@ def test_tension_only_has_no_force_in_compression(nd, name, fn):
 
 def test_tension_only_law_is_conservative_and_smooth():
     """N = dw/deps across the slack/taut transition (central differences), N continuous."""
-    from reeve_fmu.elements.linear import SLACK_STRAIN as d, axial_law
+    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d, axial_law
     EA = 2.9e6
     for eps in np.linspace(-5 * d, 5 * d, 41):
         h = 1e-3 * d

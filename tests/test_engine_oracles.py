@@ -23,11 +23,11 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from reeve_fmu.elements.linear import linear_element
-from reeve_fmu.model import build_model, new_state
-from reeve_fmu.scene import parse_scene
-from reeve_fmu.solver import Simulator
-from reeve_fmu.system import assemble
+from reeve_fmu.core.elements.linear import linear_element
+from reeve_fmu.core.model import build_model, new_state
+from reeve_fmu.core.scene import parse_scene
+from reeve_fmu.core.solver import Simulator
+from reeve_fmu.core.system import assemble
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"

@@ -1,4 +1,4 @@
-"""Fidelity selection (reeve_fmu/fidelity.py, docs/fidelity.md): a loose tolerance picks a coarser
+"""Fidelity selection (reeve_fmu/studies/fidelity.py, docs/fidelity.md): a loose tolerance picks a coarser
 configuration than a tight one; the chosen configuration meets the tolerance over the FULL run against an
 independent, much finer run (the probe only sees the start); every cheaper candidate is reported with
 the reason it was rejected; bad [accuracy] input names the key."""
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from reeve_fmu.cli import main
-from reeve_fmu.fidelity import Config, accuracy_for, configure, parse_accuracy, resolve_output, select
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, load_scene, loads_scene
-from reeve_fmu.solver import Simulator
+from reeve_fmu.studies.fidelity import Config, accuracy_for, configure, parse_accuracy, resolve_output, select
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
+from reeve_fmu.core.solver import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 HOIST = ROOT / "tests" / "scenes" / "fidelity_hoist.toml"

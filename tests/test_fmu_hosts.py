@@ -152,7 +152,7 @@ r = simulate_fmu({fmu!r}, stop_time=0.01, output_interval=1e-3)
 assert len(r) == 11, len(r)
 """
 COSIMULATE = """
-from reeve_fmu.cosim import cosimulate
+from reeve_fmu.fmu.cosim import cosimulate
 r = cosimulate({plant!r}, {drive!r}, step=1e-3, t_end=0.01, drive_values={values!r})
 assert len(r.time) == 11
 """

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, load_scene
-from reeve_fmu.solver import SolverError, Simulator
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, load_scene
+from reeve_fmu.core.solver import SolverError, Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 HARD = ROOT / "scenes" / "hard"

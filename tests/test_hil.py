@@ -29,12 +29,12 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from reeve_fmu.canhil import protocol as P  # noqa: E402
-from reeve_fmu.canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError  # noqa: E402
-from reeve_fmu.canhil.buses import make_bus  # noqa: E402
-from reeve_fmu.canhil.drive402 import Drive402  # noqa: E402
+from reeve_fmu.hil import protocol as P  # noqa: E402
+from reeve_fmu.hil.bridge import Bridge, BridgeConfig, FaultSpec, HilError  # noqa: E402
+from reeve_fmu.hil.buses import make_bus  # noqa: E402
+from reeve_fmu.hil.drive402 import Drive402  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
-from reeve_fmu.hil import HilConfig, ensure_multicast, run_hil  # noqa: E402
+from reeve_fmu.hil.run import HilConfig, ensure_multicast, run_hil  # noqa: E402
 
 JOBS = str(ROOT / "tests" / "hil_jobs.py")
 
@@ -236,8 +236,8 @@ def test_udp_multicast_cross_process_lockstep():
 # fault injection and safety
 # ------------------------------------------------------------------------------------------------
 def test_frame_loss_holds_the_setpoint_then_trips_the_watchdog(tmp_path):
-    from reeve_fmu.hil import reference_run
-    from reeve_fmu.results import read_csv
+    from reeve_fmu.hil.run import reference_run
+    from reeve_fmu.core.results import read_csv
 
     light = _run(tmp_path, inject=["loss=0.02", "seed=3"])
     assert light["frames_injected"]["lost"] > 20
@@ -284,7 +284,7 @@ def test_dead_controller_safe_stop_and_bounded_waits():
 
 def _scripted_bench(script, n=40):
     """The bench (in-process plant) against a scripted controller thread: script(k, counter, send)."""
-    from reeve_fmu.canhil.plants import InProcessPlant
+    from reeve_fmu.hil.plants import InProcessPlant
 
     ch = "hil_script_" + uuid.uuid4().hex[:6]
     bus = make_bus("virtual", ch)
@@ -391,7 +391,7 @@ def test_canopen_basenode402_enables_the_drive_and_runs_a_short_move():
     import canopen
     from canopen.profiles.p402 import BaseNode402
 
-    from reeve_fmu.canhil.plants import InProcessPlant
+    from reeve_fmu.hil.plants import InProcessPlant
 
     ch = "hil_402_" + uuid.uuid4().hex[:6]
     bus = make_bus("virtual", ch)
@@ -462,7 +462,7 @@ def test_controller_as_sync_producer_and_sync_loss():
     stop, the drive faults (EMCY 0x8100), applies the brake and the bench finishes on its own clock."""
     import can
 
-    from reeve_fmu.canhil.plants import InProcessPlant
+    from reeve_fmu.hil.plants import InProcessPlant
 
     ch = "hil_extsync_" + uuid.uuid4().hex[:6]
     bus, cbus = make_bus("virtual", ch), make_bus("virtual", ch)

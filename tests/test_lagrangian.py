@@ -1,4 +1,4 @@
-"""Lagrangian finite-element baseline (reeve_fmu/lagrangian.py) and the work-precision bench, against
+"""Lagrangian finite-element baseline (reeve_fmu/studies/lagrangian.py) and the work-precision bench, against
 exact results (method.md §7) and the ALE engine. Short runs only: speed is measured by the bench, not here."""
 import math
 from pathlib import Path
@@ -8,9 +8,9 @@ import pytest
 from scipy.linalg import eigh
 from scipy.optimize import brentq
 
-from reeve_fmu import bench
-from reeve_fmu import lagrangian as lag
-from reeve_fmu.scene import load_scene
+from reeve_fmu.studies import bench
+from reeve_fmu.studies import lagrangian as lag
+from reeve_fmu.core.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 HANGING = ROOT / "scenes" / "hanging_rope.toml"

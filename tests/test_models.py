@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu.geometry import tangent, wrap_angle
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import load_scene, loads_scene
-from reeve_fmu.solver import Simulator, SolverError
+from reeve_fmu.core.geometry import tangent, wrap_angle
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import load_scene, loads_scene
+from reeve_fmu.core.solver import Simulator, SolverError
 
 ROOT = Path(__file__).resolve().parents[1]
 

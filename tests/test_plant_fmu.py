@@ -71,7 +71,7 @@ def test_plant_model_description(fmus):
     assert cs.get("canInterpolateInputs") == "false"
     # the FMU carries the package (vendored + bootstrap shim), its scene and its config
     assert "resources/scene.toml" in names and "resources/reeve_plant.json" in names
-    assert "resources/reeve_fmu_vendor/reeve_fmu/plant.py" in names
+    assert "resources/reeve_fmu_vendor/reeve_fmu/core/plant.py" in names
     assert "resources/reeve_fmu.py" in names and "resources/reeve_plant_slave.py" in names
     assert (ROOT / "scenes" / "elevator_2to1.toml").read_bytes() == \
         zipfile.ZipFile(fmus["plant"]).read("resources/scene.toml")
@@ -162,7 +162,7 @@ def test_declared_dependencies_match_the_plant():
     """An output has direct feed-through from motor.torque iff the effect of a torque change over a
     step of length dt tends to a non-zero limit as dt -> 0 (1e-7 s vs 1e-8 s: the same value);
     without feed-through the effect scales with dt (10x smaller)."""
-    from reeve_fmu.cosim import make_plant, plant_output_specs
+    from reeve_fmu.fmu.cosim import make_plant, plant_output_specs
 
     plant = make_plant(ROOT / "scenes" / "elevator_2to1.toml")
     specs = {s["name"]: s for s in plant_output_specs(plant.output_names, ["car_sheave", "traction", "cw_sheave"])}

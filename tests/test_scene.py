@@ -3,8 +3,8 @@ from pathlib import Path
 
 import pytest
 
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, load_scene, loads_scene
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted((ROOT / "scenes").glob("*.toml"))
@@ -31,7 +31,7 @@ def test_shipped_scenes_load_and_build():
     for p in SCENES:
         sc = load_scene(p)
         if sc.model == "spatial-torsion":
-            from reeve_fmu.crane import load_crane
+            from reeve_fmu.studies.crane import load_crane
             load_crane(p)               # quasi-static crane model
             with pytest.raises(SceneError, match="reeve-fmu crane"):
                 build_model(sc)         # the dynamic engine says where such scenes go

@@ -8,9 +8,9 @@ import tomllib
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, parse_scene
-from reeve_fmu.solver import SolverError, Simulator
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, parse_scene
+from reeve_fmu.core.solver import SolverError, Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted(p for p in (ROOT / "scenes").rglob("*.toml") if "crane" not in p.name)
@@ -115,6 +115,6 @@ def test_every_single_key_mutation_is_handled():
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.name)
 def test_shipped_scenes_solve_statics(path):
     """Unmutated scenes: the initial statics converges (or the scene documents why not)."""
-    from reeve_fmu.scene import load_scene
+    from reeve_fmu.core.scene import load_scene
     sc = load_scene(path)
     Simulator(build_model(sc)).initial_state()

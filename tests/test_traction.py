@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu.analysis import en81_mu, traction_limit
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import load_scene
-from reeve_fmu.solver import Simulator
+from reeve_fmu.studies.analysis import en81_mu, traction_limit
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import load_scene
+from reeve_fmu.core.solver import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = load_scene(ROOT / "scenes" / "hard" / "traction_en81.toml")
@@ -82,7 +82,7 @@ def test_emergency_braking(decel, slips):
 def test_car_stalled_counterweight_on_buffer_rope_slips():
     """Counterweight on its buffer, empty car near the top, machine turning 'up' with mu = 0.2: the
     rope slips and the car is not lifted."""
-    from reeve_fmu.scene import Buffer
+    from reeve_fmu.core.scene import Buffer
     W_cw = 1750 * 9.81
     k_buf = 1.0e6
     z_cw = 1.5

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reeve_fmu.elements.cubic import cubic_mass
-from reeve_fmu.model import build_model
-from reeve_fmu.scene import SceneError, load_scene, loads_scene
-from reeve_fmu.solver import Simulator
+from reeve_fmu.core.elements.cubic import cubic_mass
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
+from reeve_fmu.core.solver import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 G = 9.81

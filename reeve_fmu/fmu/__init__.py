@@ -1,9 +1,10 @@
-"""Generic FMU machinery of reeve_fmu (no plant or drive physics here).
+"""The FMI layer: FMU machinery, FMU build and the co-simulation masters (physics lives in core).
 
 * `reeve_fmu.fmu.slave`   -- `ReeveSlave`, the pythonfmu base class of every reeve_fmu FMU entry
 * `reeve_fmu.fmu.build`   -- `build_fmu`, `fmu_is_stale`, `read_stamp`, `current_package_hash`
 * `reeve_fmu.fmu.runner`  -- `run_in_subprocess`, `SlaveHandle` (fmpy FMU2Slave wrapper)
 * `reeve_fmu.fmu._bootstrap` -- stdlib-only shim that runs inside FMUs (stable numba cache dir)
+* `reeve_fmu.fmu.cosim`   -- plant/drive FMU build inputs, the fmpy master `cosimulate`, the monolithic reference
 
 Names are imported lazily so that `import reeve_fmu.fmu` costs nothing.
 """

@@ -5,7 +5,7 @@
 The container (a prebuilt Rust `container_fmu.so` from fmpy) holds both FMUs in its resources and
 connects drive motor.torque/brake.command -> plant and plant motor.speed/motor.angle -> drive. Every
 container doStep first passes the connected values, then steps the drive and the plant with them
-(measured: bit-identical to `reeve_fmu.cosim.cosimulate(..., scheme="jacobi")`). The nested FMUs keep
+(measured: bit-identical to `reeve_fmu.fmu.cosim.cosimulate(..., scheme="jacobi")`). The nested FMUs keep
 their native loader, so the container runs in Python hosts and in C hosts alike.
 
 Three things fmpy 0.3.32 needs that its API does not do by itself (done here):

@@ -7,7 +7,7 @@ reports numba's own hit/miss counters; tests and `reeve-fmu check` can assert on
 """
 from __future__ import annotations
 
-from .._jit import JIT, njit
+from ..core._jit import JIT, njit
 
 
 @njit(cache=True)

@@ -54,7 +54,7 @@ def cosim_plan(plant_fmu, drive_fmu, plant_dir, drive_dir, *, step: float, steps
                drive_values: Optional[Mapping[str, float]] = None, record: Sequence[str] = (),
                drive_record: Sequence[str] = (), stop_time: Optional[float] = None,
                logging: bool = False) -> str:
-    """The plan of reeve_fmu.cosim's Gauss-Seidel co-simulation: the drive steps first with the plant's
+    """The plan of reeve_fmu.fmu.cosim's Gauss-Seidel co-simulation: the drive steps first with the plant's
     motor.speed/angle, then the plant with the drive's motor.torque/brake.command."""
     pid, pguid, pv = model_info(plant_fmu)
     did, dguid, dv = model_info(drive_fmu)

@@ -71,7 +71,7 @@ def scene_payload(scene) -> float:
 
 def empty_car_scene(scene, payload: float, car_body: str = "car"):
     """The scene with `payload` kg taken out of the car body's mass."""
-    from .scene import SceneError
+    from ..core.scene import SceneError
 
     if not payload:
         return scene
@@ -103,8 +103,8 @@ def make_plant(scene, payload: float | None = None, params: Optional[Mapping[str
 
     Parameters equal to their default leave the scene untouched (so a scene with ropes of different
     EA keeps them unless rope.EA is changed)."""
-    from .plant import Plant
-    from .scene import Scene, load_scene
+    from ..core.plant import Plant
+    from ..core.scene import Scene, load_scene
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -131,7 +131,7 @@ def holding_torques(scene, landings: Sequence[float], payload: float | None = No
     """Static motor torque (N m) that holds the car at each landing: the plant's `brake.torque` at rest
     with the car moved to the landing (the counterweight moved by the same distance the other way).
     This is what a load-weighing device gives the drive as pre-torque."""
-    from .scene import Scene, load_scene
+    from ..core.scene import Scene, load_scene
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -212,9 +212,9 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
 
 def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = None) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
-    from .model import build_model
-    from .plant import plant_scene
-    from .scene import load_scene
+    from ..core.model import build_model
+    from ..core.plant import plant_scene
+    from ..core.scene import load_scene
 
     scene = load_scene(scene_path)
     if payload is None:
@@ -290,7 +290,7 @@ DRIVE_PARAMETERS = [
 def drive_defaults() -> dict:
     """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
     round trip, pre-torque for the rated load (R1_PRETORQUE)."""
-    from .drive import DriveParams
+    from ..core.drive import DriveParams
 
     p = DriveParams()
     out = {}
@@ -311,7 +311,7 @@ def drive_defaults() -> dict:
 
 def drive_params(values: Optional[Mapping[str, float]] = None):
     """DriveParams from drive FMU parameter values (missing names take `drive_defaults`)."""
-    from .drive import DriveParams
+    from ..core.drive import DriveParams
 
     vals = drive_defaults()
     if values:
@@ -337,7 +337,7 @@ def drive_params(values: Optional[Mapping[str, float]] = None):
 
 def make_drive(values: Optional[Mapping[str, float]] = None):
     """The `ElectricDrive` of the drive FMU for these parameter values."""
-    from .drive import ElectricDrive
+    from ..core.drive import ElectricDrive
 
     return ElectricDrive(drive_params(values))
 
@@ -347,7 +347,14 @@ def make_drive(values: Optional[Mapping[str, float]] = None):
 # ------------------------------------------------------------------------------------------------
 
 def repo_root() -> Path:
-    return Path(__file__).resolve().parents[1]
+    return Path(__file__).resolve().parents[2]
+
+def fmu_dir() -> Path:
+    """Where the demo keeps its FMUs: $REEVE_FMU_FMUS, else fmus/ of the source checkout."""
+    env = os.environ.get("REEVE_FMU_FMUS")
+    if env:
+        return Path(env)
+    return repo_root() / "fmus"
 
 
 def entry_script(kind: str) -> Path:
@@ -360,7 +367,7 @@ def entry_script(kind: str) -> Path:
 
 
 def default_scene_path() -> Path:
-    from .cli import default_scene
+    from ..core.scene import default_scene
 
     return Path(default_scene(DEFAULT_SCENE))
 
@@ -392,7 +399,7 @@ def plant_fmu_model(plant_fmu) -> tuple:
     """(Scene, scene payload) a built plant FMU carries (resources/scene.toml, reeve_plant.json)."""
     import zipfile
 
-    from .scene import loads_scene
+    from ..core.scene import loads_scene
 
     with zipfile.ZipFile(plant_fmu) as zf:
         cfg = json.loads(zf.read(f"resources/{PLANT_CONFIG}").decode("utf-8"))
@@ -415,7 +422,7 @@ def plant_build_inputs(scene=None, name: str = PLANT_NAME, workdir: Optional[Pat
 
 def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True) -> tuple[Path, bool]:
     """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?)."""
-    from .fmu.build import build_fmu, fmu_is_stale
+    from .build import build_fmu, fmu_is_stale
 
     dest = Path(dest)
     with tempfile.TemporaryDirectory(prefix="reeve_plant_entry_") as work:
@@ -427,7 +434,7 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
 
 
 def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
-    from .fmu.build import NUMBA, NUMPY, build_fmu, fmu_is_stale
+    from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
@@ -678,7 +685,7 @@ def _on_detection(mon: CouplingMonitor, ep: dict, scheme: str, on_instability: s
     import logging
 
     msg = CouplingMonitor.describe(ep, mon.h, scheme)
-    logging.getLogger("reeve_fmu.cosim").warning(msg)
+    logging.getLogger("reeve_fmu.fmu.cosim").warning(msg)
     if on_instability == "raise":
         raise CosimInstability(msg)
     return on_instability == "stop"
@@ -769,7 +776,7 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
     motor.speed/angle straight into the buffer the drive's setReal reads, and vice versa.
     """
-    from .fmu.runner import SlaveHandle
+    from .runner import SlaveHandle
 
     if not (step > 0.0 and math.isfinite(step)):
         raise ValueError(f"communication step must be a finite number > 0, got {step!r}")

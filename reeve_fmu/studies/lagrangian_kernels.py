@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 
-from ._jit import njit
-from .elements.linear import end_tension, linear_element_at
-from .profiles import profile_eval
-from .solver import lu_factor, lu_solve
+from ..core._jit import njit
+from ..core.elements.linear import end_tension, linear_element_at
+from ..core.profiles import profile_eval
+from ..core.solver import lu_factor, lu_solve
 
 KB = 3   # half-bandwidth of the node block: two coordinates per node, nearest-neighbour coupling
 

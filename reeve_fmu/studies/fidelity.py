@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from .scene import AXES, MODELS, Scene, SceneError, _Reader
+from ..core.scene import AXES, MODELS, Scene, SceneError, _Reader
 
 DYNAMIC_MODELS = MODELS[:3]                      # spatial-torsion is quasi-static (reeve-fmu crane)
 MODEL_RANK = {m: i for i, m in enumerate(DYNAMIC_MODELS)}
@@ -236,7 +236,7 @@ def probe_window(scene: Scene, t_end: float, probe: float | None = None):
         return min(probe, t_end), "set by accuracy.probe"
     dv = scene.drive
     if dv.kind == "speed" and dv.profile == "s-curve" and dv.distance != 0.0:
-        from .profiles import scurve_phases
+        from ..core.profiles import scurve_phases
         d, _ = scurve_phases(dv.distance, dv.v_max, dv.a_max, dv.jerk)
         t_acc = sum(d[:3])
         t = dv.t_start + t_acc + SETTLE
@@ -301,9 +301,9 @@ def _steps_per_output(out_dt: float, h: float) -> int:
 
 def _prepare(scene: Scene, cand: Candidate, n_out: int, out_dt: float):
     """Build the candidate's model (nq and cost); a scene the configuration cannot build -> failed."""
-    from .model import build_model
-    from .solver import SolverError
-    from .geometry import GeometryError
+    from ..core.model import build_model
+    from ..core.solver import SolverError
+    from ..core.geometry import GeometryError
     try:
         model = build_model(configure(scene, cand.config))
     except (SceneError, SolverError, GeometryError, ValueError) as exc:
@@ -317,7 +317,7 @@ def _prepare(scene: Scene, cand: Candidate, n_out: int, out_dt: float):
 
 def _run(model, cand: Candidate, t_probe: float, out_dt: float):
     """Probe run; the result columns or None (cand marked failed)."""
-    from .solver import Simulator, SolverError
+    from ..core.solver import Simulator, SolverError
     t0 = time.perf_counter()
     try:
         res = Simulator(model, method="gen-alpha", step=cand.config.step).run(t_probe, out_dt)
@@ -416,7 +416,7 @@ def select(scene: Scene, acc: Accuracy, t_end: float | None = None, out_dt: floa
     """Run the probe ladder and choose. `step` fixes the step (the ladder then varies the rest);
     t_end/out_dt are the full run's (default: the scene's). Raises SceneError (bad [accuracy]) or
     FidelityError (the reference configuration cannot run)."""
-    from .model import build_model
+    from ..core.model import build_model
     t_end = scene.t_end if t_end is None else t_end
     out_dt = scene.output_step if out_dt is None else out_dt
     src = scene.source
@@ -564,8 +564,8 @@ def select(scene: Scene, acc: Accuracy, t_end: float | None = None, out_dt: floa
 
     def full(cfg: Config):
         if cfg not in full_runs:
-            from .solver import Simulator, SolverError
-            from .model import build_model
+            from ..core.solver import Simulator, SolverError
+            from ..core.model import build_model
             say(f"fidelity: full-run check {cfg.label()} over 0-{n_full * out_dt:g} s ...")
             try:
                 res = Simulator(build_model(configure(scene, cfg)), method="gen-alpha",

@@ -16,7 +16,7 @@ class PlantError(RuntimeError):
 
 
 class InProcessPlant:
-    """reeve_fmu.plant.Plant in this process (fast tests, no FMU)."""
+    """reeve_fmu.core.plant.Plant in this process (fast tests, no FMU)."""
 
     kind = "in-process"
 
@@ -33,7 +33,7 @@ class InProcessPlant:
         return self._y
 
     def step(self, dt: float, torque: float, brake: float):
-        from ..solver import SolverError
+        from ..core.solver import SolverError
 
         try:
             self._y = self.plant.step(dt, torque, brake)
@@ -152,16 +152,16 @@ class FmuPlant:
 
 
 def make_default_plant(scene=None, params: dict | None = None):
-    """The in-process twin of the plant FMU: reeve_fmu.cosim.make_plant (car.load = rated load) of the
+    """The in-process twin of the plant FMU: reeve_fmu.fmu.cosim.make_plant (car.load = rated load) of the
     2:1 elevator scene, or Plant(scene) when the co-simulation module is not available. `params` are plant
     FMU parameter names ({"car.load": ..., "rope.EA": ...})."""
-    from ..cli import default_scene
+    from ..core.scene import default_scene
 
     scene = scene if scene is not None else default_scene("elevator_2to1.toml")
     try:
-        from ..cosim import make_plant
+        from ..fmu.cosim import make_plant
     except ImportError:  # pragma: no cover - older checkouts
-        from ..plant import Plant
+        from ..core.plant import Plant
         if params:
             raise
         return Plant(scene)
@@ -170,11 +170,11 @@ def make_default_plant(scene=None, params: dict | None = None):
 
 def default_plant_fmu(dest=None, *, build: bool = True, log=None) -> Path:
     """The demo's plant FMU (reeve_fmu.demo.fmu_dir(): $REEVE_FMU_FMUS or fmus/ of the checkout) /
-    ReevingPlant.fmu, built, or rebuilt when stale, with reeve_fmu.cosim.build_plant_fmu."""
-    from ..cosim import PLANT_NAME, build_plant_fmu
+    ReevingPlant.fmu, built, or rebuilt when stale, with reeve_fmu.fmu.cosim.build_plant_fmu."""
+    from ..fmu.cosim import PLANT_NAME, build_plant_fmu
 
     if dest is None:
-        from ..demo import fmu_dir
+        from ..fmu.cosim import fmu_dir
 
         dest = fmu_dir()
     path = Path(dest) / f"{PLANT_NAME}.fmu"

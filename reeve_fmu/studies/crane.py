@@ -44,10 +44,10 @@ import time
 
 import numpy as np
 
-from ._jit import njit
-from .elements.torsion import LAWS, torsion_span
-from .geometry import GeometryError, _basis, tangent
-from .scene import Scene, SceneError, _Reader, load_scene, parse_scene
+from ..core._jit import njit
+from ..core.elements.torsion import LAWS, torsion_span
+from ..core.geometry import GeometryError, _basis, tangent
+from ..core.scene import Scene, SceneError, _Reader, load_scene, parse_scene
 
 
 class CraneError(ValueError):
@@ -586,7 +586,7 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
     sp_f[:, 0:2] = angles
     s_ref = np.zeros(nst)
     phi_ref = np.zeros(nst)
-    from .elements.torsion import transport_angle
+    from ..core.elements.torsion import transport_angle
     for k in range(nsp):
         D = T[k][1] - T[k][0]
         L = float(np.linalg.norm(D))

@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .model import build_model
-from .scene import load_scene
-from .solver import Simulator
+from ..core.model import build_model
+from ..core.scene import load_scene
+from ..core.solver import Simulator
 
 TOL_POSITION = 1e-3          # m: "equal error" of the headline ratio
 TOL_TENSION = 0.01           # relative to the reference peak
@@ -314,7 +314,7 @@ def plot(records, out: Path):
 
 
 def cli_bench(args) -> int:
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     if not (root / "scenes").exists():
         root = Path.cwd()
     out = Path(args.out)

@@ -523,3 +523,15 @@ def loads_scene(text: str, source: str = "<string>") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from None
     return parse_scene(data, source)
+
+
+_PACKAGE_DIR = Path(__file__).resolve().parents[1]
+
+
+def default_scene(name: str) -> Path:
+    """A shipped scene: ./scenes/<name> in a checkout, else the copy inside the package."""
+    for base in (Path.cwd() / "scenes", _PACKAGE_DIR.parent / "scenes", _PACKAGE_DIR / "data" / "scenes"):
+        p = base / name
+        if p.exists():
+            return p
+    return Path("scenes") / name

@@ -1,6 +1,6 @@
 """The compiled kernels' view of a Model's arrays.
 
-`model.Kernel` (a namedtuple) is what Python code reads. Passing a namedtuple of ~40 arrays into a
+`Kernel` (a namedtuple, filled by model.build_model) is what Python code reads. Passing a namedtuple of ~40 arrays into a
 compiled function that is not inlined costs an atomic incref and decref per array (measured
 0.6 us per call, about a quarter of a step). The compiled code therefore receives the same fields in a
 numba StructRef, which is one reference-counted object. Its constructor is written out (not
@@ -13,7 +13,23 @@ import numpy as np
 from collections import namedtuple
 
 from ._jit import JIT
-from .model import Kernel
+
+# The model's arrays as Python code reads them (model.build_model fills it).
+Kernel = namedtuple("Kernel", [
+    "nd", "nq",
+    "B_ptr", "B_idx", "B_val",
+    "el_idx", "el_map", "el_coef", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
+    "M0", "F0",
+    "spr_dof", "spr_k", "spr_c",
+    "drum_dof", "drum_rhoA", "drum_sign",
+    "mot_dof", "mot_R", "drive_kind", "torque_table",
+    "brake_T", "brake_wreg", "brake_tau",
+    "free", "presc", "presc_gain", "profile",
+    "out_kind", "out_i", "out_j", "out_scale",
+    "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
+    "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
+    "el_type", "el_EI",
+])
 
 # Work arrays of one assembly: the q-space M and Q and every element's coordinates, velocities,
 # mass matrix and force vector. Bundled for the same reason as the kernel (one refcount per call).

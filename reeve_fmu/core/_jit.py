@@ -53,7 +53,7 @@ def source_hash() -> str:
     """sha256[:16] over the sources the compiled code depends on (relative path + bytes)."""
     import hashlib
     from pathlib import Path
-    pkg = Path(__file__).resolve().parent
+    pkg = Path(__file__).resolve().parents[1]   # the whole reeve_fmu package: studies/ has kernels too
     h = hashlib.sha256()
     for p in _compiled_sources(pkg):
         h.update(p.relative_to(pkg).as_posix().encode())

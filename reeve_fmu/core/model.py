@@ -24,7 +24,6 @@ drives that way. The elevator scenes start their route at the car side, so posit
 """
 from __future__ import annotations
 
-from collections import namedtuple
 from dataclasses import dataclass, field
 import math
 
@@ -34,22 +33,8 @@ from .geometry import GeometryError, tangent, wrap_angle
 from .traction import equivalent_friction
 from .profiles import Profile, scurve, speed_table
 from .scene import AXES, Scene, SceneError
+from .kernel import Kernel, compiled_kernel, new_state_arrays
 
-Kernel = namedtuple("Kernel", [
-    "nd", "nq",
-    "B_ptr", "B_idx", "B_val",
-    "el_idx", "el_map", "el_coef", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
-    "M0", "F0",
-    "spr_dof", "spr_k", "spr_c",
-    "drum_dof", "drum_rhoA", "drum_sign",
-    "mot_dof", "mot_R", "drive_kind", "torque_table",
-    "brake_T", "brake_wreg", "brake_tau",
-    "free", "presc", "presc_gain", "profile",
-    "out_kind", "out_i", "out_j", "out_scale",
-    "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
-    "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
-    "el_type", "el_EI",
-])
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
 (OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
@@ -78,7 +63,6 @@ class State:
         the bundle references these same buffers, so in-place updates are shared."""
         ref = self.__dict__.get("_arrays")
         if ref is None:
-            from .kernel import new_state_arrays
             ref = new_state_arrays(self.c, self.q_ref, self.q, self.v, self.a, self.qdd, self.u,
                                    self.jac, self.piv, self.info)
             self.__dict__["_arrays"] = ref
@@ -648,7 +632,6 @@ def _build(scene: Scene) -> Model:
         unknowns = [("q", j) for j in eqs]
 
     inputs = ("motor.torque", "brake.command") if dv.kind == "external" else ()
-    from .kernel import compiled_kernel   # kernel.py builds on this module's Kernel
     return Model(scene=scene, nd=nd, K=K, KJ=compiled_kernel(K), q_names=tuple(q_names), q_kind=tuple(q_kind),
                  q0=np.array(q0, float), B=B, Bpar=Bpar, c0=c0, par0=par0,
                  output_names=tuple(out_names), input_names=inputs, sheave_dof=sheave_dof,

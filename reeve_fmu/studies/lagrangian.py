@@ -52,9 +52,9 @@ import numpy as np
 from .lagrangian_kernels import (LK, O_A, O_ANGLE, O_END, O_Q, O_RATIO, O_SPEED, O_TAP, O_TORQUE, O_V,  # noqa: F401
                                  dense_matrices, dense_matrices_ref, eval_state, integrate, newton_system,
                                  newton_system_ref, residual_at)
-from .profiles import scurve, speed_table
-from .scene import AXES, Scene, SceneError
-from .solver import Result, SolverError, gen_alpha_params
+from ..core.profiles import scurve, speed_table
+from ..core.scene import AXES, Scene, SceneError
+from ..core.solver import Result, SolverError, gen_alpha_params
 
 # ============================================================================ building
 @dataclass
@@ -91,8 +91,8 @@ class LagrangianModel:
 
 def _ale_static_config(scene: Scene, statics: str | None = None):
     """Planar ALE model (one element per span) of the scene and its initial state (scene statics)."""
-    from .model import build_model
-    from .solver import Simulator
+    from ..core.model import build_model
+    from ..core.solver import Simulator
     ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": 1}) for r in scene.ropes)
     sc = scene.with_overrides(model="planar", ropes=ropes)
     m = build_model(sc)
@@ -104,8 +104,8 @@ def _ale_static_config(scene: Scene, statics: str | None = None):
 def _material_ranges(scene: Scene, t_end: float):
     """Material interval [s_min, s_max] (ALE rope coordinate) that touches each sheave during a run to
     t_end, from the 1D ALE model (cheap): {sheave name: (lo, hi)}."""
-    from .model import build_model
-    from .solver import Simulator
+    from ..core.model import build_model
+    from ..core.solver import Simulator
     ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": 1}) for r in scene.ropes)
     m = build_model(scene.with_overrides(ropes=ropes))
     sim = Simulator(m)
@@ -452,7 +452,7 @@ def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: 
                 sh_off[k, kk] = c[kk]
         sh_R[k] = sh.radius
         try:
-            from .traction import equivalent_friction
+            from ..core.traction import equivalent_friction
             sh_mu[k] = equivalent_friction(sh.mu, sh.undercut_angle, sh.groove_angle, sh.groove)
         except ValueError:
             sh_mu[k] = sh.mu

@@ -17,7 +17,7 @@ from scipy import signal
 # EN 81-50 traction
 
 
-from .traction import equivalent_friction, traction_limit  # noqa: E402  (moved: the model uses them)
+from ..core.traction import equivalent_friction, traction_limit  # noqa: E402  (moved: the model uses them)
 
 
 def en81_mu(case: str, rope_speed: float | None = None) -> float:

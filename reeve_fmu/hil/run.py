@@ -1,11 +1,11 @@
 """`reeve-fmu hil`: the motor controller in the loop over CAN (CiA 402), docs/hil.md.
 
-The bench (reeve_fmu.canhil.bridge) is a simulated CiA 402 drive in front of the plant FMU; the
+The bench (reeve_fmu.hil.bridge) is a simulated CiA 402 drive in front of the plant FMU; the
 controller sits on the other side of a python-can bus:
 
     --bus virtual        controller in a thread of this process (python-can `virtual` is in-process only)
     --bus udp_multicast  controller in a separate process (IPv4 multicast 239.74.163.2 on loopback)
-    --controller builtin the demo's ElectricDrive as a CANopen master (reeve_fmu.canhil.controller)
+    --controller builtin the demo's ElectricDrive as a CANopen master (reeve_fmu.hil.controller)
     --controller external  wait for another CANopen master (e.g. canopen BaseNode402, a real controller)
     --realtime           pace SYNC to the wall clock (default: lock-step, deterministic, faster than real time)
     --inject loss=P | delay=MS | controller-dies-at=T | corrupt=P | seed=N
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .canhil.buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, make_bus  # noqa: E402  (re-exported)
+from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, make_bus  # noqa: E402  (re-exported)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -140,8 +140,9 @@ def demo_scenario() -> tuple[dict, dict]:
     (cosim.holding_torques). The built-in controller runs this drive; the bench runs this plant."""
     global _DEMO_SCENARIO
     if _DEMO_SCENARIO is None:
-        from . import cosim, demo
-        from .scene import load_scene
+        from ..fmu import cosim
+        from ..studies import trip as demo
+        from ..core.scene import load_scene
 
         scene = load_scene(cosim.default_scene_path())
         plant_values = {"car.load": float(demo.RATED_LOAD_KG)}
@@ -153,7 +154,7 @@ def demo_scenario() -> tuple[dict, dict]:
 
 
 def _drive_model(values):
-    from .canhil.controller import make_electric_drive
+    from .controller import make_electric_drive
 
     return make_electric_drive(values)
 
@@ -164,7 +165,7 @@ def default_t_end(drive_values=None) -> float:
 
 
 def _make_plant(cfg: HilConfig, log):
-    from .canhil.plants import FmuPlant, InProcessPlant, default_plant_fmu, make_default_plant
+    from .plants import FmuPlant, InProcessPlant, default_plant_fmu, make_default_plant
 
     if cfg.plant == "in-process":
         return InProcessPlant(make_default_plant(params=cfg.plant_values))
@@ -185,8 +186,8 @@ def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_va
     scheme "gauss-seidel": the demo's coupling (drive first with the sample at t_k, its torque held over
                    [t_k, t_k+1)), full float precision.
     Returns {"time": ..., name: ...} sampled at every t_k (k = 0..n_steps)."""
-    from .canhil.plants import make_default_plant
-    from .canhil.protocol import NM_PER_PERMILLE, RAD_PER_INC
+    from .plants import make_default_plant
+    from .protocol import NM_PER_PERMILLE, RAD_PER_INC
 
     plant = make_default_plant(params=plant_values)
     drive = _drive_model(drive_values)
@@ -222,7 +223,7 @@ def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_va
 # ---------------------------------------------------------------------------------------------------
 class _ThreadController:
     def __init__(self, bus_factory, ccfg):
-        from .canhil.controller import BuiltinController
+        from .controller import BuiltinController
 
         self.bus = bus_factory()
         self.ctl = BuiltinController(self.bus, ccfg)
@@ -268,7 +269,7 @@ class _ProcessController:
         if ccfg.drive_values:
             args += ["--drive-values", json.dumps(ccfg.drive_values)]
         env = dict(os.environ)
-        root = str(Path(__file__).resolve().parents[1])
+        root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self._log = open(self.log_path, "w", encoding="utf-8")
         self.proc = subprocess.Popen(args, env=env, stdout=self._log, stderr=subprocess.STDOUT,
@@ -308,9 +309,9 @@ def _pct(a, q):
 
 def run_hil(cfg: HilConfig, log=print) -> dict:
     """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
-    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector, effective_rt_priority
-    from .canhil.controller import ControllerConfig
-    from .canhil.protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
+    from .bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector, effective_rt_priority
+    from .controller import ControllerConfig
+    from .protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
 
     log = log or (lambda *a, **k: None)
     if cfg.bus not in ("virtual", "udp_multicast"):
@@ -440,7 +441,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
         summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
         try:   # the demo's trip metrics (stopping error, ride quality, traction) of the same record
-            from .demo import summarize, traction_limits
+            from ..studies.trip import summarize, traction_limits
 
             dv = cfg.drive_values or {}
             lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
@@ -463,7 +464,7 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             d["wall_s"] = time.perf_counter() - t0
             summary[key] = d
     if cfg.out:
-        from .results import write_csv
+        from ..core.results import write_csv
 
         out = Path(cfg.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -495,7 +496,7 @@ SUMMARY_KEYS = ("mode", "steps", "wall_s", "steps_per_s", "watchdog_trips", "bra
 
 def cli_hil(args) -> int:
     """reeve-fmu hil (arguments from reeve_fmu.cli)."""
-    from .canhil.bridge import HilError
+    from .bridge import HilError
 
     cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
                     t_end=args.t_end, out=args.out)
@@ -525,7 +526,7 @@ def _print_summary(summary: dict, cfg) -> int:
 def _controller_main(argv) -> int:
     import argparse
 
-    from .canhil.controller import BuiltinController, ControllerConfig
+    from .controller import BuiltinController, ControllerConfig
 
     ap = argparse.ArgumentParser(prog="python -m reeve_fmu.hil controller")
     ap.add_argument("--bus", default="udp_multicast")
@@ -559,7 +560,7 @@ def _bench_main(argv) -> int:
     """The bench on any python-can interface (e.g. socketcan can0 for a real controller)."""
     import argparse
 
-    from .canhil.bridge import HilError
+    from .bridge import HilError
 
     ap = argparse.ArgumentParser(prog="python -m reeve_fmu.hil bench",
                                  description="simulated CiA 402 drive (node 1) + plant FMU on a CAN interface")
@@ -579,7 +580,7 @@ def _bench_main(argv) -> int:
     ap.add_argument("--inject", action="append", default=[])
     ap.add_argument("--out", default="results/hil")
     a = ap.parse_args(argv)
-    from .canhil.bridge import Bridge, BridgeConfig, FaultSpec, Injector
+    from .bridge import Bridge, BridgeConfig, FaultSpec, Injector
 
     kw = {"bitrate": a.bitrate} if a.bitrate else {}
     import can
@@ -601,7 +602,7 @@ def _bench_main(argv) -> int:
     finally:
         bus.shutdown()
         plant.close()
-    from .results import write_csv
+    from ..core.results import write_csv
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

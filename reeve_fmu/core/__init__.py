@@ -1,0 +1,15 @@
+"""The engine: scene files -> compiled Model -> element kernels -> assembly -> integrators.
+
+scene      TOML schema and validation (SceneError names the file and key)
+geometry   rope-sheave tangent points (closed form in a plane, Newton in 3D)
+traction   rope-groove friction (EN 81-50 equivalent friction, Euler-Eytelwein limit)
+profiles   motion profiles (S-curves, speed tables) as piecewise cubics
+model      build an immutable Model (arrays) from a Scene; State holds what evolves
+kernel     the compiled code's view of the Model (one numba StructRef)
+elements/  element kernels: linear, cubic (ANCF), torsion
+system     assembly of M(q) qdd = Q(q, qdot, t, u) and the outputs
+solver     generalized-alpha, statics, scipy reference methods; Simulator
+plant      the reeving system as a torque-driven component (what the plant FMU steps)
+drive      the electric drive (trip sequencer, speed/position loops, torque path, brake)
+results    CSV and overview plots with the documented output names
+"""
