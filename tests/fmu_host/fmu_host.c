@@ -223,7 +223,7 @@ int main(int argc, char **argv)
     for (j = 0; j < nrec; j++) fprintf(out, ",%.17g", fmus[rec_f[j]].out_val[rec_i[j]]);
     fputc('\n', out);
 
-    /* communication points as reeve_fmu.cosim computes them: (k * step_ns) / 1e9 */
+    /* communication points as reeve_fmu.fmu.cosim computes them: (k * step_ns) / 1e9 */
     ns = (double)(long long)(h * 1e9 + 0.5);
     clock_gettime(CLOCK_MONOTONIC, &t0);
     for (k = 0; k < steps && !failed; k++) {
