@@ -173,14 +173,19 @@ def install_loader(fmu_path, model_identifier: str, *, compiler: Optional[list] 
         new = Path(tmp) / "new.fmu"
         with zipfile.ZipFile(fmu_path) as zin, zipfile.ZipFile(new, "w", zipfile.ZIP_DEFLATED) as zout:
             names = zin.namelist()
+            pyfmu = f"{PLATFORM_DIR}/{model_identifier}_pythonfmu.so"
+            helper = f"{PLATFORM_DIR}/{model_identifier}_pyexit.so"
             if orig not in names:
                 raise RuntimeError(f"{fmu_path.name} has no {orig} (not a pythonfmu FMU?)")
+            again = pyfmu in names   # the FMU has a loader already: <id>.so is that loader
             for item in zin.infolist():
                 data = zin.read(item.filename)
                 if item.filename == orig:
-                    item.filename = f"{PLATFORM_DIR}/{model_identifier}_pythonfmu.so"
-                elif item.filename.startswith(f"{PLATFORM_DIR}/{model_identifier}_"):
-                    continue  # a previous loader install
+                    if again:
+                        continue
+                    item.filename = pyfmu
+                elif item.filename == helper:
+                    continue
                 zout.writestr(item, data)
             for src, name in ((info["loader"], f"{model_identifier}.so"),
                               (info["helper"], f"{model_identifier}_pyexit.so")):
