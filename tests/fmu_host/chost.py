@@ -82,7 +82,8 @@ def clean_env(extra: Optional[Mapping[str, str]] = None) -> dict:
 
 def run_host(exe, plan_text: str, workdir, *, env: Optional[Mapping[str, str]] = None,
              timeout: float = 600.0) -> dict:
-    """Run the host on plan_text; returns {"returncode", "stdout", "stderr", "rows", "loop_s"}."""
+    """Run the host on plan_text; returns {"returncode", "stdout", "stderr", "rows", "loop_s",
+    "loop_cpu_s"} (wall and thread CPU time of the DoStep loop)."""
     workdir = Path(workdir)
     plan = workdir / "plan.txt"
     out = workdir / "out.csv"
@@ -96,9 +97,11 @@ def run_host(exe, plan_text: str, workdir, *, env: Optional[Mapping[str, str]] =
     if out.exists():
         for line in out.read_text(encoding="utf-8").splitlines():
             rows.append([float(x) for x in line.split(",")])
-    loop_s = None
+    loop_s = loop_cpu_s = None
     for line in p.stdout.splitlines():
         if line.startswith("loop_s "):
             loop_s = float(line.split()[1])
+        elif line.startswith("loop_cpu_s "):
+            loop_cpu_s = float(line.split()[1])
     return {"returncode": p.returncode, "stdout": p.stdout, "stderr": p.stderr, "rows": rows,
-            "loop_s": loop_s}
+            "loop_s": loop_s, "loop_cpu_s": loop_cpu_s}
