@@ -40,9 +40,13 @@ Subclass contract (see the example in tests/fmu_toy/reeve_toy_slave.py)::
 Do not override `__init__`/`do_step`/`set_real`/... (override the hooks instead), and never raise out
 of them on purpose: return False from `step` after `self.log(reason, Fmi2Status.error)`.
 
-Logging reaches the master only when it instantiates with loggingOn=True (pythonfmu forwards messages
-only in debug-logging mode). Messages are passed to the C logger as a printf *format*, so '%' is
-escaped here.
+Logging: pythonfmu alone forwards messages only when the master instantiates with loggingOn=True; the
+FMU's native loader (reeve_fmu.fmu.native, Linux) always relays warnings and errors and OK messages
+only with logging on. Messages are passed to the C logger as a printf *format*, so '%' is escaped
+here.
+
+Speed: `set_eager_outputs(names)` + `defer_outputs(write)` let step() write only the exchanged outputs
+each step and the rest (from a snapshot) only when something reads them.
 """
 from __future__ import annotations
 
