@@ -164,16 +164,20 @@ def test_fmpy_scripts_exit_cleanly(fmus, tmp_path):
     scripts = {"plant": SIMULATE.format(fmu=fmus["plant"]), "drive": SIMULATE.format(fmu=fmus["drive"]),
                "cosim": COSIMULATE.format(plant=fmus["plant"], drive=fmus["drive"], values=R1_DRIVE)}
     env = chost.clean_env({"PYTHONPATH": str(ROOT)})
-    runs = [(name, i) for name in scripts for i in range(10)]
-    for name, code in scripts.items():
-        (tmp_path / f"{name}.py").write_text(code, encoding="utf-8")
     bad = []
+    for name, code in scripts.items():   # first run of each alone: loads (or compiles) the kernels once
+        (tmp_path / f"{name}.py").write_text(code, encoding="utf-8")
+        p = subprocess.run([sys.executable, str(tmp_path / f"{name}.py")], cwd=tmp_path, env=env,
+                           capture_output=True, timeout=900)
+        if p.returncode != 0:
+            bad.append(((name, 0), p.returncode, p.stderr.decode("utf-8", "replace")[-2000:]))
+    runs = [(name, i) for name in scripts for i in range(1, 10)]
     for k in range(0, len(runs), 2):
         procs = [(run, subprocess.Popen([sys.executable, str(tmp_path / f"{run[0]}.py")], cwd=tmp_path,
                                         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
                  for run in runs[k:k + 2]]
         for run, p in procs:
-            out, err = p.communicate(timeout=300)
+            out, err = p.communicate(timeout=900)
             if p.returncode != 0:
                 bad.append((run, p.returncode, err.decode("utf-8", "replace")[-2000:]))
     assert bad == []
