@@ -110,7 +110,7 @@ class Buffer:
 
 @dataclass(frozen=True)
 class Brake:
-    """Spring-applied machine brake on the driven sheave (domain.md §2.4), elasto-plastic friction:
+    """Spring-applied machine brake on the driven sheave (docs/reference-sets.md §3.2), elasto-plastic friction:
     a stiff torsional spring (deflection z, stiffness e*T/stick_angle) whose deflection saturates
     smoothly at stick_angle, where the brake slips at the capacity e*T. It holds a load below 90 % of
     the capacity without creep. e in [0, 1] follows the command with a first-order lag."""

@@ -84,7 +84,7 @@ def _multicast_dev() -> str | None:
 
 def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
     """Is udp_multicast usable on this host? As root (and with `ip`), first keep the bench's multicast on
-    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (fmi.md §7.1)
+    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (docs/hil.md, "Connecting a real controller")
     unless 239.74.163.2 already routes to lo: through a NIC (default route) the frames leave the host, and
     on the test VM the real-time bench then had a p99 SYNC lateness of 2.9 ms instead of 52 us (docs/hil.md).
     Then probe with two buses. Returns (ok, what was done or why not)."""

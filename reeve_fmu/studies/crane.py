@@ -1,15 +1,15 @@
-"""Quasi-static crane hoist with axial-torsion coupling: hook-block rotation and cabling (method.md §5.3).
+"""Quasi-static crane hoist with axial-torsion coupling: hook-block rotation and cabling (docs/theory.md §5.3).
 
 Model. The scene's rope runs drum -> lead line(s) -> boom-tip sheaves -> n falls between tip sheaves
 and hook-block sheaves (any axes) -> dead end on the tip or on the block. Every straight span is one
-linear ALE element with the torsion field of method §1.5 (`elements.torsion.torsion_span`): node
+linear ALE element with the torsion field of docs/theory.md §1.5 (`elements.torsion.torsion_span`): node
 positions at the rope-sheave tangent points, material coordinates s at the sheave nodes (W0 wraps:
 in- and out-node share s), a torsion angle phi per sheave node (phi_in = phi_out: the groove
 transports twist), phi fixed at the drum and the dead end (clamped rope ends). The hook block is rigid
 with the unknown position and yaw psi (pose = "yaw") or the full pose (yaw, pitch, roll; pose = "full")
 and carries the hook load W at its centre of gravity. Sheaves are frictionless and massless.
 
-Tangent points are exact (method §4.2): every evaluation of the equations places them on the
+Tangent points are exact (docs/theory.md §4.2): every evaluation of the equations places them on the
 current common tangents of the route circles (Newton on the contact angles, warm-started), so
 tangent points slide around the sheaves as the block moves and turns. The forces on the block are
 the rope forces at those points (for a frictionless sheave that is exact: the rope path is stationary
@@ -206,7 +206,7 @@ def _lu_solve(A, b, x):
 @njit(cache=True)
 def _contact(cA, uA, wA, RA, cB, uB, wB, RB, a0, b0):
     """Contact angles of the common tangent from circle A to circle B (radius 0: a point), Newton
-    from (a0, b0): (P_B - P_A).rho_X = 0 for each circle (method §4.2)."""
+    from (a0, b0): (P_B - P_A).rho_X = 0 for each circle (docs/theory.md §4.2)."""
     aA = a0
     aB = b0
     extra = 0
@@ -634,7 +634,7 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
         if st_i[k, 2] >= 0:
             rscale[st_i[k, 2]] = Sref * spec.diameter
     rscale[drum_idx] = 1.0
-    # effective spacing and the torque-factor estimate of the critical height (domain.md §4.3):
+    # effective spacing and the torque-factor estimate of the critical height (docs/reference-sets.md §5.3):
     # sum over falls of the moment (W/n)(p_b(psi) x p_t)_z / h  =  -(W/(n h)) (P sin psi - Q cos psi)
     P = Q = 0.0
     for k in falls:

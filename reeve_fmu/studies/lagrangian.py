@@ -1,25 +1,25 @@
 """Lagrangian finite-element baseline: the rope as a material mesh sliding over sheaves by contact.
 
 This is how a conventional (non-ALE) multibody code models a reeving system, and it is the yardstick
-for the claim that ALE needs far fewer elements (issue 5, docs/performance.md §"Speed against error"):
+for the claim that ALE needs far fewer elements (docs/performance.md, "Speed against error"):
 
   * Planar (x-z). The rope is a chain of the same linear two-node elements as the ALE model
     (`elements.linear.linear_element_at`) with every material coordinate fixed (s-dot = 0: the
-    Lagrangian limit, method.md §7 item 7): constant consistent mass, axial elastic + Kelvin-Voigt
+    Lagrangian limit, docs/theory.md §7 item 7): constant consistent mass, axial elastic + Kelvin-Voigt
     force, potential-form gravity. Node positions (x, z) are the unknowns.
   * The mesh is material, so every stretch of rope that touches a sheave at any time of the run must
     be meshed finely: the builder runs the cheap ALE model over the run, takes the material interval
     that passes over each sheave (plus a margin) and meshes it with `element_length`; the rest of the
     rope gets elements of up to `coarse_length`.
   * Rope-sheave interaction by node-to-circle contact (as Exudyn's ObjectContactFrictionCircleCable2D,
-    method.md §4.4 "contact-based alternative"): a penalty normal force on every node that
+    docs/theory.md §4.4 "contact-based alternative"): a penalty normal force on every node that
     penetrates the pitch circle, Hunt-Crossley form F_n = k_n f(p) (1 + d p-dot) (p = R - |x - c|,
     f a C1 ramp of width `contact_onset` x the static penetration; the damping vanishes with p, so
     the force is continuous when a node arrives), and Coulomb friction as an elasto-plastic stick
     spring: z = z_old + (unstretched rope displacement relative to the rim during the step),
     F_t = -k_t sat(z), |F_t| <= mu F_n (sliding when saturated). The slip is measured in
     unstretched rope, w = u.(v - v_c)/lambda - R theta-dot, so that stick means s-dot = R theta-dot,
-    the same no-slip kinematics as the ALE sheave node (s = s0 + R theta, method.md §4.4, creep
+    the same no-slip kinematics as the ALE sheave node (s = s0 + R theta, docs/theory.md §4.4, creep
     neglected). mu is the groove's equivalent friction (EN 81-50, `traction.equivalent_friction`).
     Idler sheaves have their own angle (inertia J) driven only by this friction; a speed-driven
     traction sheave turns with the prescribed profile and the friction carries the rope.
