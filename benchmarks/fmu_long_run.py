@@ -79,7 +79,7 @@ def main():
     if args.out:
         Path(args.out).write_text(json.dumps(res, indent=2))
     import os
-    os._exit(0)   # skip interpreter finalisation (pythonfmu exit-time heap corruption, docs/cosim.md, "pythonfmu and fmpy" item 4)
+    os._exit(0)   # skip interpreter finalisation (pythonfmu exit-time heap corruption, docs/cosim.md, 'pythonfmu and fmpy' item 4)
 
 
 if __name__ == "__main__":
