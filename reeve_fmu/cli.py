@@ -6,7 +6,6 @@ is imported only when used, so `reeve-fmu simulate` does not load fmpy or python
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
