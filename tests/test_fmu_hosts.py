@@ -27,6 +27,10 @@ import cosim_jobs  # noqa: E402
 from fmu_host import chost  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
 
+from reeve_fmu.fmu.native import loader_supported  # noqa: E402
+
+pytestmark = pytest.mark.skipif(not loader_supported(), reason="the native loader is built on Linux x86-64 only")
+
 JOBS = str(ROOT / "tests" / "cosim_jobs.py")
 R1_DRIVE = {"pretorque[1]": 522.5, "pretorque[2]": 331.5}
 RECORD = ["car.position", "car.velocity", "car.acceleration", "motor.speed", "traction.tension_in",
