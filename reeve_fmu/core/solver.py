@@ -23,6 +23,7 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
+from .sparse import band_solve, build_sparse, jac_shape, jacobian_sparse, pattern_leaks, residual_sparse
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
                      set_prescribed, traction_deflection, workspace)
 
@@ -89,6 +90,9 @@ def lu_solve(LU, piv, b):
 
 
 # --------------------------------------------------------------------------------- generalized-alpha
+# From this many free coordinates on the Newton matrix is banded (core/sparse.py); below, the dense
+# path is faster (measured in benchmarks/scaling.py, docs/performance.md).
+SPARSE_MIN_FREE = 40
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
 
 @njit(cache=True, inline="always")
@@ -208,13 +212,91 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
 
 
 @njit(cache=True)
+def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, R,
+                        R0, rb, am, af, beta, gamma, tol, maxit):
+    """_newton_step with the banded Newton matrix of core/sparse.py (coloured differences, band LU)
+    and the element-wise residual; same iteration, retries and return codes."""
+    n = SP.n
+    perm = SP.perm
+    bq = h * h * beta * (1.0 - af) / (1.0 - am)
+    gv = h * gamma * (1.0 - af) / (1.0 - am)
+    set_prescribed(K, q_ref, t1, q, v, qdd)
+    for k in range(K.presc.shape[0]):
+        a[K.presc[k]] = qdd[K.presc[k]]
+    for attempt in range(4):
+        if attempt == 0 or attempt == 3:
+            for fi in range(K.free.shape[0]):   # predictor: constant acceleration
+                qdd[K.free[fi]] = qddo[K.free[fi]]
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[0] != h or attempt > 0:
+            ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+            info[3] += 1
+            if ok < 0:
+                info[7] = -ok - 1
+                return 2
+            if ok == 0:
+                info[0] = 0.0
+                continue
+            info[0] = h
+        for it in range(maxit):
+            if attempt > 0 and it > 0:
+                ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+                info[3] += 1
+                if ok <= 0:
+                    info[0] = 0.0
+                    break
+            st = residual_sparse(K, SP, W, c, q, v, qdd, t1, ue, R)
+            if st < 0:
+                info[7] = -st - 1
+                return 2
+            for b in range(n):
+                rb[b] = R[perm[b]]
+            band_solve(jac, piv, n, SP.kl, SP.ku, rb)
+            dmax = 0.0
+            amax = 0.0
+            qmax = 0.0
+            for b in range(n):
+                i = perm[b]
+                qdd[i] -= rb[b]
+                if abs(rb[b]) > dmax:
+                    dmax = abs(rb[b])
+                if abs(qdd[i]) > amax:
+                    amax = abs(qdd[i])
+                if abs(q[i]) > qmax:
+                    qmax = abs(q[i])
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[2] += 1
+            if not (dmax == dmax) or dmax > 1e300:
+                break
+            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+                if it >= REFRESH_AFTER:
+                    info[0] = 0.0
+                return 0
+    return 1
+
+
+@njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
     Newton iteration fails is redone as 4, 16 and 64 substeps (sharp events: slack -> taut, buffer
     contact, brake engagement). Writes outputs every out_every steps into ybuf rows (0: none).
     S.info = [h of jac, steps, iterations, jacobian builds, status, brake engagement,
     brake deflection, element of a vanishing span]. Returns (status, t, steps done); on failure the
-    state is the last good step."""
+    state is the last good step. Dense Newton matrix (S.jac is nf x nf)."""
+    return _integrate(K, None, S, t0, h, nsteps, params, ybuf, out_every)
+
+
+@njit(cache=True)
+def integrate_sparse(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
+    """integrate() with the banded Newton matrix SP (core/sparse.py); S.jac has shape
+    sparse.jac_shape(SP)."""
+    return _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every)
+
+
+@njit(cache=True)
+def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
+    """The stepping loop of integrate / integrate_sparse (SP None: dense; the branch is resolved at
+    compile time)."""
     c = S.c
     q_ref = S.q_ref
     q = S.q
@@ -233,8 +315,16 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     maxit = int(params[5])
     nq = K.nq
     nf = K.free.shape[0]
-    r = np.empty(nf)
-    r0 = np.empty(nf)
+    if SP is None:
+        W = workspace(K)
+        r = np.empty(nf)
+        r0 = np.empty(nf)
+        rb = r
+    else:
+        W = workspace(K, False)
+        r = np.empty(nq)
+        r0 = np.empty(nq)
+        rb = np.empty(max(nf, 1))
     qo = np.empty(nq)
     vo = np.empty(nq)
     ao = np.empty(nq)
@@ -244,7 +334,6 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     a1 = np.empty(nq)
     qdd1 = np.empty(nq)
     y = np.empty(K.out_kind.shape[0])
-    W = workspace(K)
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
     ue = np.empty(7)
@@ -289,8 +378,13 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 vo[:] = v
                 ao[:] = a
                 qddo[:] = qdd
-                status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
-                                      piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                if SP is None:
+                    status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
+                                          piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                else:
+                    status = _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs,
+                                                 ue, jac, piv, info, r, r0, rb, am, af, beta, gamma, tol,
+                                                 maxit)
                 if status != 0:
                     q[:] = qo   # _newton_step leaves its last iterate
                     v[:] = vo
@@ -371,7 +465,10 @@ class Simulator:
     """A step is a function of (Model, State, inputs); the simulator only holds settings."""
 
     def __init__(self, model: Model, method: str | None = None, step: float | None = None,
-                 rho_inf: float | None = None, newton_tol: float | None = None, max_iter: int = 12):
+                 rho_inf: float | None = None, newton_tol: float | None = None, max_iter: int = 12,
+                 sparse: bool | None = None):
+        """sparse: banded Newton matrix (True), dense (False) or by size (None: banded from
+        SPARSE_MIN_FREE free coordinates on, when the ordered band is narrower than the matrix)."""
         sv = model.scene.solver
         self.model = model
         self.method = method or sv.method
@@ -387,8 +484,54 @@ class Simulator:
         self.params = np.array([*gen_alpha_params(self.rho_inf), self.tol, max_iter], float)
         self._fast_integrate = None
         self._stepbuf = None
+        self.sparse = sparse
+        self._sp = None          # core/sparse.SparseNewton of the banded path, None: dense
+        self._sp_chosen = False
+        self._sp_state = None    # the State whose jac layout was last checked by step()
         self.warnings: list[str] = []   # conditions a user should know about (not errors)
         self.rtol, self.atol = sv.rtol, sv.atol
+
+    # ------------------------------------------------------------------ Newton matrix layout
+    def _newton_path(self, st: State):
+        """The banded structure for the step (None: dense), chosen once; st.jac/st.piv are reshaped
+        to hold its factors (a State from the other layout gets fresh ones)."""
+        if not self._sp_chosen:
+            self._sp = self._choose_sparse(st)
+            self._sp_chosen = True
+        SP = self._sp
+        nf = len(self.model.K.free)
+        shape = (nf, nf) if SP is None else jac_shape(SP)
+        if st.jac.shape != shape:
+            st.jac = np.zeros(shape)
+            st.piv = np.zeros(shape[0], np.int64)
+            st.info[0] = 0.0          # no valid factors: rebuild on the next step
+            st.__dict__.pop("_arrays", None)
+        return SP
+
+    def _choose_sparse(self, st: State):
+        m = self.model
+        nf = len(m.K.free)
+        if self.method != "gen-alpha" or self.sparse is False or (self.sparse is None and nf < SPARSE_MIN_FREE):
+            return None
+        SP = build_sparse(m.K)
+        if self.sparse is None and 3 * SP.kl + SP.ku + 1 >= nf:
+            return None               # the band is the whole matrix: dense LU is as cheap
+        am, af, beta, gamma = self.params[:4]
+        bq = self.h ** 2 * beta * (1.0 - af) / (1.0 - am)
+        gv = self.h * gamma * (1.0 - af) / (1.0 - am)
+        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
+                              st.t, self._kernel_inputs_at(st), bq, gv)
+        if leaks:
+            self.warnings.append(f"{m.scene.source}: {leaks} residual rows depend on coordinates outside the "
+                                 f"banded Newton pattern; the dense Newton matrix is used")
+            return None
+        return SP
+
+    def _integrate(self, st: State, t0, h, n, ybuf, every):
+        SP = self._newton_path(st)
+        if SP is None:
+            return integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
+        return integrate_sparse(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
 
     # ------------------------------------------------------------------ statics / initial state
     def initial_state(self, statics: str | None = None, t0: float = 0.0) -> State:
@@ -411,6 +554,7 @@ class Simulator:
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
+        self._newton_path(st)
         return st
 
     def _preload_traction(self, st: State):
@@ -574,7 +718,7 @@ class Simulator:
             h = span / n
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
-        status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
+        status, t, done = self._integrate(st, t0, h, n, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
             raise SolverError(self._status_message(status, st))
@@ -606,10 +750,17 @@ class Simulator:
         fast = self._fast_integrate
         if fast is None:
             buf = self._stepbuf = np.empty((1, len(self.model.output_names) + 1))
-            status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
-            self._fast_integrate = _entry_point(integrate)
+            status, t, done = self._integrate(st, t0, h, n, buf, n)
+            self._sp_state = st
+            self._fast_integrate = _entry_point(integrate if self._sp is None else integrate_sparse)
         else:
-            status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
+            if st is not self._sp_state:
+                self._newton_path(st)
+                self._sp_state = st
+            if self._sp is None:
+                status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
+            else:
+                status, t, done = fast(self.model.KJ, self._sp, st.arrays(), t0, h, n, self.params, buf, n)
         if status != 0:
             st.t = t0 + done * h
             raise SolverError(self._status_message(status, st))
