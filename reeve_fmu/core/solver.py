@@ -23,7 +23,8 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .sparse import band_solve, build_sparse, jac_shape, jacobian_sparse, pattern_leaks, residual_sparse
+from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_pattern,
+                     pattern_leaks, residual_sparse)
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
                      set_prescribed, traction_deflection, workspace)
 
@@ -251,7 +252,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
                 return 2
             for b in range(n):
                 rb[b] = R[perm[b]]
-            band_solve(jac, piv, n, SP.kl, SP.ku, rb)
+            bordered_solve(jac, piv, n, SP.nb, SP.kl, SP.ku, rb)
             dmax = 0.0
             amax = 0.0
             qmax = 0.0
@@ -514,7 +515,7 @@ class Simulator:
         if self.method != "gen-alpha" or self.sparse is False or (self.sparse is None and nf < SPARSE_MIN_FREE):
             return None
         SP = build_sparse(m.K)
-        if self.sparse is None and 3 * SP.kl + SP.ku + 1 >= nf:
+        if self.sparse is None and 3 * SP.kl + SP.ku + 1 + 2 * SP.nb >= nf:
             return None               # the band is the whole matrix: dense LU is as cheap
         am, af, beta, gamma = self.params[:4]
         bq = self.h ** 2 * beta * (1.0 - af) / (1.0 - am)
@@ -629,13 +630,7 @@ class Simulator:
                 raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
                                   f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
-            J = np.empty((len(eqs), len(x)))
-            for j in range(len(x)):
-                dx = 1e-7 * (1.0 + abs(x[j]))
-                xp = x.copy()
-                xp[j] += dx
-                rp = resid(xp)[0]
-                J[:, j] = (rp - r) / dx
+            J = self._statics_jacobian(resid, x, r, unknowns, eqs)
             try:
                 step = np.linalg.solve(J, -r)
             except np.linalg.LinAlgError:
@@ -676,6 +671,50 @@ class Simulator:
                     raise SolverError(f"{m.scene.source}: initial statics: rope {m.scene.ropes[ir].name!r} "
                                       f"span {k} would be in compression (a tension-only rope cannot hold)")
         return st
+
+    def _statics_jacobian(self, resid, x, r, unknowns, eqs):
+        """d r / d x by forward differences. From SPARSE_MIN_FREE unknowns on, unknowns that share no
+        equation (structural pattern, core/sparse.py) are perturbed together: every entry is computed
+        from the same numbers as with one residual per unknown, with far fewer residuals."""
+        n = len(x)
+        J = np.zeros((len(eqs), n))
+        if n >= SPARSE_MIN_FREE:
+            groups, rows = self._statics_groups(tuple(unknowns), tuple(eqs))
+        else:
+            groups, rows = [np.array([j]) for j in range(n)], None
+        for g in groups:
+            dx = 1e-7 * (1.0 + np.abs(x[g]))
+            xp = x.copy()
+            xp[g] += dx
+            d = resid(xp)[0] - r
+            for j, dj in zip(g, dx):
+                if rows is None:
+                    J[:, j] = d / dj
+                else:
+                    J[rows[j], j] = d[rows[j]] / dj
+        return J
+
+    def _statics_groups(self, unknowns, eqs):
+        """Column groups and the equation rows of each unknown (a rope length touches all)."""
+        key = (unknowns, eqs)
+        cached = self.__dict__.get("_statics_groups_cache")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        P = newton_pattern(self.model.K).tocsc()
+        pos = np.full(self.model.nq, -1)
+        pos[list(eqs)] = np.arange(len(eqs))
+        rows = []
+        for kind, i in unknowns:
+            if kind == "q":
+                rr = pos[P.indices[P.indptr[i]:P.indptr[i + 1]]]
+                rows.append(np.sort(rr[rr >= 0]))
+            else:
+                rows.append(np.arange(len(eqs)))
+        ptr = np.concatenate([[0], np.cumsum([len(rr) for rr in rows])]).astype(np.int64)
+        gptr, gcols = colour_columns(ptr, np.concatenate(rows).astype(np.int64), len(eqs), len(unknowns))
+        groups = [gcols[gptr[k]:gptr[k + 1]] for k in range(len(gptr) - 1)]
+        self.__dict__["_statics_groups_cache"] = (key, (groups, rows))
+        return groups, rows
 
     def _consistent_acceleration(self, st: State):
         m = self.model

@@ -1,0 +1,129 @@
+"""Cost per time step against model size: banded (sparse) Newton matrix against the dense one.
+
+Cases: the R1 2:1 elevator (scenes/elevator_2to1.toml) in the planar model with cubic elements at
+1-128 elements per span, and the 8-fall crane hoist (scenes/crane_8fall.toml run dynamically: spatial
+model, linear elements, 65 t on the block, drum hoisting on an S-curve) at 1-32 elements per span.
+Per case: statics, a 10-step warm-up (first Newton matrix), then the time of `--window` s of
+generalized-alpha steps (h = 1 ms) including the Newton-matrix rebuilds that happen in it. The dense
+path is timed up to `--dense-max` elements per span. Ratios come from one run, with the load average.
+Writes DIR/scaling.json and the log-log plot DIR/scaling.png.
+
+    python benchmarks/scaling.py --out docs/img          # full (docs/performance.md), ~10 min
+    python benchmarks/scaling.py --quick --out /tmp/sc    # 1-32 elements per span, ~1 min
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import sys
+import time
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from reeve_fmu.core.model import build_model  # noqa: E402
+from reeve_fmu.core.scene import Drive, load_scene  # noqa: E402
+from reeve_fmu.core.solver import Simulator  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def elevator(eps):
+    sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml")
+    ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": eps, "element": "cubic"}) for r in sc.ropes)
+    return sc.with_overrides(ropes=ropes, model="planar")
+
+
+def crane(eps):
+    """The 8-fall hoist as a dynamic scene: 65 t hook load lifted by the drum (S-curve, 0.5 m/s)."""
+    sc = load_scene(ROOT / "scenes" / "crane_8fall.toml")
+    ropes = tuple(r.__class__(**{**r.__dict__, "elements_per_span": eps}) for r in sc.ropes)
+    block = sc.bodies[0].__class__(**{**sc.bodies[0].__dict__, "mass": 65000.0})
+    drive = Drive(kind="speed", sheave="drum", roping=8.0, distance=-2.0, v_max=0.5, a_max=0.3, jerk=0.5,
+                  t_start=0.0)
+    return sc.with_overrides(ropes=ropes, bodies=(block,), drive=drive, model="spatial", statics="rope-length")
+
+
+def time_case(scene, sparse, window):
+    m = build_model(scene)
+    sim = Simulator(m, sparse=sparse, step=1e-3)
+    t0 = time.perf_counter()
+    st = sim.initial_state()
+    statics = time.perf_counter() - t0
+    sim.advance(st, st.t + 0.01)
+    n0, j0 = st.info[1], st.info[3]
+    t0 = time.perf_counter()
+    sim.advance(st, st.t + window)
+    wall = time.perf_counter() - t0
+    steps = st.info[1] - n0
+    SP = sim._sp
+    return dict(nq=int(m.nq), nf=int(len(m.K.free)), path="dense" if SP is None else "banded",
+                kl=SP.kl if SP else None, ku=SP.ku if SP else None,
+                groups=int(len(SP.grp_ptr) - 1) if SP else None, statics_s=statics,
+                us_per_step=wall / steps * 1e6, jac_builds=int(st.info[3] - j0), steps=int(steps))
+
+
+def plot(rows, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    for case, mk in (("elevator 2:1 planar cubic", "o"), ("crane 8-fall spatial", "s")):
+        for path, ls in (("banded", "-"), ("dense", "--")):
+            pts = sorted((r["nq"], r["us_per_step"]) for r in rows if r["case"] == case and r["path"] == path)
+            if pts:
+                ax.loglog(*zip(*pts), ls, marker=mk, label=f"{case}, {path}")
+    ax.set_xlabel("generalized coordinates")
+    ax.set_ylabel("wall time per step [µs]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=None, help="directory for scaling.json and scaling.png")
+    ap.add_argument("--window", type=float, default=0.1, help="timed simulated seconds per case")
+    ap.add_argument("--dense-max", type=int, default=None, help="largest elements/span timed dense")
+    a = ap.parse_args(argv)
+    el_eps = [1, 2, 4, 8, 16, 32] if a.quick else [1, 2, 4, 8, 16, 32, 64, 128]
+    cr_eps = [1, 2, 4, 8] if a.quick else [1, 2, 4, 8, 16, 32]
+    dense_max = a.dense_max or (16 if a.quick else 64)
+    time_case(elevator(1), None, 0.01)      # JIT load
+    rows = []
+    for case, make, epss in (("elevator 2:1 planar cubic", elevator, el_eps), ("crane 8-fall spatial", crane, cr_eps)):
+        for eps in epss:
+            for sparse in (None, False):
+                if sparse is False and eps > dense_max:
+                    continue
+                r = time_case(make(eps), sparse, a.window)
+                if sparse is False and r["path"] == "dense" and rows and rows[-1]["path"] == "dense" \
+                        and rows[-1]["nq"] == r["nq"]:
+                    continue    # the automatic choice was dense already
+                r.update(case=case, elements_per_span=eps, load=os.getloadavg()[0])
+                rows.append(r)
+                print(f"{case:28s} {eps:4d} el/span nq {r['nq']:5d} {r['path']:6s} "
+                      f"band ({r['kl']}, {r['ku']}) groups {r['groups']}  {r['us_per_step']:10.0f} us/step "
+                      f"(jac builds {r['jac_builds']}/{r['steps']})  statics {r['statics_s']:.2f} s  "
+                      f"load {r['load']:.1f}", flush=True)
+    for case in ("elevator 2:1 planar cubic", "crane 8-fall spatial"):
+        sp = [r for r in rows if r["case"] == case and r["path"] == "banded"]
+        for r0, r1 in zip(sp, sp[1:]):
+            print(f"{case}: {r0['nq']} -> {r1['nq']} coordinates: per-step cost x{r1['us_per_step'] / r0['us_per_step']:.2f}")
+        for r in sp:
+            d = [x for x in rows if x["case"] == case and x["path"] == "dense" and x["nq"] == r["nq"]]
+            if d:
+                print(f"{case}: {r['elements_per_span']} el/span: banded {d[0]['us_per_step'] / r['us_per_step']:.1f}x "
+                      f"faster than dense")
+    if a.out:
+        out = Path(a.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "scaling.json").write_text(json.dumps(rows, indent=1))
+        plot(rows, out / "scaling.png")
+        print(f"wrote {out / 'scaling.json'} and {out / 'scaling.png'}")
+
+
+if __name__ == "__main__":
+    main()
