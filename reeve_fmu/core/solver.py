@@ -23,8 +23,8 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_pattern,
-                     pattern_leaks, residual_sparse)
+from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
+                     newton_pattern, pattern_leaks, residual_sparse, unpack_dense)
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
                      set_prescribed, traction_deflection, workspace)
 
@@ -630,7 +630,7 @@ class Simulator:
                 raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
                                   f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
-            J = self._statics_jacobian(resid, x, r, unknowns, eqs)
+            J = self._statics_jacobian(resid, x, r, unknowns, eqs, KS, u, st.t)
             try:
                 step = np.linalg.solve(J, -r)
             except np.linalg.LinAlgError:
@@ -672,11 +672,29 @@ class Simulator:
                                       f"span {k} would be in compression (a tension-only rope cannot hold)")
         return st
 
-    def _statics_jacobian(self, resid, x, r, unknowns, eqs):
+    def _statics_jacobian(self, resid, x, r, unknowns, eqs, KS, u, t):
         """d r / d x by forward differences. From SPARSE_MIN_FREE unknowns on, unknowns that share no
         equation (structural pattern, core/sparse.py) are perturbed together: every entry is computed
-        from the same numbers as with one residual per unknown, with far fewer residuals."""
+        from the same numbers as with one residual per unknown, with far fewer residuals (compiled,
+        element-wise residuals when the unknowns are the equations' coordinates)."""
         n = len(x)
+        if n >= SPARSE_MIN_FREE and sorted(j for _, j in unknowns) == sorted(eqs) \
+                and all(k == "q" for k, _ in unknowns):
+            _, qq, _, c = resid(x)
+            SPs = self.__dict__.get("_statics_sp")
+            if SPs is None or not np.array_equal(np.sort(SPs.perm), np.sort(eqs)):
+                SPs = self.__dict__["_statics_sp"] = build_sparse(self.model.K._replace(free=np.array(sorted(eqs))))
+            Jb = np.zeros(jac_shape(SPs))
+            nq = self.model.nq
+            st = newton_matrix_sparse(KS, SPs, workspace(KS, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
+                                      np.empty(nq), np.empty(nq), np.empty(SPs.n), 0.0, 1.0, 0.0, 1e-7)
+            if st == 1:
+                A = unpack_dense(Jb, SPs)              # d(M qdd - Q)/dq = -dQ/dq, ordered
+                pos = np.empty(nq, np.int64)
+                pos[SPs.perm] = np.arange(SPs.n)
+                ie = pos[np.asarray(eqs)]
+                iu = pos[np.asarray([j for _, j in unknowns])]
+                return -A[np.ix_(ie, iu)]
         J = np.zeros((len(eqs), n))
         if n >= SPARSE_MIN_FREE:
             groups, rows = self._statics_groups(tuple(unknowns), tuple(eqs))

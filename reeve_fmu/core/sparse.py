@@ -184,6 +184,21 @@ def jac_shape(SP):
     return (max(SP.n, 1), max(wb + 2 * SP.nb, 1))
 
 
+def unpack_dense(J, SP):
+    """The ordered matrix held in J (layout of bordered_factor, before factorisation) as a dense array."""
+    n, nb, kl, ku = SP.n, SP.nb, SP.kl, SP.ku
+    n1, wb = n - nb, 3 * kl + ku + 1
+    A = np.zeros((n, n))
+    rows = np.arange(n1)
+    for d in range(-kl, ku + 1):
+        ok = (rows + d >= 0) & (rows + d < n1)
+        A[rows[ok], rows[ok] + d] = J[rows[ok], d + kl]
+    A[:n1, n1:] = J[:n1, wb:wb + nb]
+    A[n1:, :n1] = J[:n1, wb + nb:wb + 2 * nb].T
+    A[n1:, n1:] = J[n1:, :nb]
+    return A
+
+
 # --------------------------------------------------------------------------------- banded LU
 @njit(cache=True)
 def band_factor(J, piv, n, kl, ku):
@@ -243,7 +258,7 @@ def band_solve(J, piv, n, kl, ku, b):
 
 
 @njit(cache=True, inline="always")
-def _at(J, ib, jb, n1, kl, wb, nb):
+def _at(ib, jb, n1, kl, wb, nb):
     """(row, column) of J that holds entry (ib, jb) of the ordered Newton matrix (bordered_factor)."""
     if ib < n1:
         if jb < n1:
@@ -417,9 +432,20 @@ def residual_tracked(K, SP, W, c, q, v, qdd, t, u, R, Eb, track):
 # --------------------------------------------------------------------------------- Newton matrix
 @njit(cache=True)
 def jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, piv, R, R0, dxs, bq, gv):
-    """Newton matrix d r / d qdd_free by coloured differences (q and v follow through the Newmark
-    relations q += bq dx, v += gv dx), assembled in band order into J and factorised.
-    Returns -1 - element (vanishing span), 0 (singular) or 1."""
+    """newton_matrix_sparse, factorised (bordered_factor). Returns -1 - element (vanishing span),
+    0 (singular) or 1."""
+    st = newton_matrix_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, R, R0, dxs, 1.0, bq, gv, 1e-10)
+    if st < 0:
+        return st
+    return 1 if bordered_factor(J, piv, SP.n, SP.nb, SP.kl, SP.ku) else 0
+
+
+@njit(cache=True, inline="always")
+def newton_matrix_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, R, R0, dxs, ba, bq, gv, rel):
+    """d r / dx over the free coordinates by coloured differences into J (layout of bordered_factor),
+    with qdd += ba dx, q += bq dx, v += gv dx and dx = rel (1 + |q|) / bq: the Newton matrix is
+    (1, bq, gv) from the Newmark relations (rel 1e-10: the velocity change must stay inside stiff
+    bands), the static stiffness -dQ/dq is (0, 1, 0). Returns -1 - element (vanishing span) or 1."""
     n = SP.n
     nb = SP.nb
     n1 = n - nb
@@ -442,9 +468,9 @@ def jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, piv, R, R0, dxs, bq, gv):
         for kk in range(g0, g1):
             jb = SP.grp_cols[kk]
             j = perm[jb]
-            dx = 1e-10 * (1.0 + abs(q[j])) / bq   # as the dense path: inside stiff velocity bands
+            dx = rel * (1.0 + abs(q[j])) / bq
             dxs[jb] = dx
-            qdd[j] += dx
+            qdd[j] += ba * dx
             q[j] += bq * dx
             v[j] += gv * dx
         residual_tracked(K, SP, W, c, q, v, qdd, t1, ue, R, Eb, True)
@@ -454,7 +480,7 @@ def jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, piv, R, R0, dxs, bq, gv):
             jb = SP.grp_cols[kk]
             j = perm[jb]
             dx = dxs[jb]
-            qdd[j] -= dx
+            qdd[j] -= ba * dx
             q[j] -= bq * dx
             v[j] -= gv * dx
             for m in range(SP.col_ptr[jb], SP.col_ptr[jb + 1]):
@@ -468,7 +494,7 @@ def jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, piv, R, R0, dxs, bq, gv):
                 for p in range(nb):
                     d = Eb[ie, p] - Eb0[ie, p]
                     if d != 0.0:
-                        r_, c_ = _at(J, n1 + p, jb, n1, kl, wb, nb)
+                        r_, c_ = _at(n1 + p, jb, n1, kl, wb, nb)
                         J[r_, c_] += d / dx
                         R[perm[n1 + p]] -= d      # what is left is the q-level part
             for m in range(SP.qb_ptr[jb], SP.qb_ptr[jb + 1]):
@@ -478,9 +504,9 @@ def jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, J, piv, R, R0, dxs, bq, gv):
             jb = owner[p]
             if jb >= 0:
                 i = perm[n1 + p]
-                r_, c_ = _at(J, n1 + p, jb, n1, kl, wb, nb)
+                r_, c_ = _at(n1 + p, jb, n1, kl, wb, nb)
                 J[r_, c_] += (R[i] - R0[i]) / dxs[jb]
-    return 1 if bordered_factor(J, piv, n, nb, kl, SP.ku) else 0
+    return 1
 
 
 @njit(cache=True)
