@@ -2,9 +2,10 @@
 
 Cases: the R1 2:1 elevator (scenes/elevator_2to1.toml) in the planar model with cubic elements at
 1-128 elements per span, and the 8-fall crane hoist (scenes/crane_8fall.toml run dynamically: spatial
-model, linear elements, 65 t on the block, drum hoisting on an S-curve) at 1-32 elements per span.
-Per case: statics, a 10-step warm-up (first Newton matrix), then the time of `--window` s of
-generalized-alpha steps (h = 1 ms) including the Newton-matrix rebuilds that happen in it. The dense
+model, linear elements, 65 t on the block released at rest, drum hoisting on an S-curve) at 2-64
+elements per span.
+Per case: statics, a 10-step warm-up (first Newton matrix), then the best of three consecutive
+`--window` s of generalized-alpha steps (h = 1 ms), Newton-matrix rebuilds in them included. The dense
 path is timed up to `--dense-max` elements per span. Ratios come from one run, with the load average.
 Writes DIR/scaling.json and the log-log plot DIR/scaling.png.
 
@@ -41,26 +42,32 @@ def crane(eps):
     block = sc.bodies[0].__class__(**{**sc.bodies[0].__dict__, "mass": 65000.0})
     drive = Drive(kind="speed", sheave="drum", roping=8.0, distance=-2.0, v_max=0.5, a_max=0.3, jerk=0.5,
                   t_start=0.0)
-    return sc.with_overrides(ropes=ropes, bodies=(block,), drive=drive, model="spatial", statics="rope-length")
+    # released at rest from the geometry (statics "none"): the static Newton from the geometric guess
+    # is singular for some meshes (straight unloaded spans in the spatial model)
+    return sc.with_overrides(ropes=ropes, bodies=(block,), drive=drive, model="spatial", statics="none")
 
 
-def time_case(scene, sparse, window):
+def time_case(scene, sparse, window, repeat=3):
     m = build_model(scene)
     sim = Simulator(m, sparse=sparse, step=1e-3)
     t0 = time.perf_counter()
     st = sim.initial_state()
     statics = time.perf_counter() - t0
     sim.advance(st, st.t + 0.01)
-    n0, j0 = st.info[1], st.info[3]
-    t0 = time.perf_counter()
-    sim.advance(st, st.t + window)
-    wall = time.perf_counter() - t0
-    steps = st.info[1] - n0
+    wall = float("inf")
+    for _ in range(repeat):     # best of `repeat` consecutive windows (the machine is shared)
+        n0, j0, i0 = st.info[1], st.info[3], st.info[2]
+        t0 = time.perf_counter()
+        sim.advance(st, st.t + window)
+        w = time.perf_counter() - t0
+        if w < wall:
+            wall, steps, its, jacs = w, st.info[1] - n0, st.info[2] - i0, st.info[3] - j0
     SP = sim._sp
     return dict(nq=int(m.nq), nf=int(len(m.K.free)), path="dense" if SP is None else "banded",
                 kl=SP.kl if SP else None, ku=SP.ku if SP else None,
                 groups=int(len(SP.grp_ptr) - 1) if SP else None, statics_s=statics,
-                us_per_step=wall / steps * 1e6, jac_builds=int(st.info[3] - j0), steps=int(steps))
+                us_per_step=wall / steps * 1e6, jac_builds=int(jacs), steps=int(steps),
+                iter_per_step=its / steps, us_per_iter=wall / its * 1e6)
 
 
 def plot(rows, path):
@@ -89,7 +96,7 @@ def main(argv=None):
     ap.add_argument("--dense-max", type=int, default=None, help="largest elements/span timed dense")
     a = ap.parse_args(argv)
     el_eps = [1, 2, 4, 8, 16, 32] if a.quick else [1, 2, 4, 8, 16, 32, 64, 128]
-    cr_eps = [1, 2, 4, 8] if a.quick else [1, 2, 4, 8, 16, 32]
+    cr_eps = [2, 4, 8, 16] if a.quick else [2, 4, 8, 16, 32, 64]
     dense_max = a.dense_max or (16 if a.quick else 64)
     time_case(elevator(1), None, 0.01)      # JIT load
     rows = []
@@ -106,12 +113,14 @@ def main(argv=None):
                 rows.append(r)
                 print(f"{case:28s} {eps:4d} el/span nq {r['nq']:5d} {r['path']:6s} "
                       f"band ({r['kl']}, {r['ku']}) groups {r['groups']}  {r['us_per_step']:10.0f} us/step "
-                      f"(jac builds {r['jac_builds']}/{r['steps']})  statics {r['statics_s']:.2f} s  "
+                      f"({r['iter_per_step']:.2f} it/step, {r['us_per_iter']:.0f} us/it, jac builds {r['jac_builds']}/{r['steps']})  statics {r['statics_s']:.2f} s  "
                       f"load {r['load']:.1f}", flush=True)
     for case in ("elevator 2:1 planar cubic", "crane 8-fall spatial"):
         sp = [r for r in rows if r["case"] == case and r["path"] == "banded"]
         for r0, r1 in zip(sp, sp[1:]):
-            print(f"{case}: {r0['nq']} -> {r1['nq']} coordinates: per-step cost x{r1['us_per_step'] / r0['us_per_step']:.2f}")
+            print(f"{case}: {r0['nq']} -> {r1['nq']} coordinates (x{r1['nq'] / r0['nq']:.2f}): per-step cost "
+                  f"x{r1['us_per_step'] / r0['us_per_step']:.2f}, per coordinate "
+                  f"x{r1['us_per_step'] / r1['nq'] / (r0['us_per_step'] / r0['nq']):.2f}")
         for r in sp:
             d = [x for x in rows if x["case"] == case and x["path"] == "dense" and x["nq"] == r["nq"]]
             if d:

@@ -24,7 +24,7 @@ import numpy as np
 from ._jit import njit
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
-                     newton_pattern, pattern_leaks, residual_sparse, unpack_dense)
+                     newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
                      set_prescribed, traction_deflection, workspace)
 
@@ -423,6 +423,20 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     return 0, t, nsteps
 
 
+def _solve(J, b):
+    """J^-1 b for a dense or scipy sparse J; LinAlgError when J is singular."""
+    if not hasattr(J, "toarray"):
+        return np.linalg.solve(J, b)
+    from scipy.sparse.linalg import splu
+    try:
+        x = splu(J.tocsc()).solve(b)
+    except RuntimeError as exc:      # "Factor is exactly singular"
+        raise np.linalg.LinAlgError(str(exc)) from None
+    if not np.all(np.isfinite(x)):
+        raise np.linalg.LinAlgError("singular matrix")
+    return x
+
+
 def gen_alpha_params(rho_inf: float):
     """Chung-Hulbert parameters: alpha_m, alpha_f, beta, gamma."""
     r = float(rho_inf)
@@ -632,8 +646,9 @@ class Simulator:
             rn = np.max(np.abs(r)) if len(r) else 0.0
             J = self._statics_jacobian(resid, x, r, unknowns, eqs, KS, u, st.t)
             try:
-                step = np.linalg.solve(J, -r)
+                step = _solve(J, -r)
             except np.linalg.LinAlgError:
+                J = J.toarray() if hasattr(J, "toarray") else J
                 # Exactly singular: e.g. interior nodes of a straight, still unstretched span in the
                 # planar model have no transverse stiffness until the rope carries tension. The
                 # minimum-norm step leaves those directions alone (their residual is zero) and loads
@@ -675,26 +690,14 @@ class Simulator:
     def _statics_jacobian(self, resid, x, r, unknowns, eqs, KS, u, t):
         """d r / d x by forward differences. From SPARSE_MIN_FREE unknowns on, unknowns that share no
         equation (structural pattern, core/sparse.py) are perturbed together: every entry is computed
-        from the same numbers as with one residual per unknown, with far fewer residuals (compiled,
-        element-wise residuals when the unknowns are the equations' coordinates)."""
+        from the same numbers as with one residual per unknown, with far fewer residuals; the
+        coordinates' columns then come from compiled element-wise residuals (a scipy sparse matrix
+        is returned) and each rope length (positions mode) from one residual."""
         n = len(x)
-        if n >= SPARSE_MIN_FREE and sorted(j for _, j in unknowns) == sorted(eqs) \
-                and all(k == "q" for k, _ in unknowns):
-            _, qq, _, c = resid(x)
-            SPs = self.__dict__.get("_statics_sp")
-            if SPs is None or not np.array_equal(np.sort(SPs.perm), np.sort(eqs)):
-                SPs = self.__dict__["_statics_sp"] = build_sparse(self.model.K._replace(free=np.array(sorted(eqs))))
-            Jb = np.zeros(jac_shape(SPs))
-            nq = self.model.nq
-            st = newton_matrix_sparse(KS, SPs, workspace(KS, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
-                                      np.empty(nq), np.empty(nq), np.empty(SPs.n), 0.0, 1.0, 0.0, 1e-7)
-            if st == 1:
-                A = unpack_dense(Jb, SPs)              # d(M qdd - Q)/dq = -dQ/dq, ordered
-                pos = np.empty(nq, np.int64)
-                pos[SPs.perm] = np.arange(SPs.n)
-                ie = pos[np.asarray(eqs)]
-                iu = pos[np.asarray([j for _, j in unknowns])]
-                return -A[np.ix_(ie, iu)]
+        if n >= SPARSE_MIN_FREE:
+            J = self._statics_jacobian_banded(resid, x, r, unknowns, eqs, KS, u, t)
+            if J is not None:
+                return J
         J = np.zeros((len(eqs), n))
         if n >= SPARSE_MIN_FREE:
             groups, rows = self._statics_groups(tuple(unknowns), tuple(eqs))
@@ -711,6 +714,39 @@ class Simulator:
                 else:
                     J[rows[j], j] = d[rows[j]] / dj
         return J
+
+    def _statics_jacobian_banded(self, resid, x, r, unknowns, eqs, KS, u, t):
+        import scipy.sparse as sp
+        nq = self.model.nq
+        qcols = [k for k, (kind, _) in enumerate(unknowns) if kind == "q"]
+        U = tuple(sorted(set(eqs) | {unknowns[k][1] for k in qcols}))
+        cached = self.__dict__.get("_statics_sp")
+        if cached is None or cached[0] != U:
+            cached = self.__dict__["_statics_sp"] = (U, build_sparse(self.model.K._replace(free=np.array(U, np.int64))))
+        SPs = cached[1]
+        _, qq, _, c = resid(x)
+        Jb = np.zeros(jac_shape(SPs))
+        status = newton_matrix_sparse(KS, SPs, workspace(KS, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
+                                      np.empty(nq), np.empty(nq), np.empty(SPs.n), 0.0, 1.0, 0.0, 1e-7)
+        if status != 1:
+            return None
+        A = unpack_sparse(Jb, SPs)                    # d(M qdd - Q)/dq = -dQ/dq in SPs order
+        pos = np.empty(nq, np.int64)
+        pos[SPs.perm] = np.arange(SPs.n)
+        rows = pos[np.asarray(eqs, np.int64)]
+        blocks = [-A[rows][:, pos[[unknowns[k][1] for k in qcols]]]]
+        order = list(qcols)
+        for k, (kind, _) in enumerate(unknowns):     # rope lengths: one residual each
+            if kind != "q":
+                dx = 1e-7 * (1.0 + abs(x[k]))
+                xp = x.copy()
+                xp[k] += dx
+                blocks.append(sp.csr_matrix(((resid(xp)[0] - r) / dx)[:, None]))
+                order.append(k)
+        J = sp.hstack(blocks).tocsc()
+        inv = np.empty(len(order), np.int64)
+        inv[order] = np.arange(len(order))
+        return J[:, inv]
 
     def _statics_groups(self, unknowns, eqs):
         """Column groups and the equation rows of each unknown (a rope length touches all)."""

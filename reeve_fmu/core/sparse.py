@@ -199,6 +199,28 @@ def unpack_dense(J, SP):
     return A
 
 
+def unpack_sparse(J, SP):
+    """unpack_dense as a scipy CSR matrix (structural zeros of the band dropped)."""
+    import scipy.sparse as sp
+    n, nb, kl, ku = SP.n, SP.nb, SP.kl, SP.ku
+    n1, wb = n - nb, 3 * kl + ku + 1
+    rows = np.arange(n1)
+    R, C, V = [], [], []
+    for d in range(-kl, ku + 1):
+        ok = (rows + d >= 0) & (rows + d < n1)
+        R.append(rows[ok])
+        C.append(rows[ok] + d)
+        V.append(J[rows[ok], d + kl])
+    if nb:
+        bi = np.arange(nb)
+        R += [np.repeat(rows, nb), np.tile(n1 + bi, n1), np.repeat(n1 + bi, nb)]
+        C += [np.tile(n1 + bi, n1), np.repeat(rows, nb), np.tile(n1 + bi, nb)]
+        V += [J[:n1, wb:wb + nb].ravel(), J[:n1, wb + nb:wb + 2 * nb].ravel(), J[n1:n, :nb].ravel()]
+    A = sp.csr_matrix((np.concatenate(V), (np.concatenate(R), np.concatenate(C))), shape=(n, n))
+    A.eliminate_zeros()
+    return A
+
+
 # --------------------------------------------------------------------------------- banded LU
 @njit(cache=True)
 def band_factor(J, piv, n, kl, ku):
