@@ -11,6 +11,7 @@ Writes DIR/scaling.json and the log-log plot DIR/scaling.png.
 
     python benchmarks/scaling.py --out docs/img          # full (docs/performance.md), ~10 min
     python benchmarks/scaling.py --quick --out /tmp/sc    # 1-32 elements per span, ~1 min
+    python benchmarks/scaling.py --baseline ../main --trip-only   # 1D trip against another checkout
 """
 from __future__ import annotations
 
@@ -70,6 +71,68 @@ def time_case(scene, sparse, window, repeat=3):
                 iter_per_step=its / steps, us_per_iter=wall / its * 1e6)
 
 
+def lu_comparison(eps=64, repeat=20):
+    """Factor + solve of one Newton matrix of the elevator at eps elements per span: the compiled
+    bordered band LU against scipy's SuperLU (splu, COLAMD ordering) and dense LAPACK."""
+    import numpy as np
+    from scipy.sparse.linalg import splu
+    from reeve_fmu.core.model import new_state
+    from reeve_fmu.core.sparse import (bordered_factor, bordered_solve, build_sparse, jac_shape,
+                                       newton_matrix_sparse, unpack_sparse)
+    from reeve_fmu.core.system import workspace
+    m = build_model(elevator(eps))
+    SP = build_sparse(m.K)
+    st = new_state(m)
+    J = np.zeros(jac_shape(SP))
+    newton_matrix_sparse(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(), 0.0,
+                         np.zeros(7), J, np.empty(m.nq), np.empty(m.nq), np.empty(SP.n), 1.0, 2.5e-7, 5e-4, 1e-10)
+    A = unpack_sparse(J, SP).tocsc()
+    b = np.ones(SP.n)
+    piv = np.zeros(J.shape[0], np.int64)
+
+    def best(f):
+        f()
+        t = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            f()
+            t.append(time.perf_counter() - t0)
+        return min(t) * 1e6
+
+    def banded():
+        Jc = J.copy()
+        bordered_factor(Jc, piv, SP.n, SP.nb, SP.kl, SP.ku)
+        x = b.copy()
+        bordered_solve(Jc, piv, SP.n, SP.nb, SP.kl, SP.ku, x)
+    Jf = J.copy()
+    bordered_factor(Jf, piv, SP.n, SP.nb, SP.kl, SP.ku)
+    lu = splu(A)
+    Ad = A.toarray()
+    res = dict(nq=int(m.nq), banded_factor_solve_us=best(banded),
+               banded_solve_us=best(lambda: bordered_solve(Jf, piv, SP.n, SP.nb, SP.kl, SP.ku, b.copy())),
+               splu_factor_solve_us=best(lambda: splu(A).solve(b)), splu_solve_us=best(lambda: lu.solve(b)),
+               dense_factor_solve_us=best(lambda: np.linalg.solve(Ad, b)))
+    print("LU at", eps, "el/span:", {k: round(v, 1) if isinstance(v, float) else v for k, v in res.items()})
+    return res
+
+
+def trip_1d(baseline, rounds=3):
+    """The 1D 2:1 trip (benchmarks/trip_2to1.py, best of 5 inside) of this tree and of a baseline
+    checkout, alternated `rounds` times in fresh processes: us per step of each (best per tree)."""
+    import re
+    import subprocess
+    best = {}
+    for _ in range(rounds):
+        for name, root in (("this", ROOT), ("baseline", Path(baseline))):
+            out = subprocess.run([sys.executable, str(root / "benchmarks" / "trip_2to1.py")], capture_output=True,
+                                 text=True, cwd=str(root), check=True).stdout
+            us = float(re.search(r"\(([0-9.]+) us/step", out).group(1))
+            best[name] = min(best.get(name, float("inf")), us)
+    print(f"1D 2:1 trip: {best['this']:.2f} us/step here, {best['baseline']:.2f} us/step in {baseline} "
+          f"(ratio {best['this'] / best['baseline']:.3f}, load {os.getloadavg()[0]:.1f})")
+    return best
+
+
 def plot(rows, path):
     import matplotlib
     matplotlib.use("Agg")
@@ -94,16 +157,25 @@ def main(argv=None):
     ap.add_argument("--out", default=None, help="directory for scaling.json and scaling.png")
     ap.add_argument("--window", type=float, default=0.1, help="timed simulated seconds per case")
     ap.add_argument("--dense-max", type=int, default=None, help="largest elements/span timed dense")
+    ap.add_argument("--baseline", default=None, help="another checkout: compare the 1D 2:1 trip speed with it")
+    ap.add_argument("--trip-only", action="store_true", help="only the 1D trip comparison (--baseline)")
     a = ap.parse_args(argv)
+    if a.baseline:
+        trip_1d(a.baseline)
+        if a.trip_only:
+            return
     el_eps = [1, 2, 4, 8, 16, 32] if a.quick else [1, 2, 4, 8, 16, 32, 64, 128]
     cr_eps = [2, 4, 8, 16] if a.quick else [2, 4, 8, 16, 32, 64]
     dense_max = a.dense_max or (16 if a.quick else 64)
+    # the crane starts from rest and rebuilds its Newton matrix every other step: dense costs minutes
+    # per case above 16 elements per span
+    dense_max_case = {"elevator 2:1 planar cubic": dense_max, "crane 8-fall spatial": min(dense_max, 16)}
     time_case(elevator(1), None, 0.01)      # JIT load
     rows = []
     for case, make, epss in (("elevator 2:1 planar cubic", elevator, el_eps), ("crane 8-fall spatial", crane, cr_eps)):
         for eps in epss:
             for sparse in (None, False):
-                if sparse is False and eps > dense_max:
+                if sparse is False and eps > dense_max_case[case]:
                     continue
                 r = time_case(make(eps), sparse, a.window)
                 if sparse is False and r["path"] == "dense" and rows and rows[-1]["path"] == "dense" \
@@ -126,10 +198,11 @@ def main(argv=None):
             if d:
                 print(f"{case}: {r['elements_per_span']} el/span: banded {d[0]['us_per_step'] / r['us_per_step']:.1f}x "
                       f"faster than dense")
+    lu = lu_comparison(32 if a.quick else 64)
     if a.out:
         out = Path(a.out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "scaling.json").write_text(json.dumps(rows, indent=1))
+        (out / "scaling.json").write_text(json.dumps(dict(rows=rows, lu=lu), indent=1))
         plot(rows, out / "scaling.png")
         print(f"wrote {out / 'scaling.json'} and {out / 'scaling.png'}")
 
