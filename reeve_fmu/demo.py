@@ -80,7 +80,7 @@ def _plant_source(case, out: Path):
         data = apply_to_data(load_scene_data(path), case.scene_sets)
         path = out / "scene.toml"
         path.write_text(f"# {case.scene_path} with --set " + ", ".join(
-            f"{k}={v!r}" for k, v in case.scene_sets.items()) + "\n" + dump_toml(data))
+            f"{k}={v!r}" for k, v in case.scene_sets.items()) + "\n" + dump_toml(data), encoding="utf-8")
     if path.resolve() == cosim.default_scene_path().resolve():
         return path, cosim.PLANT_NAME
     return path, "Plant_" + cosim._slug(case.scene.name)
@@ -217,7 +217,7 @@ def cli_build(args) -> int:
     if scene_sets:
         dest.mkdir(parents=True, exist_ok=True)
         path = dest / f"{name}.scene.toml"
-        path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)))
+        path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)), encoding="utf-8")
         scene = path
     t0 = time.perf_counter()
     plant, _ = cosim.build_plant_fmu(dest, scene, name)
@@ -231,6 +231,6 @@ def cli_build(args) -> int:
         case = trip_case(scene, load=load, sets=drive_sets)
         vals = {k: v for k, v in case.drive_values.items() if k not in cosim.SIS_PARAMETERS}
         p = dest / f"{name}.drive.json"
-        p.write_text(json.dumps({"plant": {"car.load": case.load}, "drive": vals}, indent=1) + "\n")
+        p.write_text(json.dumps({"plant": {"car.load": case.load}, "drive": vals}, indent=1) + "\n", encoding="utf-8")
         print(f"drive parameters sized for {sc.name} (start values for {drive.name}) -> {p}")
     return 0

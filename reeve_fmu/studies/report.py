@@ -185,7 +185,7 @@ def _plot_levelling(plt, out, t, c, stops, sis):
 
 def write_summary(out: Path, summary: dict) -> Path:
     p = Path(out) / "summary.json"
-    p.write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
+    p.write_text(json.dumps(summary, indent=2, default=_json_default) + "\n", encoding="utf-8")
     return p
 
 
@@ -222,7 +222,7 @@ def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts:
     lines += ["", "## Plots", ""]
     lines += [f"![{p}]({p})" for p in pngs]
     p = Path(out) / "report.md"
-    p.write_text("\n".join(lines) + "\n")
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return p
 
 

@@ -267,7 +267,7 @@ def write_report(rows: list, study: dict, out: Path, png: Path | None, wall: flo
     if png is not None:
         lines += ["", f"![metrics against parameters]({png.name})"]
     p = out / "report.md"
-    p.write_text("\n".join(lines) + "\n")
+    p.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return p
 
 
