@@ -64,7 +64,7 @@ def main(argv=None) -> int:
         print(f"speed-up {res[-1]['workers']} vs {res[0]['workers']} worker(s): "
               f"{res[-1]['rows_per_s'] / res[0]['rows_per_s']:.2f}x")
     if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
+        Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     return 0
 
 
