@@ -28,7 +28,11 @@ from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, o
 
 
 class SolverError(RuntimeError):
-    """The integration cannot continue; the message says why and when."""
+    """The integration cannot continue; the message says why and when. A run that stops keeps what
+    it computed: `result` holds the outputs up to the last good step (Simulator.advance with out_dt,
+    Simulator.run), `time` that step's time (None for a failure before the first step, e.g. statics)."""
+    result = None
+    time = None
 
 
 STATUS_TEXT = {
@@ -577,7 +581,12 @@ class Simulator:
         status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
-            raise SolverError(self._status_message(status, st))
+            err = SolverError(self._status_message(status, st))
+            err.time = st.t
+            if out_dt is not None:
+                rows = done // every   # output rows the compiled loop wrote before the failure
+                err.result = Result(ybuf[:rows, 0].copy(), ybuf[:rows, 1:].copy(), self.model.output_names)
+            raise err
         st.t = t_end if abs(st.t - t_end) < 1e-9 else st.t
         if out_dt is None:
             return None
@@ -725,10 +734,25 @@ class Simulator:
             t_next = min(t_end, st.t + chunk)
             n = max(1, int(round((t_next - st.t) / out_dt)))
             t_next = st.t + n * out_dt
-            res = self.advance(st, t_next, out_dt=out_dt)
+            try:
+                res = self.advance(st, t_next, out_dt=out_dt)
+            except SolverError as exc:
+                self.final_state = st
+                exc.result = self._partial(times, vals, exc.result, st)
+                exc.time = st.t
+                raise
             times.append(res.time)
             vals.append(res.values)
             if progress is not None:
                 progress(st.t)
         self.final_state = st
+        return Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
+
+    def _partial(self, times, vals, chunk, st) -> Result:
+        """Everything a stopped run computed: the samples so far, the stopped chunk's samples and a
+        last sample at the last good step (st is left there)."""
+        if chunk is not None and len(chunk.time):
+            times, vals = times + [chunk.time], vals + [chunk.values]
+        if st.t > times[-1][-1] + 1e-12:
+            times, vals = times + [np.array([st.t])], vals + [self.outputs(st)[None, :]]
         return Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
