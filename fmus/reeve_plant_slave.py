@@ -71,6 +71,8 @@ class ReevingPlantSlave(ReeveSlave):
                                f"(resources out of date?)")
         for w in self.plant.warnings:    # plausibility and statics warnings of the scene
             self.log(w, Fmi2Status.warning)
+        for w in self.plant.warnings:    # plausibility and statics warnings of the scene
+            self.log(w, Fmi2Status.warning)
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
         self.plant.warm_up()     # JIT load/compile here, not inside the first doStep

@@ -355,6 +355,37 @@ def _entry_point(dispatcher):
     return dispatcher
 
 
+# --------------------------------------------------------------------------------- statics helpers
+RCOND = 1e-12   # singular values below RCOND x the largest are zero (round-off of a ~1e16 condition)
+
+
+def _newton_direction(J, r):
+    """Newton step -J^+ r and the part of the residual outside J's range. Singular values below
+    RCOND x the largest are dropped: interior nodes of a straight, unstretched span have no
+    transverse stiffness until the rope carries tension, so J is singular to round-off there and a
+    plain solve returns a step of ~1e7 m. Dropping those directions leaves them alone (their residual
+    is zero) and loads the rope; the next Jacobian is regular."""
+    U, sv, Vt = np.linalg.svd(J)
+    keep = sv > RCOND * (sv[0] if sv.size else 0.0)
+    step = -(Vt[keep].T @ ((U[:, keep].T @ r) / sv[keep]))
+    outside = float(np.max(np.abs(J @ step + r))) if r.size else 0.0
+    return step, outside
+
+
+def _unbalanced(m, eqs, r) -> str:
+    """'unbalanced force 2.3e+04 N on body 'car' (car.z)' for the largest residual of the statics."""
+    if r is None or not len(r):
+        return "no residual"
+    i = int(np.argmax(np.abs(r)))
+    name = m.q_names[eqs[i]]
+    kind = m.q_kind[eqs[i]]
+    base = name.split(".")[0]
+    what = {"body": f"body {base!r}", "sheave": f"sheave {base!r} (rope coordinate)",
+            "angle": f"sheave {base!r}", "hitch": f"rope {base!r} (hitch)",
+            "interior": f"rope {base!r} (interior node)", "slope": f"rope {base!r} (slope)"}.get(kind, name)
+    return f"unbalanced force {r[i]:.4g} N on {what} ({name})"
+
+
 # --------------------------------------------------------------------------------- front end
 @dataclass
 class Result:
@@ -483,6 +514,8 @@ class Simulator:
 
         x = np.array([q[i] if k == "q" else par[i] for k, i in unknowns], float)
         fscale = max(1.0, float(np.max(np.abs(K.F0))) if nq else 1.0)
+        cap = max(1.0, float(np.max(np.abs(m.c0))) if m.c0.size else 1.0)   # scene size [m]
+        outside = 0.0
         for it in range(100):
             r, qq, pp, c = resid(x)
             if r is None:
@@ -496,30 +529,29 @@ class Simulator:
                 xp[j] += dx
                 rp = resid(xp)[0]
                 J[:, j] = (rp - r) / dx
-            try:
-                step = np.linalg.solve(J, -r)
-            except np.linalg.LinAlgError:
-                # Exactly singular: e.g. interior nodes of a straight, still unstretched span in the
-                # planar model have no transverse stiffness until the rope carries tension. The
-                # minimum-norm step leaves those directions alone (their residual is zero) and loads
-                # the rope; a residual outside J's range means a body that nothing holds.
-                step = np.linalg.lstsq(J, -r, rcond=None)[0]
-                if np.max(np.abs(J @ step + r)) > 1e-6 * max(rn, 1e-9 * fscale):
-                    raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations "
-                                      f"(a body or sheave is not held by any rope?)") from None
-            lam = 1.0
-            while lam > 1e-4:
+            # a residual outside J's range is left for the next iteration (the rope weight across an
+            # unloaded span: the loaded rope holds it); if it stays, nothing holds that body
+            step, outside = _newton_direction(J, r)
+            # a Newton step longer than the scene is not trusted: it is cut to the scene's size first
+            lam = min(1.0, cap / max(float(np.max(np.abs(step))), 1e-300))
+            while lam > 1e-6:
                 rt = resid(x + lam * step)[0]
                 if rt is not None and np.max(np.abs(rt)) < max(rn, 1e-300) * (1 - 1e-4 * lam) or rn < 1e-9 * fscale:
                     break
                 lam *= 0.5
+            else:
+                break   # no step reduces the force imbalance: reported below
             x = x + lam * step
             if np.max(np.abs(lam * step)) < 1e-12 * (1 + np.max(np.abs(x))):
                 break
         r, qq, pp, c = resid(x)
         if r is None or np.max(np.abs(r)) > 1e-6 * fscale:
-            raise SolverError(f"{m.scene.source}: initial statics did not converge "
-                              f"(residual {np.max(np.abs(r)) if r is not None else float('nan'):.3g} N)")
+            if r is not None and outside > 0.5 * np.max(np.abs(r)):
+                raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations: "
+                                  f"{_unbalanced(m, eqs, r)}, which is not held by any rope")
+            where = _unbalanced(m, eqs, r) if r is not None else "a span is shorter than solver.min_span"
+            raise SolverError(f"{m.scene.source}: initial statics did not converge: {where} "
+                              f"(check the start positions, masses and EA)")
         st.q[:] = qq
         st.c[:] = c
         if KS is not m.KJ:
