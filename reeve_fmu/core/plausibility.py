@@ -228,6 +228,9 @@ def _check_ropes(scene, geo, add):
             f, unit = _unit_slip(rope.EA, (T / STRAIN_WARN, T / 1e-5), (1e3, 1e6, 1e9), ("kN", "MN", "GN"))
             hint = (f"; EA is in N per rope: given in {unit}? (EA = {rope.EA * f:.3g} N gives "
                     f"{100 * T / (rope.EA * f):.2g} %)" if unit else "; EA is in N per rope (given in kN or MN?)")
+            g = float(np.linalg.norm(scene.gravity))
+            if abs(g / G_EARTH - 1.0) > 0.02:
+                hint = f"; or scene.gravity: |g| = {g:g} m/s^2 (Earth: 9.81)"
             level = "error" if eps > STRAIN_ERROR else "warning"
             add(level, f"{key}.EA",
                 f"rope {rope.name!r}: EA = {rope.EA:g} N gives a static strain of about {100 * eps:.3g} % "
