@@ -73,6 +73,7 @@ def check_scene(scene: Scene) -> list[Finding]:
     _check_spans(scene, geo, add)
     _check_wraps(scene, geo, add)
     _check_run_length(scene, add)
+    _check_crane_heights(scene, geo, add)
     return sorted(out, key=lambda f: f.level != "error")
 
 
@@ -371,3 +372,43 @@ def _check_run_length(scene, add):
         add("warning", "scene.t_end",
             f"t_end = {scene.t_end:g} s with solver.step = {scene.solver.step:g} s is {steps:.2g} steps "
             f"(times are in s: given in ms?)")
+
+
+def _check_crane_heights(scene, geo, add):
+    """[crane] hoist heights the rope cannot reach (the quasi-static sweep of `reeve-fmu crane`)."""
+    crane = scene.extra.get("crane") if isinstance(scene.extra, dict) else None
+    if not isinstance(crane, dict) or crane.get("block") not in {b.name for b in scene.bodies}:
+        return
+    block = crane["block"]
+
+    def num(key):
+        v = crane.get(key)
+        return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+
+    hmin, hmax = num("height_min"), num("height_max")
+    falls = _falls(scene)[block]
+    sheaves = {s.name: s for s in scene.sheaves}
+    rope_names = {r.name for r in scene.ropes}
+    ropes = [r for r in scene.ropes if r.name == crane.get("rope", scene.ropes[0].name)] or \
+        [scene.ropes[0]] if rope_names else []
+    if hmax is not None and falls and ropes:
+        rope = ropes[0]
+        i = scene.ropes.index(rope)
+        spans = geo[i][0]
+        route = sum(float(np.linalg.norm(b - a)) for a, b in spans) if spans is not None else 0.0
+        stored = sum(sheaves[st.sheave].stored for st in rope.route
+                     if st.sheave is not None and sheaves[st.sheave].kind == "drum")
+        if falls * hmax > route + stored:
+            # the quasi-static sweep does not run the drum empty: an error only when far off
+            add("error" if falls * hmax > 10.0 * (route + stored) else "warning", "crane.height_max",
+                f"height_max = {hmax:g} m needs about {falls} x {hmax:g} = {falls * hmax:.4g} m of rope in the "
+                f"{falls} falls; rope {rope.name!r} has {route:.4g} m on its route and {stored:.4g} m on the "
+                f"drum (heights are in m)")
+    if hmin is not None:
+        on_block = [s.radius for s in scene.sheaves if s.body == block]
+        fixed = [s.radius for s in scene.sheaves if s.body is None and s.kind != "drum"]
+        clearance = (max(on_block) if on_block else 0.0) + (max(fixed) if fixed else 0.0)
+        if hmin < clearance:
+            add("warning", "crane.height_min",
+                f"height_min = {hmin:g} m: the block sheaves would touch the boom-tip sheaves (radii "
+                f"{clearance:g} m together); no equilibrium there (heights are in m)")
