@@ -182,8 +182,11 @@ def _run(case):
         model = build_crane(scene)
         r = sweep(model, np.linspace(model.spec.height_min, model.spec.height_max, CRANE_HEIGHTS))
         yaw = r.columns["block.yaw"]
-        if not np.isfinite(yaw[0]):
-            return dict(outcome="fail-nan", message="non-finite yaw at the first height", warnings=warnings)
+        # NaN marks heights with no equilibrium (docs/crane.md); at the first height only a
+        # plausibility warning may explain it
+        if not np.isfinite(yaw[0]) and not warnings:
+            return dict(outcome="fail-nan", message="no equilibrium at the first height and no warning",
+                        warnings=warnings)
         return dict(outcome="run", warnings=warnings)
     from reeve_fmu.core.model import build_model
     from reeve_fmu.core.solver import Simulator, SolverError
