@@ -70,6 +70,7 @@ def check_scene(scene: Scene) -> list[Finding]:
     _check_masses(scene, geo, add)
     _check_ropes(scene, geo, add)
     _check_sheave_diameters(scene, add)
+    _check_grooves(scene, add)
     _check_spans(scene, geo, add)
     _check_wraps(scene, geo, add)
     _check_run_length(scene, add)
@@ -274,6 +275,23 @@ def _check_sheave_diameters(scene, add):
                     f"sheave {sh.name!r}: pitch diameter D = {2 * sh.radius:g} m is {ratio:.3g} x the rope "
                     f"diameter ({how}); {rule} asks D/d >= {limit:g} (radius is the pitch radius in m, "
                     f"given in cm or mm?)")
+
+
+def _check_grooves(scene, add):
+    """Friction of traction sheaves: mu of steel rope in an iron groove is about 0.1 (EN 81-50)."""
+    for i, sh in enumerate(scene.sheaves):
+        if sh.kind != "traction":
+            continue
+        if sh.mu > 1.0:
+            add("error", f"sheaves[{i}].mu", f"sheave {sh.name!r}: mu = {sh.mu:g}: a friction coefficient of "
+                                              f"rope on a groove above 1 is not physical (EN 81-50: 0.1)")
+        elif sh.mu > 0.5 or sh.mu < 0.01:
+            add("warning", f"sheaves[{i}].mu", f"sheave {sh.name!r}: mu = {sh.mu:g} is unusual for a rope "
+                                                f"in a groove (EN 81-50: 0.1)")
+        for key, value in (("undercut_angle", sh.undercut_angle), ("groove_angle", sh.groove_angle)):
+            if 0.0 < value < 3.2:
+                add("warning", f"sheaves[{i}].{key}", f"sheave {sh.name!r}: {key} = {value:g} deg is tiny "
+                                                      f"(angles are in degrees: given in rad?)")
 
 
 def _check_spans(scene, geo, add):
