@@ -3,7 +3,10 @@ scenes. Every mutation must either still build or fail with a SceneError that na
 mutated key - never an unhandled exception from inside the code."""
 from pathlib import Path
 import copy
-import tomllib
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
 
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
