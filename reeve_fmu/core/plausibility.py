@@ -385,11 +385,23 @@ def _check_wraps(scene, geo, add):
 
 
 def _check_run_length(scene, add):
+    """Runs and models too large to finish: steps, output samples, rope elements."""
     steps = scene.t_end / scene.solver.step
     if steps > 1e8:
         add("warning", "scene.t_end",
             f"t_end = {scene.t_end:g} s with solver.step = {scene.solver.step:g} s is {steps:.2g} steps "
             f"(times are in s: given in ms?)")
+    samples = scene.t_end / scene.output_step
+    if samples > 1e7:
+        add("error" if samples > 1e9 else "warning", "scene.output_step",
+            f"output_step = {scene.output_step:g} s over t_end = {scene.t_end:g} s is {samples:.2g} samples "
+            f"of every output (times are in s: given in ms?)")
+    n_el = sum(r.elements_per_span * (len(r.route) - 1) for r in scene.ropes)
+    if n_el > 500:
+        i = max(range(len(scene.ropes)), key=lambda k: scene.ropes[k].elements_per_span)
+        add("error" if n_el > 20000 else "warning", f"ropes[{i}].elements_per_span",
+            f"{n_el} rope elements in all: the Newton matrices are dense, so memory and time per step grow "
+            f"as the square of that (a few elements per span are enough: docs/performance.md)")
 
 
 def _check_crane_heights(scene, geo, add):
@@ -409,6 +421,10 @@ def _check_crane_heights(scene, geo, add):
     rope_names = {r.name for r in scene.ropes}
     ropes = [r for r in scene.ropes if r.name == crane.get("rope", scene.ropes[0].name)] or \
         [scene.ropes[0]] if rope_names else []
+    n = crane.get("heights")
+    if isinstance(n, int) and not isinstance(n, bool) and n > 1e4:
+        add("error" if n > 1e6 else "warning", "crane.heights",
+            f"heights = {n}: the sweep solves every height (a few hundred are enough for the plot)")
     if hmax is not None and falls and ropes:
         rope = ropes[0]
         i = scene.ropes.index(rope)
