@@ -10,14 +10,15 @@ Parameters (fixed: the model is built in exitInitializationMode) car.load, rope.
 The scene and the output declarations come from the FMU's resources (scene.toml, reeve_plant.json,
 written by reeve_fmu.fmu.cosim.plant_build_inputs). Any communication step is accepted: the plant
 sub-steps internally with the scene's solver step (generalized-alpha, steps <= solver.step).
-Plausibility warnings of the scene are logged at initialization (errors fail it). A run stopped by
-an event (vanishing span, no Newton convergence) logs one line naming the event and its time and
-returns fmi2Discard; the outputs keep the values of the last good step, from which a retry starts.
+Plausibility warnings of the scene are logged at initialization (physically impossible values fail
+it). A solver failure (an event: vanishing span, no Newton convergence) raises inside step():
+ReeveSlave logs it through the FMU logger (the message names the event and its time) and returns
+fmi2Discard; the outputs keep the values of the last good step; further steps are refused until the
+master restores an FMU state or resets.
 """
 import json
 
 from reeve_fmu.fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
-from reeve_fmu.core.solver import SolverError
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 
@@ -71,8 +72,6 @@ class ReevingPlantSlave(ReeveSlave):
                                f"(resources out of date?)")
         for w in self.plant.warnings:    # plausibility and statics warnings of the scene
             self.log(w, Fmi2Status.warning)
-        for w in self.plant.warnings:    # plausibility and statics warnings of the scene
-            self.log(w, Fmi2Status.warning)
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
         self.plant.warm_up()     # JIT load/compile here, not inside the first doStep
@@ -82,13 +81,7 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        try:
-            self._write(self.plant.step(dt, v["motor.torque"], v["brake.command"]))
-        except SolverError as exc:
-            # an event (vanishing span, no Newton convergence): the outputs keep the last good step
-            self.log(f"run stopped by an event: {exc}; the outputs are those of t = {self.plant.t:.6f} s",
-                     Fmi2Status.error)
-            return False
+        self._write(self.plant.step(dt, v["motor.torque"], v["brake.command"]))
         return True
 
     def get_hidden_state(self):
