@@ -26,6 +26,9 @@ def cmd_simulate(args) -> int:
     warnings = plausibility_warnings(scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
+    for opt, v in (("--t-end", args.t_end), ("--dt", args.dt), ("--step", args.step)):
+        if v is not None and not (0 < v < float("inf")):
+            raise ValueError(f"{opt} must be a finite number > 0 [s], got {v:g}")
     out = Path(args.out)
     scene, chosen_step, res = _fidelity(args, scene, t_end, dt, out)
     reused = res is not None
