@@ -180,13 +180,15 @@ def _check_masses(scene, geo, add):
                 f"{heaviest!r} ({masses[heaviest]:g} kg); masses are in kg (given in t, or g?)")
     total = sum(masses.values())
     lengths = _rope_lengths(scene, geo)
-    rope_mass = sum(r.rhoA * r.count * L for r, L in zip(scene.ropes, lengths) if math.isfinite(L))
+    each = [r.rhoA * r.count * L if math.isfinite(L) else 0.0 for r, L in zip(scene.ropes, lengths)]
+    rope_mass = sum(each)
+    key = f"ropes[{int(np.argmax(each))}].rhoA"      # the heaviest rope
     if rope_mass > 10.0 * total:
-        add("warning", "ropes[0].rhoA" if len(scene.ropes) == 1 else "ropes.rhoA",
+        add("warning", key,
             f"the ropes weigh {rope_mass:.3g} kg, {rope_mass / total:.3g} x the bodies ({total:.3g} kg); "
             f"rhoA is in kg/m per rope (given in g/m?)")
     elif 0 < rope_mass < 1e-4 * total:
-        add("warning", "ropes[0].rhoA" if len(scene.ropes) == 1 else "ropes.rhoA",
+        add("warning", key,
             f"the ropes weigh {rope_mass:.3g} kg, {rope_mass / total:.1e} of the bodies ({total:.3g} kg); "
             f"rhoA is in kg/m per rope (given in t/m, or body masses in g?)")
 
