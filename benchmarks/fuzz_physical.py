@@ -228,6 +228,17 @@ def summarize(results) -> dict:
     out = {"cases": len(results)}
     for key in ("run", "error", "fail-traceback", "fail-nan", "fail-timeout"):
         out[key] = sum(r["outcome"] == key for r in results)
+    errors = [r for r in results if r["outcome"] == "error"]
+    out["errors_by_kind"] = {
+        "scene syntax and ranges (parser)": sum(r["error"] == "SceneError" and "initial.statics" not in r["message"]
+                                                for r in errors),
+        "plausibility": sum(r["error"] == "PlausibilityError" for r in errors),
+        "no static equilibrium / statics mode": sum(r["error"] == "SolverError" or "initial.statics" in r["message"]
+                                                    for r in errors),
+        "crane": sum(r["error"] == "CraneError" for r in errors),
+        "other (ValueError naming a key)": sum(r["error"] == "ValueError" for r in errors)}
+    out["runs_stopped_by_an_event_in_the_steps"] = sum(
+        r["outcome"] == "run" and any(w.startswith("event:") for w in r["warnings"]) for r in results)
     out["runs_with_warnings"] = sum(r["outcome"] == "run" and bool(r["warnings"]) for r in results)
     out["runs_without_warnings"] = out["run"] - out["runs_with_warnings"]
     out["failures"] = out["fail-traceback"] + out["fail-nan"] + out["fail-timeout"]

@@ -44,6 +44,11 @@ def test_EA_strain_between_2_and_20_percent_warns():
     assert "[ropes[0].EA]" in w and "static strain of about 4" in w
 
 
+def test_EA_a_million_times_too_large_warns():
+    (w,) = check_or_raise(elevator("EA = 2.9e6", "EA = 2.9e12"))
+    assert "[ropes[0].EA]" in w and "1e6 times too large?" in w
+
+
 def test_crossing_wrap_names_the_sheave_and_the_sense_that_does_not_cross():
     sc = elevator('{ sheave = "car_sheave", wrap = "ccw" }', '{ sheave = "car_sheave", wrap = "cw" }')
     (w,) = check_or_raise(sc)

@@ -20,6 +20,7 @@ from .scene import Scene, SceneError
 G_EARTH = 9.81
 STRAIN_WARN = 0.02      # static rope strain that warns: steel wire ropes break at about 1-2 %
 STRAIN_ERROR = 0.20     # ... that is an error: no rope (steel or fibre) stretches that far and holds
+STRAIN_LOW = 1e-5       # below this a loaded rope is stiffer than any rope: EA too large by 1e3 or more
 WAVE_SPEED = (500.0, 15000.0)   # m/s, sqrt(EA/rhoA): steel ropes 3-5 km/s, fibre ropes 1.5-11 km/s
 STEEL_ROPE_DENSITY = 4000.0     # kg/m per m^2 of d^2: a steel wire rope weighs ~0.4 kg/m per cm^2
 DD_ELEVATOR = 40.0      # EN 81-50: sheave pitch diameter >= 40 x nominal rope diameter
@@ -239,6 +240,13 @@ def _check_ropes(scene, geo, add):
             add(level, f"{key}.EA",
                 f"rope {rope.name!r}: EA = {rope.EA:g} N gives a static strain of about {100 * eps:.3g} % "
                 f"(tension about {T:.3g} N per rope; steel ropes break at 1-2 %){hint}")
+        elif 0 < eps < STRAIN_LOW:
+            f, unit = _unit_slip(rope.EA, (T / STRAIN_WARN, T / STRAIN_LOW), (1e-3, 1e-6, 1e-9), ("1e3", "1e6", "1e9"))
+            hint = (f": {unit} times too large? (EA = {rope.EA * f:.3g} N gives {100 * T / (rope.EA * f):.2g} %)"
+                    if unit else "")
+            add("warning", f"{key}.EA",
+                f"rope {rope.name!r}: EA = {rope.EA:g} N gives a static strain of only {100 * eps:.2g} % "
+                f"(tension about {T:.3g} N per rope; loaded ropes stretch 0.05-1 %): EA is in N per rope{hint}")
         elif not WAVE_SPEED[0] <= c <= WAVE_SPEED[1]:
             f, unit = _unit_slip(rope.rhoA, (rope.EA / WAVE_SPEED[1] ** 2, rope.EA / WAVE_SPEED[0] ** 2),
                                  (1e-3, 1e3), ("g/m", "t/m"))
