@@ -75,6 +75,7 @@ def check_scene(scene: Scene) -> list[Finding]:
     _check_spans(scene, geo, add)
     _check_wraps(scene, geo, add)
     _check_run_length(scene, add)
+    _check_motion(scene, add)
     _check_crane_heights(scene, geo, add)
     return sorted(out, key=lambda f: f.level != "error")
 
@@ -456,3 +457,27 @@ def _check_crane_heights(scene, geo, add):
             add("warning", "crane.height_min",
                 f"height_min = {hmin:g} m: the block sheaves would touch the boom-tip sheaves (radii "
                 f"{clearance:g} m together); no equilibrium there (heights are in m)")
+
+
+def _check_motion(scene, add):
+    """Drive profile, rope damping and solver settings far outside lifting practice."""
+    dv = scene.drive
+    if dv.kind == "speed" and dv.profile == "s-curve":
+        for key, value, limit, unit, slip in (("v_max", dv.v_max, 20.0, "m/s", "m/min?"),
+                                              ("a_max", dv.a_max, 9.81, "m/s^2", "more than 1 g"),
+                                              ("jerk", dv.jerk, 100.0, "m/s^3", "")):
+            if value > limit:
+                add("warning", f"drive.{key}", f"{key} = {value:g} {unit} is beyond lifting practice "
+                                               f"(limit here {limit:g} {unit}){'; given in ' + slip if slip.endswith('?') else ''}")
+    for i, rope in enumerate(scene.ropes):
+        if rope.damping > 0.1:
+            add("warning", f"ropes[{i}].damping",
+                f"rope {rope.name!r}: damping = {rope.damping:g} s is the Kelvin-Voigt time constant "
+                f"(steel ropes about 1e-3 s; given in ms?)")
+    sv = scene.solver
+    if sv.newton_tol > 1e-2:
+        add("warning", "solver.newton_tol", f"newton_tol = {sv.newton_tol:g} is relative: above 1e-2 the "
+                                            f"Newton error dominates the results (scenes use 1e-4 to 1e-8)")
+    if sv.step > 0.05:
+        add("warning", "solver.step", f"step = {sv.step:g} s is longer than the rope and body motions it "
+                                      f"integrates (scenes use 1e-4 to 1e-3 s; given in ms?)")
