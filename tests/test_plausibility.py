@@ -233,3 +233,12 @@ def test_crane_without_yaw_stiffness_is_explained():
     res = sweep(build_crane(loads_scene(ONE_FALL.replace("GJ0 = 0.0", "GJ0 = 2000.0"), "one_fall.toml")),
                 np.linspace(2.0, 10.0, 3))
     assert np.all(np.isfinite(res.columns["block.yaw"]))
+
+
+def test_plant_keeps_the_warnings_for_the_fmu_log():
+    """The plant FMU logs Plant.warnings at initialization (fmus/reeve_plant_slave.py)."""
+    from reeve_fmu.core.plant import Plant
+    plant = Plant(elevator("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -9.5]"))
+    assert any("[scene.gravity] |g| = 9.5 m/s^2" in w for w in plant.warnings)
+    with pytest.raises(PlausibilityError, match=r"\[ropes\[0\]\.EA\]"):
+        Plant(elevator("EA = 2.9e6", "EA = 4.5"))
