@@ -92,7 +92,7 @@ def _write_run(out, scene, time_, cols, warnings, stop, wall):
                "samples": int(len(time_)), "t_last": float(time_[-1]),
                "wall_seconds": wall, "warnings": list(warnings), "event": event,
                "exit_code": EXIT_EVENT if event else 0}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
 
 
 def _fidelity(args, scene, t_end, dt, out):
@@ -199,15 +199,7 @@ def main(argv=None) -> int:
     debug = "--debug" in argv or os.environ.get("REEVE_FMU_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
     args = ap.parse_args(argv)
-    rc = run_command(args, debug)
-    if args.command in FMU_HOST_COMMANDS and _is_cli_process():
-        # everything is written: skip interpreter finalisation, where pythonfmu FMUs loaded in this
-        # process occasionally corrupt the heap at exit ("corrupted double-linked list", measured
-        # 1 in 4 demo runs; docs/cosim.md, 'pythonfmu and fmpy' item 4, PythonFMU #228) and would turn a good run into exit 134
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(rc)
-    return rc
+    return run_command(args, debug)
 
 
 EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_EVENT = 1, 2, 3   # documented in README.md, "Exit codes"
@@ -255,16 +247,6 @@ def _where(exc) -> str:
         return ""
     f = frames[-1]
     return f" (in {Path(f.filename).stem}.{f.name})"
-
-
-FMU_HOST_COMMANDS = {"demo", "hil"}   # commands that load pythonfmu FMUs into this process
-
-
-def _is_cli_process() -> bool:
-    """True when this process is the `reeve-fmu` console script or `python -m reeve_fmu.cli` (not a
-    test or a script calling main())."""
-    p = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
-    return p is not None and (p.name == "reeve-fmu" or (p.name == "cli.py" and p.parent.name == "reeve_fmu"))
 
 
 if __name__ == "__main__":
