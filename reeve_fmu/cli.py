@@ -140,9 +140,9 @@ def main(argv=None) -> int:
     _add_simulate(sub)
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
     _lazy(sub, "build", "demo", "cli_build", "build the plant and electric-drive FMUs into fmus/", _cfg_build)
-    _lazy(sub, "bench", "bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
-    _lazy(sub, "crane", "crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
-    _lazy(sub, "hil", "hil", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
+    _lazy(sub, "bench", "studies.bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
+    _lazy(sub, "crane", "studies.crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
+    _lazy(sub, "hil", "hil.run", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
     args = ap.parse_args(argv)
     from .core.scene import SceneError
     from .core.solver import SolverError
