@@ -537,3 +537,49 @@ def test_controller_as_sync_producer_and_sync_loss():
     assert np.all(res.column("hil.brake_command")[31:] == 0.0)
     assert seen["emcy"] is not None and int.from_bytes(seen["emcy"][:2], "little") == P.ERR_SYNC
     assert time.perf_counter() - t0 < 10.0                               # 0.2 s timeout + 70 ms on its own clock
+
+
+# ------------------------------------------------------------------------------------------------
+# entry points
+# ------------------------------------------------------------------------------------------------
+def test_reeve_fmu_hil_command(plant_fmu, tmp_path, monkeypatch, capsys):
+    """`reeve-fmu hil` (plant FMU, built-in controller, virtual bus): 0.8 s lock-step, exit 0, the
+    summary and results written, the bench equal to the in-process reference of the same scheme."""
+    from reeve_fmu.cli import main
+    monkeypatch.setenv("REEVE_FMU_FMUS", str(Path(plant_fmu).parent))
+    out = tmp_path / "hil"
+    assert main(["hil", "--t-end", "0.8", "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["steps"] == 800 and s["mode"] == "lock-step" and s["plant"]["kind"] == "fmu"
+    assert s["watchdog_trips"] == 0 and s["frames_rejected"] == 0
+    assert s["reference"]["max_abs_diff_car_position"] == 0.0
+    assert "results.csv" in capsys.readouterr().out
+
+
+def test_hil_bench_entry_point_serves_a_controller(tmp_path, capsys):
+    """`python -m reeve_fmu.hil bench` (here on python-can's virtual interface, in-process plant,
+    lock-step) waits for the controller's NMT start, serves 500 SYNC cycles and writes results.csv."""
+    import threading
+    from reeve_fmu.hil.controller import BuiltinController, ControllerConfig
+    from reeve_fmu.hil.run import main as hil_main
+    from reeve_fmu.core.results import read_csv
+
+    ch = "hil_bench_" + uuid.uuid4().hex[:6]
+    out = tmp_path / "bench"
+    rc = {}
+    bench = threading.Thread(target=lambda: rc.setdefault("bench", hil_main(
+        ["bench", "--interface", "virtual", "--channel", ch, "--plant", "in-process", "--lockstep",
+         "--t-end", "0.5", "--start-timeout", "30", "--out", str(out)])))
+    bench.start()
+    time.sleep(0.5)                                  # the bench is listening before the controller boots it
+    cbus = make_bus("virtual", ch)
+    try:
+        st = BuiltinController(cbus, ControllerConfig(n_steps=500, drive_values=SHORT)).run()
+    finally:
+        cbus.shutdown()
+    bench.join(60)
+    assert not bench.is_alive() and rc["bench"] == 0
+    printed = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert printed["steps"] == 500 and printed["watchdog_trips"] == 0 and printed["frames_rejected"] == 0
+    assert len(read_csv(out / "results.csv")["time"]) == 501
+    assert st.as_dict()["operation_enabled_at"] is not None
