@@ -520,7 +520,6 @@ def test_controller_as_sync_producer_and_sync_loss():
     bridge.warm_up()
     th = threading.Thread(target=controller, daemon=True)
     th.start()
-    t0 = time.perf_counter()
     try:
         res = bridge.run(100)
     finally:
@@ -536,7 +535,6 @@ def test_controller_as_sync_producer_and_sync_loss():
     assert np.all(res.column("hil.state")[3:30] == P.S_OPERATION_ENABLED)
     assert np.all(res.column("hil.brake_command")[31:] == 0.0)
     assert seen["emcy"] is not None and int.from_bytes(seen["emcy"][:2], "little") == P.ERR_SYNC
-    assert time.perf_counter() - t0 < 10.0                               # 0.2 s timeout + 70 ms on its own clock
 
 
 # ------------------------------------------------------------------------------------------------
