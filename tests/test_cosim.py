@@ -103,6 +103,19 @@ def test_cosim_error_at_1ms_is_below_a_quarter_millimetre(demo):
     assert r["max_err_m"] <= 0.25e-3, r                           # measured 0.196 mm (README: 0.2 mm)
 
 
+def test_cosim_error_at_2_5_10_ms(fmus):
+    """The round trip through the FMUs at 2, 5 and 10 ms against the monolithic 0.1 ms reference
+    (docs/hard-cases.md, large communication steps): ~linear growth up to 5 ms, the speed loop
+    unstable at 10 ms; the drive FMU warns from 5 ms on."""
+    r = job("cosim_accuracy", fmus["plant"], fmus["drive"], [2e-3, 5e-3, 1e-2], R1_DRIVE)
+    assert r["t_end"] > 61.0
+    assert r["0.002"]["max_err_m"] < 0.5e-3                      # measured 0.403 mm
+    assert r["0.005"]["max_err_m"] < 1.5e-3                      # measured 1.13 mm
+    assert r["0.01"]["max_err_m"] > 20e-3                        # measured 77.6 mm: unstable coupling
+    assert r["0.002"]["warnings"] == []
+    assert all(any("communication step" in w for w in r[h]["warnings"]) for h in ("0.005", "0.01"))
+
+
 def test_demo_coupling_monitor_reports_a_stable_run(demo):
     """1 ms Gauss-Seidel (the demo): the monitor finds nothing; its figures are in summary.json."""
     c = json.loads((demo["out"] / "summary.json").read_text())["cosim"]
