@@ -1,5 +1,5 @@
 """Speed of the fmpy co-simulation of the full R1 2:1 round trip (plant + drive FMUs, 1 ms), and where
-the time goes. Target (issue 3): >= 50x faster than real time; plant doStep p99 <= 100 us.
+the time goes. Target: >= 50x faster than real time; plant doStep p99 <= 100 us.
 
     python benchmarks/cosim_trip.py [--fmus DIR] [--repeat 3] [--step 1e-3] [--json out.json]
     python benchmarks/cosim_trip.py --accuracy [--png docs/cosim_error.png] [--json out.json]

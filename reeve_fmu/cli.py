@@ -154,7 +154,7 @@ def main(argv=None) -> int:
     if args.command in FMU_HOST_COMMANDS and _is_cli_process():
         # everything is written: skip interpreter finalisation, where pythonfmu FMUs loaded in this
         # process occasionally corrupt the heap at exit ("corrupted double-linked list", measured
-        # 1 in 4 demo runs; fmi.md §5.2, PythonFMU #228) and would turn a good run into exit 134
+        # 1 in 4 demo runs; docs/cosim.md, 'pythonfmu and fmpy' item 4, PythonFMU #228) and would turn a good run into exit 134
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(rc)

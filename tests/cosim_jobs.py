@@ -1,5 +1,5 @@
 """Jobs for tests/test_plant_fmu.py and tests/test_cosim.py, each run in a fresh interpreter by
-reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, fmi.md §5.2).
+reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, docs/cosim.md, 'pythonfmu and fmpy' item 4).
 
 FMU jobs load the runner *by file path* and do not import reeve_fmu from the checkout: the FMUs then
 run the package they carry (bootstrapped into ~/.cache/reeve_fmu/<source hash>/, where numba's cache

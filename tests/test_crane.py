@@ -1,12 +1,12 @@
-"""Crane hoist statics with axial-torsion coupling (method.md §1.5, §3.2, §5.3, §7 item 11).
+"""Crane hoist statics with axial-torsion coupling (docs/theory.md §1.5, §3.2, §5.3, §7 item 11).
 
 Oracles:
 - the coupling laws are the derivatives of their energy density (S = dw/deps, M = dw/dkappa) and the
   torsion span's generalized forces are the gradient of its potential (finite differences);
 - with the tangent points frozen in their body frames the crane residual is grad Pi (energy laws);
 - two falls, torque-factor law M = k S d, no torsional stiffness: sin psi = 4 k d h / (a b) and the
-  critical height a b / (4 k d) (closed form, method §5.3);
-- 8 falls (domain.md §4.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
+  critical height a b / (4 k d) (closed form, docs/theory.md §5.3);
+- 8 falls (docs/reference-sets.md §5.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
   (H_crit about 1200 m with S = 0.8 m), 6-strand rope k = 0.08 cabling at about 90 m.
 """
 from __future__ import annotations
@@ -174,7 +174,7 @@ def test_two_falls_against_the_closed_form():
 
 
 def test_eight_falls_large_crane():
-    """domain.md §4.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
+    """docs/reference-sets.md §5.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
     m = load_crane(EIGHT)
     assert m.S_eff == pytest.approx(0.80, abs=0.01)
     res = sweep(m)

@@ -1,4 +1,4 @@
-"""Cubic ALE-ANCF elements assembled in the engine (issue 4): planar 2:1 elevator without bending
+"""Cubic ALE-ANCF elements assembled in the engine: planar 2:1 elevator without bending
 stiffness against the 1D model, and energy conservation of a swinging cubic-element rope."""
 from dataclasses import replace
 from pathlib import Path

@@ -2,7 +2,7 @@
 
 The toy FMU (tests/fmu_toy/reeve_toy_slave.py) is built once per module from a *snapshot* of the
 package (other engineers edit reeve_fmu/ concurrently; a snapshot keeps the source hash stable for
-the stale/hash tests). Every FMU-loading check runs in its own fresh interpreter (fmi.md §5.2); the
+the stale/hash tests). Every FMU-loading check runs in its own fresh interpreter (docs/cosim.md, 'pythonfmu and fmpy' item 4); the
 job functions live in tests/fmu_toy/toy_jobs.py.
 """
 from __future__ import annotations
@@ -319,7 +319,7 @@ def test_run_in_subprocess_results_errors_and_exit_aborts(tmp_path):
     assert len(runner.last_run_info["attempts"]) == 1
     # interpreter finalisation is skipped once the result is written (os._exit), so an abort that
     # would happen at exit (here: an atexit handler; in real life pythonfmu's heap corruption,
-    # fmi.md §5.2) cannot fail the job: no retry is needed
+    # docs/cosim.md, 'pythonfmu and fmpy' item 4) cannot fail the job: no retry is needed
     code = ("import atexit, os\n"
             "atexit.register(os.abort)\n"
             "result = 'fine'\n")

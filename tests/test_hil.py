@@ -1,4 +1,4 @@
-"""Motor controller in the loop over CAN (issue 7, docs/hil.md).
+"""Motor controller in the loop over CAN (docs/hil.md).
 
 * protocol: the DBC (cantools) and the EDS (canopen) describe the same frames; the fast frame codec
   equals cantools bit for bit; the CiA 402 state machine;

@@ -1,4 +1,4 @@
-"""Property-based bad-scene tests (issue 6 item 8): delete, retype or negate any key of the shipped
+"""Property-based bad-scene tests (docs/hard-cases.md, "Bad scene files"): delete, retype or negate any key of the shipped
 scenes. Every mutation must either still build or fail with a SceneError that names the file and the
 mutated key - never an unhandled exception from inside the code."""
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""W2 wraps (method.md §4.4): short cubic ALE-ANCF elements on the sheave wraps, against exact results.
+"""W2 wraps (docs/theory.md §4.4): short cubic ALE-ANCF elements on the sheave wraps, against exact results.
 
 The scenes are planar Atwood-type machines written below (statics "none": released at rest from the
 geometry with the rope unstretched, or "rope-length" for the statics test). Reference values are closed
@@ -99,7 +99,7 @@ def test_w2_rope_mass_conserved_with_moving_s():
 
 
 def cosh_law(t, mA, mB, rhoA, L_tot, J, R):
-    """Rigid frictionless Atwood with rope mass (method.md §7 item 6) and sheave inertia J."""
+    """Rigid frictionless Atwood with rope mass (docs/theory.md §7 item 6) and sheave inertia J."""
     M = mA + mB + rhoA * L_tot + J / R ** 2
     a0 = (mA - mB) * G / M
     k = math.sqrt(2 * rhoA * G / M)

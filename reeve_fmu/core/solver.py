@@ -1,4 +1,4 @@
-"""Integrators for M(q) qdd = Q(q, qdot, t, u) and the static equilibrium (method.md §4.7).
+"""Integrators for M(q) qdd = Q(q, qdot, t, u) and the static equilibrium (docs/theory.md §4.7).
 
 After the linear constraints are eliminated (p = B q + c, model.py) the equations are an ODE of index
 0 in q: no multipliers, no drift. Prescribed coordinates (a speed-driven sheave) are rheonomic: they

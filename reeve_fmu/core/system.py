@@ -3,7 +3,7 @@
 Element matrices live in p-space (node positions and material coordinates); p = B q + c with B
 sparse (CSR), so M = B^T M_p B and Q = B^T Q_p are accumulated element by element through the few
 non-zeros of each B row. q-level terms: body/sheave/wrap inertia (M0), body and wrap gravity (F0),
-hitch springs and guide damping, rope stored on drums (variable mass, method §2.5), motor torque.
+hitch springs and guide damping, rope stored on drums (variable mass, docs/theory.md §2.5), motor torque.
 """
 from __future__ import annotations
 
@@ -229,7 +229,7 @@ def assemble_ws(K, W, c, q, v, t, u):
     for k in range(K.buf_dof.shape[0]):
         Q[K.buf_dof[k]] += K.buf_sign[k] * buffer_force(K, q, v, k)
     for k in range(K.drum_dof.shape[0]):
-        # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (method §2.5, variable mass)
+        # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (docs/theory.md §2.5, variable mass)
         # drums start the route: the stored rope is s in [0, sigma]
         j = K.drum_dof[k]
         M[j, j] += K.drum_rhoA[k] * q[j]

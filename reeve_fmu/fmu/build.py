@@ -90,7 +90,7 @@ def _check_entry_name(entry: Path) -> str:
         raise FmuBuildError(
             f"entry module name {stem!r} is too generic: pythonfmu imports it by name, and a second "
             f"FMU with the same module name in one process silently runs the first one's code "
-            f"(fmi.md §5.2). Use a unique name such as 'reeve_<model>_slave'.")
+            f"(docs/cosim.md, 'pythonfmu and fmpy' item 4). Use a unique name such as 'reeve_<model>_slave'.")
     import importlib.util
 
     try:

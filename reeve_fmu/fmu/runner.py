@@ -1,6 +1,6 @@
 """Helpers for tests and masters: FMU jobs in fresh subprocesses, and a thin fmpy FMU2Slave wrapper.
 
-Why subprocesses (fmi.md §5.2): pythonfmu FMUs share the host interpreter, so an FMU's entry module,
+Why subprocesses (docs/cosim.md, 'pythonfmu and fmpy' item 4): pythonfmu FMUs share the host interpreter, so an FMU's entry module,
 its embedded packages and pythonfmu itself land in the host's `sys.modules`; two FMUs with the same
 module names silently run each other's code, and rarely the process aborts at exit with heap
 corruption. So every FMU-loading job runs in its own interpreter and is judged by its result file
@@ -90,7 +90,7 @@ except BaseException:
     os._exit(1)
 sys.stdout.flush(); sys.stderr.flush()
 # The result is on disk: skip interpreter finalisation, where pythonfmu FMUs occasionally corrupt
-# the heap at exit (fmi.md §5.2, PythonFMU #228; seen here as "corrupted double-linked list").
+# the heap at exit (docs/cosim.md, 'pythonfmu and fmpy' item 4, PythonFMU #228; seen here as "corrupted double-linked list").
 os._exit(0)
 """
 

@@ -1,7 +1,7 @@
 """`ReeveSlave`: the pythonfmu base class every reeve_fmu FMU entry subclasses.
 
 It adds to `pythonfmu.Fmi2Slave` (0.7.0) what the FMI standard, `fmpy validate` and robust masters need
-and pythonfmu does not do (see /work/shared/reference/fmi.md §1.4-1.6, domain.md §6):
+and pythonfmu does not do (docs/cosim.md, 'pythonfmu and fmpy', items 1-3):
 
 * declarative variables: `add_real/add_integer/add_boolean/add_string` with causality, variability,
   initial, unit (SI, with `UnitDefinitions` + `BaseUnit` exponents and display units such as rpm/mm),

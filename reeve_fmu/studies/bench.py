@@ -1,4 +1,4 @@
-"""Benchmarks: real-time factor of the elevator trips (issue 2) and the work-precision study (issue 5):
+"""Benchmarks: real-time factor of the elevator trips and the work-precision study:
 ALE against the Lagrangian finite-element baseline (lagrangian.py) on the same scenes and outputs.
 
 Speed is measured here, never asserted in tests. Wall times are of the time integration from the
@@ -69,7 +69,7 @@ def hanging_release_exact(scene, t, n_modes=4000):
     unstretched state, no damping: u(s, t) = u_s(s) + sum_n a_n sin(beta_n s/L) cos(omega_n t), with
     u_s the static displacement (downward, s from the top), beta_n tan beta_n = rhoA L/m,
     omega_n = beta_n c/L and a_n = -<u_s, phi_n>/<phi_n, phi_n> in the mass inner product
-    <f, g> = int rhoA f g ds + m f(L) g(L) (method.md §7 items 1-2). Returns (z_mass(t), N_top(t))."""
+    <f, g> = int rhoA f g ds + m f(L) g(L) (docs/theory.md §7 items 1-2). Returns (z_mass(t), N_top(t))."""
     from scipy.optimize import brentq
     rope, body = scene.ropes[0], scene.bodies[0]
     EA, rhoA, L, m = rope.EA * rope.count, rope.rhoA * rope.count, rope.length, body.mass
