@@ -210,12 +210,12 @@ def test_bad_crane_section_names_file_and_key(tmp_path):
     ]
     for src, old, new, msg in cases:
         p = tmp_path / "bad.toml"
-        head, tail = src.read_text().rsplit("\n[crane]", 1)
+        head, tail = src.read_text(encoding="utf-8").rsplit("\n[crane]", 1)
         if old.startswith("model"):
             head = head.replace(old, new, 1)
         else:
             tail = tail.replace(old, new, 1)
-        p.write_text(head + "\n[crane]" + tail)
+        p.write_text(head + "\n[crane]" + tail, encoding="utf-8")
         with pytest.raises(SceneError) as exc:
             load_crane(p)
         assert str(exc.value).startswith(f"{p}: ") and msg in str(exc.value), str(exc.value)
@@ -225,12 +225,12 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
     from reeve_fmu.cli import main
     out = tmp_path / "two"
     assert main(["crane", str(TWO), "--out", str(out), "--heights", "40"]) == 0
-    header = (out / "rotation.csv").read_text().splitlines()[0].split(",")
+    header = (out / "rotation.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
     assert header[:2] == ["height", "block.yaw"]
     assert {"fall1.tension", "fall2.tension", "rope.torque"} <= set(header)
     data = np.genfromtxt(out / "rotation.csv", delimiter=",", skip_header=1)
     assert data.shape == (40, len(header))
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["critical_height"] == pytest.approx(35.5, rel=0.01)
     assert (out / "rotation.png").stat().st_size > 10_000
     assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
@@ -296,7 +296,7 @@ def test_three_falls_dead_end_on_the_block_and_crossed_sheave_axes(tmp_path):
     tangents between sheaves with perpendicular axes). Tension W/3 per fall (frictionless),
     the block turns the way of the rope torque, steadily with the height."""
     p = tmp_path / "three.toml"
-    p.write_text(THREE)
+    p.write_text(THREE, encoding="utf-8")
     m = load_crane(p)
     assert [m.span_names[k] for k in m.falls] == ["fall1", "fall2", "fall3"]
     res = sweep(m)

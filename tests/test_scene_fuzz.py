@@ -66,7 +66,7 @@ def mutate(doc, path, how):
     return doc
 
 
-DOCS = {p.name: tomllib.loads(p.read_text()) for p in SCENES}
+DOCS = {p.name: tomllib.loads(p.read_text(encoding="utf-8")) for p in SCENES}
 PATHS = {name: leaves(doc) for name, doc in DOCS.items()}
 
 

@@ -31,9 +31,9 @@ Kernel = namedtuple("Kernel", [
     "el_type", "el_EI",
 ])
 
-# Work arrays of one assembly: the q-space M and Q and every element's coordinates, velocities,
-# mass matrix and force vector. Bundled for the same reason as the kernel (one refcount per call).
-Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs"])
+# Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
+# mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as the kernel (one refcount per call).
+Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs", "Md"])
 
 if JIT:
     from numba import njit
@@ -123,6 +123,7 @@ if JIT:
         ("VE", types.float64[:, ::1]),
         ("MEs", types.float64[:, :, ::1]),
         ("QEs", types.float64[:, ::1]),
+        ("Md", types.float64[::1]),
     ])
 
     @structref.register
@@ -160,7 +161,7 @@ if JIT:
         return s
 
     @njit(cache=True)
-    def new_work(M, Q, QE, VE, MEs, QEs):
+    def new_work(M, Q, QE, VE, MEs, QEs, Md):
         w = structref.new(WORK_TYPE)
         w.M = M
         w.Q = Q
@@ -168,12 +169,13 @@ if JIT:
         w.VE = VE
         w.MEs = MEs
         w.QEs = QEs
+        w.Md = Md
         return w
 else:
     StateArrays = namedtuple("StateArrays", ["c", "q_ref", "q", "v", "a", "qdd", "u", "jac", "piv", "info"])
 
-    def new_work(M, Q, QE, VE, MEs, QEs):
-        return Work(M, Q, QE, VE, MEs, QEs)
+    def new_work(M, Q, QE, VE, MEs, QEs, Md):
+        return Work(M, Q, QE, VE, MEs, QEs, Md)
 
     def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
         return StateArrays(c, q_ref, q, v, a, qdd, u, jac, piv, info)

@@ -434,13 +434,13 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
 
 
 def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
-    from .build import build_fmu, fmu_is_stale
+    from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
     if not force and not fmu_is_stale(path, entry):
         return path, False
-    return build_fmu(entry, dest), True
+    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA)), True   # the drive reads no TOML
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,

@@ -922,7 +922,7 @@ def load_crane(path, overrides: dict | None = None) -> CraneModel:
             import tomllib
         except ModuleNotFoundError:  # Python 3.10
             import tomli as tomllib
-        data = tomllib.loads(Path(path).read_text())
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
         data.setdefault("crane", {}).update(overrides)
         return build_crane(parse_scene(data, str(path)))
     return build_crane(load_scene(path))
@@ -986,7 +986,7 @@ def plot_rotation(path, res: SweepResult):
 def write_rotation_csv(path, cols: dict):
     names = list(cols)
     data = np.column_stack([np.asarray(cols[n], float) for n in names])
-    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g", encoding="utf-8")
     return Path(path)
 
 
@@ -1004,7 +1004,7 @@ def cli_crane(args) -> int:
     write_rotation_csv(out / "rotation.csv", res.columns)
     plot_rotation(out / "rotation.png", res)
     summ = summary(res)
-    (out / "summary.json").write_text(json.dumps(summ, indent=2) + "\n")
+    (out / "summary.json").write_text(json.dumps(summ, indent=2) + "\n", encoding="utf-8")
     ch = res.critical_height
     yaw = res.columns["block.yaw"]
     last = np.flatnonzero(np.isfinite(yaw))
