@@ -242,7 +242,7 @@ def main(argv=None):
     if args.accuracy:
         res = accuracy(plant_fmu, drive_fmu, dv, args.png)
         if args.json:
-            Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
+            Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
         return res
     res = {"step_s": args.step}
     for label, record in (("demo (all 25 plant outputs recorded)", None),
@@ -273,7 +273,7 @@ def main(argv=None):
         for name, p in parts.items():
             print(f"    {name:24s} mean {p['mean_us']:7.2f}  p50 {p['p50_us']:7.2f}  p99 {p['p99_us']:7.2f} us")
     if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
+        Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     return res
 
 

@@ -40,7 +40,7 @@ class TrivialFloorSlave(Fmi2Slave):
 
 def build(tmp: str) -> str:
     src = os.path.join(tmp, "trivial_floor_slave.py")
-    with open(src, "w") as fh:
+    with open(src, "w", encoding="utf-8") as fh:
         fh.write(SLAVE)
     subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", src, "-d", tmp], check=True,
                    capture_output=True)

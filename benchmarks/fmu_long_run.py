@@ -20,7 +20,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def rss_mb():
-    with open("/proc/self/statm") as fh:
+    with open("/proc/self/statm", encoding="utf-8") as fh:
         return int(fh.read().split()[1]) * resource.getpagesize() / 2 ** 20
 
 
@@ -77,7 +77,7 @@ def main():
            "car_position_end_m": z[0]}
     print(json.dumps(res, indent=2))
     if args.out:
-        Path(args.out).write_text(json.dumps(res, indent=2))
+        Path(args.out).write_text(json.dumps(res, indent=2), encoding="utf-8")
     import os
     os._exit(0)   # skip interpreter finalisation (pythonfmu exit-time heap corruption, docs/cosim.md, 'pythonfmu and fmpy' item 4)
 

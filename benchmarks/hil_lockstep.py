@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     out["loadavg_end"] = os.getloadavg()
     p = Path(a.out)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(out, indent=1, default=str) + "\n")
+    p.write_text(json.dumps(out, indent=1, default=str) + "\n", encoding="utf-8")
     print(f"-> {p}  (target: lock-step >= 2000 steps/s)")
     return 0
 

@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     info = res.pop("info")
     res.pop("step_numbers")
     cols = ["time"] + [k for k in res if k != "time"]
-    with open(args.out, "w", newline="") as fh:
+    with open(args.out, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for row in zip(*(res[c] for c in cols)):

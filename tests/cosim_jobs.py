@@ -177,9 +177,11 @@ def plant_errors(fmu):
         t1 = h.time
         # drive the car into the machine: 1 MN m for 0.3 s in ONE communication step
         mark = len(h.messages)
+        res["before_crash"] = h.get_many(PLANT_OUTS)
         h.set("motor.torque", 1.0e6)
         res["crash_step"] = h.do_step(t1, 0.3)
         res["crash_msgs"] = _msgs(h)[mark:]
+        res["after_crash"] = h.get_many(PLANT_OUTS)     # the last good outputs stay readable
         mark = len(h.messages)
         h.set("motor.torque", 500.0)
         res["dirty_step"] = h.do_step(t1, DT)
@@ -416,7 +418,7 @@ def reference_error(results_csv, summary_json, ref_step=1e-4):
 
     from reeve_fmu.fmu.cosim import monolithic
 
-    with open(summary_json) as fh:
+    with open(summary_json, encoding="utf-8") as fh:
         sc = json.load(fh)["scenario"]
     d = np.genfromtxt(results_csv, delimiter=",", names=True, deletechars="")
     drive_values = {"pretorque[1]": sc["pretorque_Nm"][0], "pretorque[2]": sc["pretorque_Nm"][1],
@@ -470,7 +472,7 @@ def ensure_test_fmus(base, timeout=600.0):
         ssp = base / "cosim" / "ReevingSystem"
         ssp.mkdir(parents=True, exist_ok=True)
         shutil.copy2(os.path.join(REPO, "cosim", "ReevingSystem", "SystemStructure.ssd"), ssp)
-        marker.write_text(p.stdout)
+        marker.write_text(p.stdout, encoding="utf-8")
     return {"base": str(base), "plant": str(base / "fmus" / "ReevingPlant.fmu"),
             "drive": str(base / "fmus" / "ElectricDrive.fmu"), "ssp": str(base / "cosim" / "ReevingSystem"),
-            "build_log": marker.read_text()}
+            "build_log": marker.read_text(encoding="utf-8")}

@@ -271,12 +271,12 @@ route = [ { anchor = "A", at = [0, 0, 0] }, { sheave = "pulley", wrap = "cw" },
 
 
 def test_w2_scene_errors():
-    base = (ROOT / "scenes" / "hanging_rope.toml").read_text()
+    base = (ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8")
     txt = base.replace('length = 50.0', 'length = 50.0\nwrap_model = "W2"')
     with pytest.raises(SceneError, match=r"\[ropes\[0\]\.wrap_model\] 'W2'.*element = 'cubic'"):
         loads_scene(txt, "h.toml")
     sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml")
-    d = (ROOT / "scenes" / "elevator_2to1.toml").read_text()
+    d = (ROOT / "scenes" / "elevator_2to1.toml").read_text(encoding="utf-8")
     d2 = d.replace('damping = 2e-3                 # s, Kelvin-Voigt', 'damping = 2e-3\nwrap_elements = 3')
     with pytest.raises(SceneError, match=r"\[ropes\[0\]\.wrap_elements\] only used with wrap_model = 'W2'"):
         loads_scene(d2, "e.toml")

@@ -214,9 +214,11 @@ def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = Non
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..core.model import build_model
     from ..core.plant import plant_scene
+    from ..core.plausibility import check_or_raise
     from ..core.scene import load_scene
 
     scene = load_scene(scene_path)
+    check_or_raise(scene)    # a physically impossible scene fails the build, not the FMU's initialization
     if payload is None:
         payload = scene_payload(scene)
     model = build_model(plant_scene(empty_car_scene(scene, payload)))
@@ -434,13 +436,13 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
 
 
 def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
-    from .build import build_fmu, fmu_is_stale
+    from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
     if not force and not fmu_is_stale(path, entry):
         return path, False
-    return build_fmu(entry, dest), True
+    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA)), True   # the drive reads no TOML
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,

@@ -75,7 +75,7 @@ def _multicast_dev() -> str | None:
     if ip is None:
         return None
     try:
-        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, timeout=10).stdout
+        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, encoding="utf-8", errors="replace", timeout=10).stdout
     except (OSError, subprocess.SubprocessError):
         return None
     parts = out.split()
@@ -93,7 +93,7 @@ def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
     if setup_route and ip is not None and hasattr(os, "geteuid") and os.geteuid() == 0 \
             and _multicast_dev() != "lo":
         subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
-        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True,
+        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True, encoding="utf-8", errors="replace",
                            timeout=10)
         note = " (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)" if r.returncode == 0 \
             else f" (ip route add 239.0.0.0/8 dev lo failed: {r.stderr.strip()})"
@@ -271,7 +271,7 @@ class _ProcessController:
         env = dict(os.environ)
         root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self._log = open(self.log_path, "w")
+        self._log = open(self.log_path, "w", encoding="utf-8")
         self.proc = subprocess.Popen(args, env=env, stdout=self._log, stderr=subprocess.STDOUT,
                                      start_new_session=True)
 
@@ -292,7 +292,7 @@ class _ProcessController:
             rc = self.proc.wait(timeout=10)
         self._log.close()
         try:
-            st = json.loads(self.stats_path.read_text())
+            st = json.loads(self.stats_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             st = {"stopped": f"controller process wrote no statistics (exit code {rc}); see {self.log_path.name}"}
         st["exit_code"] = rc
@@ -520,7 +520,8 @@ def _write_results(out: Path, cfg: HilConfig, summary: dict, time_, cols: dict, 
         if cfg.realtime and len(st.sync_jitter):
             tcols["sync_late_us"] = st.sync_jitter * 1e6
         write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
+                                       encoding="utf-8")
 
 
 def _json_default(o):
@@ -594,7 +595,7 @@ def _controller_main(argv) -> int:
         bus.shutdown()
     d = st.as_dict()
     if a.stats:
-        Path(a.stats).write_text(json.dumps(d))
+        Path(a.stats).write_text(json.dumps(d), encoding="utf-8")
     print(json.dumps(d))
     return 0
 

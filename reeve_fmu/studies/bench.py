@@ -339,8 +339,8 @@ def cli_bench(args) -> int:
     for h in heads:
         print("headline:", json.dumps(h))
     figs = plot(records, out)
-    (out / "bench.json").write_text(json.dumps(records, indent=1))
-    (out / "headline.json").write_text(json.dumps(heads, indent=1))
+    (out / "bench.json").write_text(json.dumps(records, indent=1), encoding="utf-8")
+    (out / "headline.json").write_text(json.dumps(heads, indent=1), encoding="utf-8")
     print(f"-> {out / 'bench.json'}, headline.json, {', '.join(figs)} (cpu: {os.cpu_count()} cores; "
           f"single-threaded runs; {time.perf_counter() - t_start:.0f} s)")
     return 0

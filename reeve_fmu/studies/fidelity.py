@@ -380,7 +380,7 @@ class Report:
         from pathlib import Path
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.as_dict(), indent=1, default=float) + "\n")
+        path.write_text(json.dumps(self.as_dict(), indent=1, default=float) + "\n", encoding="utf-8")
         return path
 
     def text(self) -> str:
