@@ -29,7 +29,7 @@ def test_load_is_explicit_and_checked():
     with pytest.raises(ValueError, match="load = -1"):
         check_load(spec, -1.0)
     # a copy of the scene under the demo's name but without [elevator] is not guessed from its name
-    text = R1.read_text().split("[elevator]")[0] + "[solver]" + R1.read_text().split("[solver]", 1)[1]
+    text = R1.read_text(encoding="utf-8").split("[elevator]")[0] + "[solver]" + R1.read_text(encoding="utf-8").split("[solver]", 1)[1]
     with pytest.raises(SceneError, match=r"no \[elevator\] table"):
         elevator_spec(loads_scene(text, "copy.toml"))
 
@@ -109,7 +109,7 @@ def test_csv_denormals_and_thinning(tmp_path):
     from reeve_fmu.studies.report import thin_index
 
     write_csv(tmp_path / "r.csv", [0.0, 1.0], {"x": [9.9e-324, 1.5e-300]})
-    assert tmp_path.joinpath("r.csv").read_text().splitlines()[1:] == ["0,0", "1,1.5e-300"]
+    assert tmp_path.joinpath("r.csv").read_text(encoding="utf-8").splitlines()[1:] == ["0,0", "1,1.5e-300"]
     assert thin_index(np.arange(11) * 1e-3, 4e-3).tolist() == [0, 4, 8, 10]
 
 
@@ -128,7 +128,7 @@ def test_levelling_with_shaft_information_system(tmp_path):
     stops = [(tr["t_stop_s"], tr["landing_m"]) for tr in r.summary["trips"]]
     pngs = report.plot_trip(tmp_path, r.time, r.columns, limits=traction_limits(load_scene(R1)), title="t",
                             stops=stops)
-    md = report.write_report(tmp_path, "t", {"scene": "elevator_2to1"}, [], r.summary["verdicts"], pngs).read_text()
+    md = report.write_report(tmp_path, "t", {"scene": "elevator_2to1"}, [], r.summary["verdicts"], pngs).read_text(encoding="utf-8")
     assert pngs == ["results.png", "traction.png", "motor.png", "levelling.png"]
     assert md.count("| **PASS** |") + md.count("| **WARN** |") + md.count("| **FAIL** |") == len(r.summary["verdicts"])
 
@@ -141,7 +141,7 @@ def test_sweep_on_a_local_cluster_records_failed_runs(tmp_path):
 
     study = tmp_path / "s.toml"
     study.write_text(f'[study]\nscene = "{R1.as_posix()}"\nmode = "list"\nlandings = [0.0, 3.0]\n'
-                     'series = ["car.position"]\n[parameters]\n"rope.EA" = [2.9e6, -1.0]\nload_percent = [50, 50]\n')
+                     'series = ["car.position"]\n[parameters]\n"rope.EA" = [2.9e6, -1.0]\nload_percent = [50, 50]\n', encoding="utf-8")
     st = sweep.load_study(study)
     client = sweep.make_client(workers=2)
     try:
@@ -155,6 +155,6 @@ def test_sweep_on_a_local_cluster_records_failed_runs(tmp_path):
     assert pd.isna(df["error"][0]) and df["load_kg"][0] == 500.0 and len(df["series.car.position"][0]) > 10
     assert df["verdict"][1] == "ERROR" and "[ropes[0].EA] must be > 0, got -1" in df["error"][1]
     bad = tmp_path / "bad.toml"
-    bad.write_text(study.read_text().replace('"rope.EA"', '"rope.EAx"'))
+    bad.write_text(study.read_text(encoding="utf-8").replace('"rope.EA"', '"rope.EAx"'), encoding="utf-8")
     with pytest.raises(sweep.StudyError, match="unknown key 'EAx'"):
         sweep.load_study(bad)
