@@ -279,6 +279,12 @@ def main(argv=None) -> int:
 EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_EVENT = 1, 2, 3   # documented in README.md, "Exit codes"
 
 
+def _cosim_stopped(exc) -> bool:
+    """A co-simulation that ended at a failed step after writing its results (demo)."""
+    from .fmu.cosim import CosimError
+    return isinstance(exc, CosimError) and exc.time is not None
+
+
 def run_command(args, debug: bool = False) -> int:
     """Run a subcommand: every failure becomes one line on stderr and an exit code (README "Exit
     codes"); --debug (or REEVE_FMU_DEBUG=1) adds the traceback."""
@@ -294,7 +300,7 @@ def run_command(args, debug: bool = False) -> int:
             import traceback
             traceback.print_exc()
         text = str(exc).strip() or type(exc).__name__
-        if isinstance(exc, SolverError) and exc.time is not None:
+        if isinstance(exc, SolverError) and exc.time is not None or _cosim_stopped(exc):
             rc, what = EXIT_EVENT, f"run stopped by an event: {text}"
         elif isinstance(exc, (SceneError, SolverError, ValueError, OSError)) and not _numpy_internal(exc):
             rc, what = EXIT_BAD_INPUT, f"error: {text}"

@@ -11,6 +11,7 @@ motor.png, levelling.png, summary.json and report.md, and prints the summary tab
 """
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -86,6 +87,29 @@ def _plant_source(case, out: Path):
     return path, "Plant_" + cosim._slug(case.scene.name)
 
 
+def _write_stopped(out: Path, case, exc, output_dt) -> None:
+    """A co-simulation stopped by a failed step: results.csv up to the last good communication point,
+    results.png with the event marked, summary.json with the event (time, cause, FMU log)."""
+    from .core.results import plot_overview
+    from .studies import report
+
+    res = exc.result
+    t, c = res.time, dict(res.columns)
+    lines = [ln for ln in str(exc).splitlines() if ln.strip()]
+    cause = lines[0] if lines else type(exc).__name__
+    out.mkdir(parents=True, exist_ok=True)
+    report.write_tables(out, t, c, output_dt=output_dt)
+    plot_overview(out / "results.png", t, c, title=f"{case.describe()} (stopped at {exc.time:.3f} s)",
+                  event=(exc.time, cause))
+    report.write_summary(out, {"scenario": {"scene": case.scene.name, "car_load_kg": case.load,
+                                            "landings_m": list(case.sequence)},
+                               "event": {"time": exc.time, "cause": cause, "message": str(exc)},
+                               "samples": int(len(t)), "t_last": float(t[-1]) if len(t) else None,
+                               "verdict": "FAIL", "exit_code": 3})
+    print(f"reeve-fmu demo: the co-simulation stopped at t = {exc.time:.3f} s ({cause}); {len(t)} samples "
+          f"up to then -> {out}/results.csv, results.png, summary.json", file=sys.stderr)
+
+
 def cli_demo(args) -> int:
     from .fmu import cosim
     from .studies import report
@@ -126,6 +150,10 @@ def cli_demo(args) -> int:
     try:
         res = cosim.cosimulate(plant_fmu, drive_fmu, step=step, t_end=t_end, plant_values=case.plant_values,
                                drive_values=drive_values, progress=progress)
+    except cosim.CosimError as exc:
+        if exc.result is not None:     # keep what was computed up to the failed step, then exit 3
+            _write_stopped(out, case, exc, output_dt)
+        raise
     finally:
         if bar is not None:
             bar.close()

@@ -476,3 +476,21 @@ def ensure_test_fmus(base, timeout=600.0):
     return {"base": str(base), "plant": str(base / "fmus" / "ReevingPlant.fmu"),
             "drive": str(base / "fmus" / "ElectricDrive.fmu"), "ssp": str(base / "cosim" / "ReevingSystem"),
             "build_log": marker.read_text(encoding="utf-8")}
+
+
+def cosim_stopped_run(plant_fmu, drive_fmu, drive_values):
+    """A trip commanded beyond the top landing: the plant's step fails when a span vanishes; cosimulate
+    raises CosimError carrying the result up to the last good communication point."""
+    import numpy as np
+
+    _fmu_package(plant_fmu)
+    from reeve_fmu.fmu.cosim import CosimError, cosimulate
+
+    try:
+        cosimulate(plant_fmu, drive_fmu, step=DT, t_end=60.0, drive_values=drive_values)
+    except CosimError as exc:
+        r = exc.result
+        return {"time": exc.time, "message": str(exc).splitlines()[0], "rows": int(len(r.time)),
+                "t_last": float(r.time[-1]), "car_last": float(r.columns["car.position"][-1]),
+                "finite": bool(all(np.isfinite(v).all() for v in r.columns.values()))}
+    return {"time": None}

@@ -220,3 +220,15 @@ def test_libcosim_runs_the_ssp_and_matches_fmpy(fmus):
     err = max(abs(a - b) for a, b in zip(lc["drive.motor.torque"], const["motor.torque"][1:]))
     assert err <= 1e-2
     assert max(lc["plant.car.position"]) > 0.2 and max(lc["drive.brake.command"]) == 1.0
+
+
+def test_a_run_stopped_by_a_failed_step_keeps_its_results(fmus):
+    """Nothing lost: the drive sends the car past the top of the shaft; the plant's step fails (a span
+    vanishes), and cosimulate's CosimError carries every row up to the last good communication point."""
+    r = job("cosim_stopped_run", fmus["plant"], fmus["drive"],
+             {**R1_DRIVE, "landing[2]": 60.0, "trip.moves": 1}, timeout=900)
+    assert r["time"] is not None, "the run should have stopped"
+    assert 5.0 < r["time"] < 60.0                              # it moved a while before the event
+    assert r["rows"] == round(r["time"] / 1e-3) + 1            # every 1 ms point up to the failed step
+    assert abs(r["t_last"] - r["time"]) < 1e-9
+    assert r["car_last"] > 39.0 and r["finite"]               # past the top landing, no NaN rows

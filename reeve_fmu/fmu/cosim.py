@@ -539,7 +539,11 @@ class CosimResult:
 
 
 class CosimError(RuntimeError):
-    """A co-simulation step failed; the message carries the FMU log."""
+    """A co-simulation step failed; the message carries the FMU log. Raised by `cosimulate` after the
+    FMUs are closed, with `result` (the CosimResult up to the last good communication point) and `time`
+    (the failed step's start) set; both are None for a failure before the first step."""
+    result = None
+    time = None
 
 
 def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: float = 1.0) -> float:
@@ -862,7 +866,11 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
             except Exception:  # pragma: no cover - teardown must not hide the real error
                 pass
     total_wall = time.perf_counter() - t_wall0
-    return _cosim_result(x, run, mon, scheme, step, record_every, total_wall, warnings)
+    res = _cosim_result(x, run, mon, scheme, step, record_every, total_wall, warnings)
+    if run.failure is not None:
+        run.failure.result, run.failure.time = res, run.n * step
+        raise run.failure
+    return res
 
 
 def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_values, drive_values, echo_log):
@@ -919,6 +927,7 @@ class _LoopRun:
     loop_wall: float
     tns_p: Optional[np.ndarray]
     tns_d: Optional[np.ndarray]
+    failure: Optional["CosimError"] = None   # the error that ended the run early, if any
 
 
 def _master_loop(x: _Exchange, handles, mon, n, step, scheme, record_every, progress, progress_every, timing,
@@ -950,87 +959,91 @@ def _master_loop(x: _Exchange, handles, mon, n, step, scheme, record_every, prog
     t_loop0 = time.perf_counter()
     h = step
     stop = False
-    for k in range(n):
-        t = tk(k)
-        if ns_step_differences:
-            h = tk(k + 1) - t
-        if mon is not None:
-            w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
-        if gs:
-            s = setd(cd, DIvr, DIn, Pbuf)
-            if s > 1:
-                _check(s, "drive setReal", handles, t)
-            if timing:
-                a = perf()
-                s = stepd(cd, t, h, 1)
-                tns_d[k] = perf() - a
+    failure = None
+    try:
+        for k in range(n):
+            t = tk(k)
+            if ns_step_differences:
+                h = tk(k + 1) - t
+            if mon is not None:
+                w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
+            if gs:
+                s = setd(cd, DIvr, DIn, Pbuf)
+                if s > 1:
+                    _check(s, "drive setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepd(cd, t, h, 1)
+                    tns_d[k] = perf() - a
+                else:
+                    s = stepd(cd, t, h, 1)
+                if s > 1:
+                    _check(s, "drive doStep", handles, t)
+                s = getd(cd, Dvr, Dn, Dbuf)
+                if s > 1:
+                    _check(s, "drive getReal", handles, t)
+                s = setp(cp, PIvr, PIn, Dbuf)
+                if s > 1:
+                    _check(s, "plant setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepp(cp, t, h, 1)
+                    tns_p[k] = perf() - a
+                else:
+                    s = stepp(cp, t, h, 1)
+                if s > 1:
+                    _check(s, "plant doStep", handles, t)
+                s = getp(cp, Pvr, Pn, Pbuf)
+                if s > 1:
+                    _check(s, "plant getReal", handles, t)
             else:
-                s = stepd(cd, t, h, 1)
-            if s > 1:
-                _check(s, "drive doStep", handles, t)
-            s = getd(cd, Dvr, Dn, Dbuf)
-            if s > 1:
-                _check(s, "drive getReal", handles, t)
-            s = setp(cp, PIvr, PIn, Dbuf)
-            if s > 1:
-                _check(s, "plant setReal", handles, t)
-            if timing:
-                a = perf()
-                s = stepp(cp, t, h, 1)
-                tns_p[k] = perf() - a
-            else:
-                s = stepp(cp, t, h, 1)
-            if s > 1:
-                _check(s, "plant doStep", handles, t)
-            s = getp(cp, Pvr, Pn, Pbuf)
-            if s > 1:
-                _check(s, "plant getReal", handles, t)
-        else:
-            s = setd(cd, DIvr, DIn, Pbuf)
-            if s > 1:
-                _check(s, "drive setReal", handles, t)
-            s = setp(cp, PIvr, PIn, Dbuf)
-            if s > 1:
-                _check(s, "plant setReal", handles, t)
-            if timing:
-                a = perf()
-                s = stepd(cd, t, h, 1)
-                b = perf()
-                s2 = stepp(cp, t, h, 1)
-                tns_p[k] = perf() - b
-                tns_d[k] = b - a
-            else:
-                s = stepd(cd, t, h, 1)
-                s2 = stepp(cp, t, h, 1)
-            if s > 1:
-                _check(s, "drive doStep", handles, t)
-            if s2 > 1:
-                _check(s2, "plant doStep", handles, t)
-            s = getd(cd, Dvr, Dn, Dbuf)
-            if s > 1:
-                _check(s, "drive getReal", handles, t)
-            s = getp(cp, Pvr, Pn, Pbuf)
-            if s > 1:
-                _check(s, "plant getReal", handles, t)
-        if mon is not None:
-            ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
-            if ep is not None:
-                stop = _on_detection(mon, ep, scheme, on_instability)
-        if (k + 1) % record_every == 0 or stop:
-            Prec[j] = Pv
-            Drec[j] = Dv
-            j += 1
-        if (k + 1) % every == 0:
-            progress((k + 1) * step)
-        if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
-            t_first = time.perf_counter() - t_loop0
-        if stop:
-            n = k + 1
-            break
+                s = setd(cd, DIvr, DIn, Pbuf)
+                if s > 1:
+                    _check(s, "drive setReal", handles, t)
+                s = setp(cp, PIvr, PIn, Dbuf)
+                if s > 1:
+                    _check(s, "plant setReal", handles, t)
+                if timing:
+                    a = perf()
+                    s = stepd(cd, t, h, 1)
+                    b = perf()
+                    s2 = stepp(cp, t, h, 1)
+                    tns_p[k] = perf() - b
+                    tns_d[k] = b - a
+                else:
+                    s = stepd(cd, t, h, 1)
+                    s2 = stepp(cp, t, h, 1)
+                if s > 1:
+                    _check(s, "drive doStep", handles, t)
+                if s2 > 1:
+                    _check(s2, "plant doStep", handles, t)
+                s = getd(cd, Dvr, Dn, Dbuf)
+                if s > 1:
+                    _check(s, "drive getReal", handles, t)
+                s = getp(cp, Pvr, Pn, Pbuf)
+                if s > 1:
+                    _check(s, "plant getReal", handles, t)
+            if mon is not None:
+                ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
+                if ep is not None:
+                    stop = _on_detection(mon, ep, scheme, on_instability)
+            if (k + 1) % record_every == 0 or stop:
+                Prec[j] = Pv
+                Drec[j] = Dv
+                j += 1
+            if (k + 1) % every == 0:
+                progress((k + 1) * step)
+            if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
+                t_first = time.perf_counter() - t_loop0
+            if stop:
+                n = k + 1
+                break
+    except CosimError as exc:   # a failed step ends the run; what was recorded before it is kept
+        failure, n = exc, k
     loop_wall = time.perf_counter() - t_loop0
     if progress is not None:
         progress(n * step)
-    return _LoopRun(Prec, Drec, j, n, stop, t_first, loop_wall, tns_p, tns_d)
+    return _LoopRun(Prec, Drec, j, n, stop, t_first, loop_wall, tns_p, tns_d, failure)
 
 
 def _cosim_result(x: _Exchange, run: _LoopRun, mon, scheme, step, record_every, total_wall, warnings):
