@@ -23,8 +23,9 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
-                     set_prescribed, traction_deflection, workspace)
+from .system import (INFO_CREEP, UE_CREEP, assemble, assemble_ws, brake_deflection, creep_angle,
+                     creep_inputs, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
+                     traction_deflection, workspace)
 
 
 class SolverError(RuntimeError):
@@ -152,7 +153,10 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
-    set_prescribed(K, q_ref, t1, q, v, qdd)
+    if K.mot_crp >= 0:
+        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
         a[K.presc[k]] = qdd[K.presc[k]]
     for attempt in range(4):
@@ -247,7 +251,9 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     W = workspace(K)
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
-    ue = np.empty(7)
+    ncrp = K.crp_s.shape[0]
+    ue = np.empty(UE_CREEP + 3 * ncrp)
+    th1 = np.empty(ncrp)      # creep sheave angles at the step start (retry)
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
     t = t0
@@ -262,6 +268,8 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
         e1 = info[5]
         z1 = info[6]
         zt1 = info[8]
+        for k in range(ncrp):
+            th1[k] = info[INFO_CREEP + k]
         status = 1
         for level in range(4):
             nsub = 1 if level == 0 else 4 ** level
@@ -275,6 +283,8 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 info[5] = e1
                 info[6] = z1
                 info[8] = zt1
+                for k in range(ncrp):
+                    info[INFO_CREEP + k] = th1[k]
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 info[5] = target + (info[5] - target) * decay
@@ -285,6 +295,8 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     ue[5] = q[K.trac_s]
                     ue[6] = q[K.trac_th]
+                if ncrp > 0:
+                    creep_inputs(K, c, q, v, info, ue)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -301,6 +313,9 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     info[6] = brake_deflection(K, q, ue)
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
+                for k in range(ncrp):
+                    if K.crp_kind[k] == 0:
+                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k)
             if status != 1:
                 break   # converged (0) or a vanishing span (2): substeps do not help
         if status != 0:
@@ -311,6 +326,8 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
             info[5] = e1
             info[6] = z1
             info[8] = zt1
+            for k in range(ncrp):
+                info[INFO_CREEP + k] = th1[k]
             if status == 1:
                 for i in range(nq):
                     if not (q[i] == q[i]) or not (qdd[i] == qdd[i]):
@@ -407,7 +424,8 @@ class Simulator:
             M = np.empty((m.nq, m.nq))
             Q = np.empty(m.nq)
             assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
-            tau_hold = -Q[K.mot_dof] / K.mot_gain      # brake torque needed (Q = tau * gain)
+            kap = self._kernel_inputs_at(st)[UE_CREEP + 3 * K.mot_crp] if K.mot_crp >= 0 else 1.0
+            tau_hold = -Q[K.mot_dof] / (K.mot_gain * kap)   # brake torque needed (Q = tau * gain)
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
@@ -538,8 +556,12 @@ class Simulator:
         K = m.K
         M = np.empty((m.nq, m.nq))
         Q = np.empty(m.nq)
-        set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
-        assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
+        ue = self._kernel_inputs_at(st)
+        if K.mot_crp >= 0:
+            set_prescribed_creep(m.KJ, ue, st.t, st.t, st.q, st.v, st.qdd)   # keeps sigma
+        else:
+            set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
+        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
         f, p = K.free, K.presc
         rhs = Q[f] - M[np.ix_(f, p)] @ st.qdd[p]
         st.qdd[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)
@@ -630,13 +652,15 @@ class Simulator:
                     f"than solver.min_span = {self.model.scene.solver.min_span:g} m")
         return msg
 
-    def _rhs_factory(self, st: State):
+    def _rhs_factory(self, st: State, ue):
+        """The scipy methods hold the creep inputs ue (kappa, angles) of the call's start."""
         m = self.model
         K = m.K
         f, p = K.free, K.presc
         nq = m.nq
         M = np.empty((nq, nq))
         Q = np.empty(nq)
+        t0 = st.t
 
         def rhs(t, y):
             q = st.q.copy()
@@ -644,8 +668,11 @@ class Simulator:
             qdd = np.zeros(nq)
             q[f] = y[:len(f)]
             v[f] = y[len(f):]
-            set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
-            if assemble(m.KJ, st.c, q, v, t, self.kernel_inputs(st), M, Q) < 0:
+            if K.mot_crp >= 0:
+                set_prescribed_creep(m.KJ, ue, t0, t, q, v, qdd)
+            else:
+                set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
+            if assemble(m.KJ, st.c, q, v, t, ue, M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
             return np.concatenate([v[f], acc])
@@ -655,7 +682,8 @@ class Simulator:
         from scipy.integrate import solve_ivp
         m = self.model
         f = m.K.free
-        rhs = self._rhs_factory(st)
+        ue = self._kernel_inputs_at(st)
+        rhs = self._rhs_factory(st, ue)
         y0 = np.concatenate([st.q[f], st.v[f]])
         t_eval = None
         if out_dt is not None:
@@ -670,26 +698,38 @@ class Simulator:
         if t_eval is not None:
             Y = np.empty((len(t_eval), len(m.output_names)))
             for k, tk in enumerate(sol.t):
-                self._set_from_y(st, tk, sol.y[:, k])
-                Y[k] = self.outputs(st)
+                self._set_from_y(st, tk, sol.y[:, k], ue)
+                Y[k] = self.outputs(st, ue)
             res = Result(sol.t.copy(), Y, m.output_names)
-        self._set_from_y(st, t_end, sol.y[:, -1])
+        self._set_from_y(st, t_end, sol.y[:, -1], ue)
+        for k in range(m.K.crp_s.shape[0]):
+            if m.K.crp_kind[k] == 0:
+                st.info[INFO_CREEP + k] = creep_angle(m.KJ, st.q, ue, k)
         return res
 
-    def _set_from_y(self, st, t, y):
+    def _set_from_y(self, st, t, y, ue):
         m = self.model
         f = m.K.free
+        t0 = st.t
         st.t = float(t)
         st.q[f] = y[:len(f)]
         st.v[f] = y[len(f):]
+        if m.K.mot_crp >= 0:     # the prescribed sigma from the call's start at its kappa
+            set_prescribed_creep(m.KJ, ue, ue[-1], t, st.q, st.v, st.qdd)
         self._consistent_acceleration(st)
 
     # ------------------------------------------------------------------ queries
-    @staticmethod
-    def kernel_inputs(st: State) -> np.ndarray:
+    def kernel_inputs(self, st: State) -> np.ndarray:
         """[motor torque, brake engagement, brake deflection, motor coordinate at step start,
-        traction deflection, rope s and sheave angle of the slipping sheave at step start]."""
-        return np.array([st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0])
+        traction deflection, rope s and sheave angle of the slipping sheave at step start], then per
+        creep sheave (kappa, angle, sigma) at the state, then the state's time."""
+        K = self.model.K
+        ue = np.zeros(UE_CREEP + 3 * K.crp_s.shape[0] + 1)
+        ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0)
+        if K.crp_s.shape[0]:
+            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue)
+        ue[-1] = st.t
+        return ue
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:
         ue = self.kernel_inputs(st)
@@ -701,14 +741,19 @@ class Simulator:
             ue[6] = st.q[K.trac_th]
         return ue
 
-    def outputs(self, st: State) -> np.ndarray:
+    def outputs(self, st: State, ue_creep=None) -> np.ndarray:
+        """Outputs at st; ue_creep: creep inputs of an earlier state that st continues (scipy)."""
         y = np.empty(len(self.model.output_names))
-        outputs(self.model.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self._kernel_inputs_at(st), y)
+        ue = self._kernel_inputs_at(st)
+        if ue_creep is not None:
+            ue[UE_CREEP:] = ue_creep[UE_CREEP:]
+        outputs(self.model.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, ue, y)
         return y
 
     def energy(self, st: State):
-        """(kinetic, gravity, strain) energy [J]."""
-        return energy(self.model.KJ, st.c, st.q, st.v)
+        """(kinetic, gravity, strain) energy [J]; a creep sheave's rim moves at kappa times the
+        material rate."""
+        return energy_u(self.model.KJ, st.c, st.q, st.v, self._kernel_inputs_at(st))
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,
             progress=None) -> Result:

@@ -18,6 +18,8 @@ from .kernel import new_work
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
+INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
+UE_CREEP = 7      # kernel inputs: (kappa, angle, sigma) of creep sheave k at UE_CREEP + 3 k
 
 
 @njit(cache=True, inline="always")
@@ -48,13 +50,126 @@ def _elastoplastic(z, zmax):
     return sat if z > 0.0 else -sat
 
 
+# ------------------------------------------------------------------ rope creep on the rim
+# sheave_contact = "creep" (docs/numerics.md "Rope creep on the rim"): the rope arrives on the groove
+# at its strain eps_a and rides the rim in adhesion, so the rim speed is the *strained* rope speed:
+# R dtheta = -(1 + eps_a) dsigma. kappa = 1 + eps_a is taken at the step start (lagged: the Newton
+# matrix and the per-step cost stay as for the rigid rim); the angle is integrated with it. The strain
+# change to the leaving span happens by creep, whose dissipation enters as the force creep_force.
+
+@njit(cache=True, inline="always")
+def end_strain(K, x, end):
+    """Axial strain at an element end (0: start, 1: end) from the element coordinates x: linear
+    elements |r2 - r1| / (s2 - s1) - 1, cubic elements |d| - 1 at the node."""
+    nd = K.nd
+    acc = 0.0
+    if K.el_type == 1:
+        o = nd if end == 0 else 3 * nd + 1      # [r1, d1, s1, r2, d2, s2]
+        for k in range(nd):
+            acc += x[o + k] * x[o + k]
+        return math.sqrt(acc) - 1.0
+    for k in range(nd):
+        dk = x[nd + k] - x[k]
+        acc += dk * dk
+    return math.sqrt(acc) / (x[2 * nd + 1] - x[2 * nd]) - 1.0
+
+
+@njit(cache=True, inline="always")
+def _element_coords(K, c, q, ie, x):
+    for a in range(K.el_idx.shape[1]):
+        val = c[K.el_idx[ie, a]]
+        for w in range(K.el_map.shape[2]):
+            val += K.el_coef[ie, a, w] * q[K.el_map[ie, a, w]]
+        x[a] = val
+
+
+@njit(cache=True)
+def creep_inputs(K, c, q, v, info, ue):
+    """Kernel inputs of the creep sheaves at the step start: ue[UE_CREEP + 3k ...] = (kappa, angle,
+    sigma). The arriving side is the in-span while material runs along the route (sigma dot < 0),
+    the out-span when it runs back; a tanh blend over crp_vreg makes a reversal smooth. A drum's only
+    span arrives either way (its stored rope is taken at that span's strain)."""
+    x = np.empty(K.el_idx.shape[1])
+    for k in range(K.crp_s.shape[0]):
+        j = K.crp_s[k]
+        ei = K.crp_el_in[k]
+        eo = K.crp_el_out[k]
+        w = 0.5 * (1.0 - math.tanh(v[j] / K.crp_vreg))
+        if ei < 0:
+            w = 0.0
+        elif eo < 0:
+            w = 1.0
+        eps = 0.0
+        if w > 0.0:
+            _element_coords(K, c, q, ei, x)
+            eps += w * end_strain(K, x, 1)
+        if w < 1.0:
+            _element_coords(K, c, q, eo, x)
+            eps += (1.0 - w) * end_strain(K, x, 0)
+        ue[UE_CREEP + 3 * k] = 1.0 + eps
+        ue[UE_CREEP + 3 * k + 1] = info[INFO_CREEP + k]
+        ue[UE_CREEP + 3 * k + 2] = q[j]
+
+
+@njit(cache=True, inline="always")
+def creep_kappa(K, u, k):
+    """1 + arriving strain of creep sheave k (1 when k < 0 or the inputs carry no creep part)."""
+    i = UE_CREEP + 3 * k
+    if k < 0 or u.shape[0] <= i:
+        return 1.0
+    return u[i]
+
+
+@njit(cache=True, inline="always")
+def creep_angle(K, q, u, k):
+    """Sheave angle of creep sheave k: angle at step start - kappa (sigma - sigma_start) / R."""
+    i = UE_CREEP + 3 * k
+    return u[i + 1] - u[i] * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
+
+
+@njit(cache=True, inline="always")
+def creep_force(K, QE, v, k):
+    """Generalized force of the creep dissipation on sigma: -sign(sigma dot) EA (eps_in - eps_out)^2 / 2.
+    Its power -|sigma dot| EA d_eps^2 / 2 is the friction work in the creep arc, where the strain
+    changes from eps_a to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
+    ei = K.crp_el_in[k]
+    eo = K.crp_el_out[k]
+    if ei < 0 or eo < 0:
+        return 0.0
+    d = end_strain(K, QE[ei], 1) - end_strain(K, QE[eo], 0)
+    return -math.tanh(v[K.crp_s[k]] / K.crp_vreg) * 0.5 * K.el_EA[ei] * d * d
+
+
+@njit(cache=True)
+def creep_power(K, c, q, v):
+    """Creep dissipation [W] of all sheaves at (q, v) (>= 0)."""
+    x = np.empty((K.el_idx.shape[0], K.el_idx.shape[1]))
+    for k in range(K.crp_s.shape[0]):
+        if K.crp_el_in[k] >= 0:
+            _element_coords(K, c, q, K.crp_el_in[k], x[K.crp_el_in[k]])
+        if K.crp_el_out[k] >= 0:
+            _element_coords(K, c, q, K.crp_el_out[k], x[K.crp_el_out[k]])
+    P = 0.0
+    for k in range(K.crp_s.shape[0]):
+        P -= creep_force(K, x, v, k) * v[K.crp_s[k]]
+    return P
+
+
+@njit(cache=True, inline="always")
+def _trac_kappa(K, u):
+    for k in range(K.crp_s.shape[0]):
+        if K.crp_kind[k] == 1:
+            return creep_kappa(K, u, k)
+    return 1.0
+
+
 @njit(cache=True, inline="always")
 def brake_deflection(K, q, u):
     """Elasto-plastic brake: effective spring deflection z (rad of the motor angle) after turning from
     the step's start. Kernel inputs u = [motor torque, brake engagement e, brake z at step start,
     motor coordinate at step start, traction z at step start, rope s at the slipping sheave and its
     angle at step start]."""
-    z = u[2] + K.mot_gain * (q[K.mot_dof] - u[3])
+    z = u[2] + K.mot_gain * creep_kappa(K, u, K.mot_crp) * (q[K.mot_dof] - u[3])
     return _elastoplastic(z, K.brake_wreg)
 
 
@@ -90,7 +205,8 @@ def _static_end_tension(K, QE, QEs, ie, end):
 def traction_deflection(K, q, u):
     """Rope-groove friction deflection z [m]: relative displacement of the rope along the route
     against the rim since the step's start, elasto-plastic with band zmax = creep."""
-    z = u[4] - (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+    # the rope's displacement along the route at the strain it arrives with (creep sheave)
+    z = u[4] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
     return _elastoplastic(z, K.trac_zmax)
 
 
@@ -234,16 +350,24 @@ def assemble_ws(K, W, c, q, v, t, u):
         j = K.drum_dof[k]
         M[j, j] += K.drum_rhoA[k] * q[j]
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
+    gain = K.mot_gain * creep_kappa(K, u, K.mot_crp)     # d(motor angle) / d(motor coordinate)
     if K.mot_dof >= 0 and K.drive_kind >= 2:
-        Q[K.mot_dof] += drive_torque(K, t, u) * K.mot_gain
+        Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
-        Q[K.mot_dof] += brake_torque(K, q, v, u) * K.mot_gain
+        Q[K.mot_dof] += brake_torque(K, q, v, u) * gain
     if K.trac_s >= 0:
-        # friction f on the rope along the route: virtual work f * (-d sigma) on the rope and
+        # friction f on the rope along the route: virtual work f * (-kappa d sigma) on the rope and
         # -f * R d theta on the sheave
         f = traction_force(K, q, u, QE, QEs)
-        Q[K.trac_s] -= f
+        Q[K.trac_s] -= f * _trac_kappa(K, u)
         Q[K.trac_th] -= f * K.trac_R
+    for k in range(K.crp_s.shape[0]):
+        j = K.crp_s[k]
+        if K.crp_kind[k] == 0:
+            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
+            kap = creep_kappa(K, u, k)
+            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) / (K.crp_R[k] * K.crp_R[k])
+        Q[j] += creep_force(K, QE, v, k)
     return status
 
 
@@ -319,7 +443,8 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 r = -Q[j]
                 for m in range(K.nq):
                     r += M[j, m] * qdd[m]
-                y[k] = K.out_scale[k] * r   # generalized drive force / (d angle / d coordinate)
+                # generalized drive force / (d angle / d coordinate)
+                y[k] = K.out_scale[k] * r / creep_kappa(K, u, K.mot_crp)
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
@@ -335,17 +460,27 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 y[k] = -(q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
         elif kind == 10:
             y[k] = traction_force(K, q, u, QE, QEs)
+        elif kind == 11:
+            y[k] = creep_angle(K, q, u, K.out_i[k])
+        elif kind == 12:
+            i = K.out_i[k]
+            y[k] = -creep_kappa(K, u, i) * v[K.crp_s[i]] / K.crp_R[i]
 
 
 @njit(cache=True)
 def energy(K, c, q, v):
-    """(kinetic, gravity potential, strain energy) of the whole system."""
+    """(kinetic, gravity potential, strain energy) of the whole system (rigid-rim kinetic energy)."""
+    return energy_u(K, c, q, v, np.zeros(UE_CREEP))
+
+
+@njit(cache=True)
+def energy_u(K, c, q, v, u):
+    """energy() with the kernel inputs u (a creep sheave's rim kinetic energy uses its kappa)."""
     nq = K.nq
     nd = K.nd
     ne = K.el_idx.shape[1]
     M = np.empty((nq, nq))
     Q = np.empty(nq)
-    u = np.zeros(1)
     assemble(K, c, q, v, 0.0, u, M, Q)
     T = 0.0
     for i in range(nq):
@@ -390,5 +525,22 @@ def set_prescribed(K, q_ref, t, q, v, qdd):
         j = K.presc[k]
         gsc = K.presc_gain[k]
         q[j] = q_ref[j] + gsc * (x - x0)
+        v[j] = gsc * xd
+        qdd[j] = gsc * xdd
+
+
+@njit(cache=True, inline="always")
+def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
+    """set_prescribed for a speed-driven creep sheave over the step t0 -> t1 (q holds the step start):
+    the profile prescribes the rim, so sigma follows it at the arriving strain,
+    d sigma = gain dx / kappa."""
+    x, xd, xdd = profile_eval(K.profile, t1)
+    x0 = profile_eval(K.profile, t0)[0]
+    m = K.mot_crp
+    kap = creep_kappa(K, u, m)
+    for k in range(K.presc.shape[0]):
+        j = K.presc[k]
+        gsc = K.presc_gain[k] / kap
+        q[j] = u[UE_CREEP + 3 * m + 2] + gsc * (x - x0)
         v[j] = gsc * xd
         qdd[j] = gsc * xdd
