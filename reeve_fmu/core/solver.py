@@ -652,39 +652,52 @@ class Simulator:
                     f"than solver.min_span = {self.model.scene.solver.min_span:g} m")
         return msg
 
-    def _rhs_factory(self, st: State, ue):
-        """The scipy methods hold the creep inputs ue (kappa, angles) of the call's start."""
+    def _rhs_factory(self, st: State):
+        """ODE right-hand side for the scipy methods. With creep sheaves y also holds their angles and
+        (speed drive) the driven sheave's sigma: d theta/dt = -kappa sigma_dot / R and
+        d sigma/dt = gain x_dot / kappa, kappa evaluated at the current state (not lagged)."""
         m = self.model
         K = m.K
         f, p = K.free, K.presc
-        nq = m.nq
+        nq, nf, nc = m.nq, len(K.free), K.crp_s.shape[0]
         M = np.empty((nq, nq))
         Q = np.empty(nq)
-        t0 = st.t
+        base = self._kernel_inputs_at(st)
+        info = st.info.copy()
 
         def rhs(t, y):
             q = st.q.copy()
             v = st.v.copy()
             qdd = np.zeros(nq)
-            q[f] = y[:len(f)]
-            v[f] = y[len(f):]
+            q[f] = y[:nf]
+            v[f] = y[nf:2 * nf]
+            ue = base
+            if nc:
+                ue = base.copy()
+                info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
+                if K.mot_crp >= 0 and len(p):
+                    q[p[0]] = y[-1]
+                creep_inputs(m.KJ, st.c, q, v, info, ue)
             if K.mot_crp >= 0:
-                set_prescribed_creep(m.KJ, ue, t0, t, q, v, qdd)
+                set_prescribed_creep(m.KJ, ue, t, t, q, v, qdd)
             else:
                 set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
             if assemble(m.KJ, st.c, q, v, t, ue, M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
-            return np.concatenate([v[f], acc])
+            dth = [-ue[UE_CREEP + 3 * k] * v[K.crp_s[k]] / K.crp_R[k] for k in range(nc)]
+            dsig = [v[p[0]]] if (K.mot_crp >= 0 and len(p)) else []
+            return np.concatenate([v[f], acc, dth, dsig])
         return rhs
 
     def _advance_scipy(self, st: State, t_end: float, out_dt):
         from scipy.integrate import solve_ivp
         m = self.model
-        f = m.K.free
-        ue = self._kernel_inputs_at(st)
-        rhs = self._rhs_factory(st, ue)
-        y0 = np.concatenate([st.q[f], st.v[f]])
+        K = m.K
+        f, nc = K.free, K.crp_s.shape[0]
+        rhs = self._rhs_factory(st)
+        y0 = np.concatenate([st.q[f], st.v[f], st.info[INFO_CREEP:INFO_CREEP + nc],
+                             [st.q[K.presc[0]]] if (K.mot_crp >= 0 and len(K.presc)) else []])
         t_eval = None
         if out_dt is not None:
             n_out = int(round((t_end - st.t) / out_dt))
@@ -698,37 +711,34 @@ class Simulator:
         if t_eval is not None:
             Y = np.empty((len(t_eval), len(m.output_names)))
             for k, tk in enumerate(sol.t):
-                self._set_from_y(st, tk, sol.y[:, k], ue)
-                Y[k] = self.outputs(st, ue)
+                self._set_from_y(st, tk, sol.y[:, k])
+                Y[k] = self.outputs(st)
             res = Result(sol.t.copy(), Y, m.output_names)
-        self._set_from_y(st, t_end, sol.y[:, -1], ue)
-        for k in range(m.K.crp_s.shape[0]):
-            if m.K.crp_kind[k] == 0:
-                st.info[INFO_CREEP + k] = creep_angle(m.KJ, st.q, ue, k)
+        self._set_from_y(st, t_end, sol.y[:, -1])
         return res
 
-    def _set_from_y(self, st, t, y, ue):
+    def _set_from_y(self, st, t, y):
         m = self.model
-        f = m.K.free
-        t0 = st.t
+        K = m.K
+        f, nf, nc = K.free, len(K.free), K.crp_s.shape[0]
         st.t = float(t)
-        st.q[f] = y[:len(f)]
-        st.v[f] = y[len(f):]
-        if m.K.mot_crp >= 0:     # the prescribed sigma from the call's start at its kappa
-            set_prescribed_creep(m.KJ, ue, ue[-1], t, st.q, st.v, st.qdd)
+        st.q[f] = y[:nf]
+        st.v[f] = y[nf:2 * nf]
+        st.info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
+        if K.mot_crp >= 0 and len(K.presc):
+            st.q[K.presc[0]] = y[-1]
         self._consistent_acceleration(st)
 
     # ------------------------------------------------------------------ queries
     def kernel_inputs(self, st: State) -> np.ndarray:
         """[motor torque, brake engagement, brake deflection, motor coordinate at step start,
         traction deflection, rope s and sheave angle of the slipping sheave at step start], then per
-        creep sheave (kappa, angle, sigma) at the state, then the state's time."""
+        creep sheave (kappa, angle, sigma) at the state."""
         K = self.model.K
-        ue = np.zeros(UE_CREEP + 3 * K.crp_s.shape[0] + 1)
+        ue = np.zeros(UE_CREEP + 3 * K.crp_s.shape[0])
         ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0)
         if K.crp_s.shape[0]:
             creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue)
-        ue[-1] = st.t
         return ue
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:
@@ -741,13 +751,9 @@ class Simulator:
             ue[6] = st.q[K.trac_th]
         return ue
 
-    def outputs(self, st: State, ue_creep=None) -> np.ndarray:
-        """Outputs at st; ue_creep: creep inputs of an earlier state that st continues (scipy)."""
+    def outputs(self, st: State) -> np.ndarray:
         y = np.empty(len(self.model.output_names))
-        ue = self._kernel_inputs_at(st)
-        if ue_creep is not None:
-            ue[UE_CREEP:] = ue_creep[UE_CREEP:]
-        outputs(self.model.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, ue, y)
+        outputs(self.model.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self._kernel_inputs_at(st), y)
         return y
 
     def energy(self, st: State):
