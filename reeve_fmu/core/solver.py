@@ -23,8 +23,8 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
-from .system import (INFO_CREEP, UE_CREEP, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_inputs, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
+from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
+                     creep_inputs, kappa_now, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
                      traction_deflection, workspace)
 
 
@@ -252,7 +252,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
     ncrp = K.crp_s.shape[0]
-    ue = np.empty(UE_CREEP + 3 * ncrp)
+    ue = np.empty(UE_CREEP + UE_STRIDE * ncrp)
     th1 = np.empty(ncrp)      # creep sheave angles at the step start (retry)
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
@@ -296,7 +296,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     ue[5] = q[K.trac_s]
                     ue[6] = q[K.trac_th]
                 if ncrp > 0:
-                    creep_inputs(K, c, q, v, info, ue)
+                    creep_inputs(K, c, q, v, info, ue, hs)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -313,9 +313,9 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     info[6] = brake_deflection(K, q, ue)
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
-                for k in range(ncrp):
+                for k in range(ncrp):   # W holds the converged iterate's element arrays
                     if K.crp_kind[k] == 0:
-                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k)
+                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kappa_now(K, W.QE, W.VE, v, k)[0])
             if status != 1:
                 break   # converged (0) or a vanishing span (2): substeps do not help
         if status != 0:
@@ -424,7 +424,7 @@ class Simulator:
             M = np.empty((m.nq, m.nq))
             Q = np.empty(m.nq)
             assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
-            kap = self._kernel_inputs_at(st)[UE_CREEP + 3 * K.mot_crp] if K.mot_crp >= 0 else 1.0
+            kap = self._kernel_inputs_at(st)[UE_CREEP + UE_STRIDE * K.mot_crp] if K.mot_crp >= 0 else 1.0
             tau_hold = -Q[K.mot_dof] / (K.mot_gain * kap)   # brake torque needed (Q = tau * gain)
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
@@ -446,7 +446,11 @@ class Simulator:
         name = m.q_names[K.trac_s].rsplit(".", 1)[0]
         T_in, T_out = y[f"{name}.tension_in"], y[f"{name}.tension_out"]
         cap = max(min(T_in, T_out), 0.0) * K.trac_efa
-        f_needed = Q[K.trac_s]            # Q_sigma - f = 0
+        kap = 1.0                         # the rope's strain factor at the groove (creep)
+        for k in range(K.crp_s.shape[0]):
+            if K.crp_kind[k] == 1:
+                kap = ue[UE_CREEP + UE_STRIDE * k]
+        f_needed = Q[K.trac_s] / kap      # Q_sigma - kappa f = 0
         k = cap / K.trac_zmax
         if abs(f_needed) > 0.9 * cap:
             # friction cannot hold the static tensions: the run starts with the rope sliding at the
@@ -677,7 +681,7 @@ class Simulator:
                 info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
                 if K.mot_crp >= 0 and len(p):
                     q[p[0]] = y[-1]
-                creep_inputs(m.KJ, st.c, q, v, info, ue)
+                creep_inputs(m.KJ, st.c, q, v, info, ue, 0.0)
             if K.mot_crp >= 0:
                 set_prescribed_creep(m.KJ, ue, t, t, q, v, qdd)
             else:
@@ -685,7 +689,7 @@ class Simulator:
             if assemble(m.KJ, st.c, q, v, t, ue, M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
-            dth = [-ue[UE_CREEP + 3 * k] * v[K.crp_s[k]] / K.crp_R[k] for k in range(nc)]
+            dth = [-ue[UE_CREEP + UE_STRIDE * k] * v[K.crp_s[k]] / K.crp_R[k] for k in range(nc)]
             dsig = [v[p[0]]] if (K.mot_crp >= 0 and len(p)) else []
             return np.concatenate([v[f], acc, dth, dsig])
         return rhs
@@ -735,10 +739,10 @@ class Simulator:
         traction deflection, rope s and sheave angle of the slipping sheave at step start], then per
         creep sheave (kappa, angle, sigma) at the state."""
         K = self.model.K
-        ue = np.zeros(UE_CREEP + 3 * K.crp_s.shape[0])
+        ue = np.zeros(UE_CREEP + UE_STRIDE * K.crp_s.shape[0])
         ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0)
         if K.crp_s.shape[0]:
-            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue)
+            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue, 0.0)
         return ue
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:

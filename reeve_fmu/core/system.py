@@ -19,7 +19,8 @@ from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
-UE_CREEP = 7      # kernel inputs: (kappa, angle, sigma) of creep sheave k at UE_CREEP + 3 k
+UE_CREEP = 7      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
+UE_STRIDE = 5
 
 
 @njit(cache=True, inline="always")
@@ -75,6 +76,29 @@ def end_strain(K, x, end):
 
 
 @njit(cache=True, inline="always")
+def end_strain_rate(K, x, xd, end):
+    """Time derivative of end_strain at coordinates x moving at xd."""
+    nd = K.nd
+    if K.el_type == 1:
+        o = nd if end == 0 else 3 * nd + 1
+        n2 = 0.0
+        dd = 0.0
+        for k in range(nd):
+            n2 += x[o + k] * x[o + k]
+            dd += x[o + k] * xd[o + k]
+        return dd / math.sqrt(n2)
+    n2 = 0.0
+    dd = 0.0
+    for k in range(nd):
+        dk = x[nd + k] - x[k]
+        n2 += dk * dk
+        dd += dk * (xd[nd + k] - xd[k])
+    d = math.sqrt(n2)
+    l = x[2 * nd + 1] - x[2 * nd]
+    return dd / (d * l) - d * (xd[2 * nd + 1] - xd[2 * nd]) / (l * l)
+
+
+@njit(cache=True, inline="always")
 def _element_coords(K, c, q, ie, x):
     for a in range(K.el_idx.shape[1]):
         val = c[K.el_idx[ie, a]]
@@ -83,48 +107,81 @@ def _element_coords(K, c, q, ie, x):
         x[a] = val
 
 
+@njit(cache=True, inline="always")
+def kappa_rate(K, v, k, xi, xdi, xo, xdo):
+    """(kappa, d kappa/dt) of creep sheave k, kappa = 1 + arriving strain, from the coordinates and
+    velocities of the elements that meet it (in: xi, xdi; out: xo, xdo). The arriving side is the
+    in-span while material runs along the route (sigma dot < 0), the out-span when it runs back; a
+    tanh blend over crp_vreg makes a reversal smooth. A drum's only span arrives either way (its
+    stored rope is taken at that span's strain)."""
+    w = 0.5 * (1.0 - math.tanh(v[K.crp_s[k]] / K.crp_vreg))
+    if K.crp_el_in[k] < 0:
+        w = 0.0
+    elif K.crp_el_out[k] < 0:
+        w = 1.0
+    eps = 0.0
+    rate = 0.0
+    if w > 0.0:
+        eps += w * end_strain(K, xi, 1)
+        rate += w * end_strain_rate(K, xi, xdi, 1)
+    if w < 1.0:
+        eps += (1.0 - w) * end_strain(K, xo, 0)
+        rate += (1.0 - w) * end_strain_rate(K, xo, xdo, 0)
+    return 1.0 + eps, rate
+
+
+@njit(cache=True, inline="always")
+def kappa_now(K, QE, VE, v, k):
+    """kappa_rate from the element arrays of an assembly."""
+    ei = K.crp_el_in[k] if K.crp_el_in[k] >= 0 else K.crp_el_out[k]
+    eo = K.crp_el_out[k] if K.crp_el_out[k] >= 0 else K.crp_el_in[k]
+    return kappa_rate(K, v, k, QE[ei], VE[ei], QE[eo], VE[eo])
+
+
 @njit(cache=True)
-def creep_inputs(K, c, q, v, info, ue):
-    """Kernel inputs of the creep sheaves at the step start: ue[UE_CREEP + 3k ...] = (kappa, angle,
-    sigma). The arriving side is the in-span while material runs along the route (sigma dot < 0),
-    the out-span when it runs back; a tanh blend over crp_vreg makes a reversal smooth. A drum's only
-    span arrives either way (its stored rope is taken at that span's strain)."""
-    x = np.empty(K.el_idx.shape[1])
+def creep_inputs(K, c, q, v, info, ue, h):
+    """Kernel inputs of the creep sheaves at the start of a step of size h:
+    ue[UE_CREEP + UE_STRIDE k ...] = (kappa, angle, sigma, kappa rate, kappa over the step predicted
+    to its middle, for a speed-driven sigma)."""
+    ne = K.el_idx.shape[1]
+    xi, xdi, xo, xdo = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
+    zero = np.zeros(c.shape[0])
     for k in range(K.crp_s.shape[0]):
-        j = K.crp_s[k]
-        ei = K.crp_el_in[k]
-        eo = K.crp_el_out[k]
-        w = 0.5 * (1.0 - math.tanh(v[j] / K.crp_vreg))
-        if ei < 0:
-            w = 0.0
-        elif eo < 0:
-            w = 1.0
-        eps = 0.0
-        if w > 0.0:
-            _element_coords(K, c, q, ei, x)
-            eps += w * end_strain(K, x, 1)
-        if w < 1.0:
-            _element_coords(K, c, q, eo, x)
-            eps += (1.0 - w) * end_strain(K, x, 0)
-        ue[UE_CREEP + 3 * k] = 1.0 + eps
-        ue[UE_CREEP + 3 * k + 1] = info[INFO_CREEP + k]
-        ue[UE_CREEP + 3 * k + 2] = q[j]
+        ei = K.crp_el_in[k] if K.crp_el_in[k] >= 0 else K.crp_el_out[k]
+        eo = K.crp_el_out[k] if K.crp_el_out[k] >= 0 else K.crp_el_in[k]
+        _element_coords(K, c, q, ei, xi)
+        _element_coords(K, zero, v, ei, xdi)
+        _element_coords(K, c, q, eo, xo)
+        _element_coords(K, zero, v, eo, xdo)
+        kap, rate = kappa_rate(K, v, k, xi, xdi, xo, xdo)
+        i = UE_CREEP + UE_STRIDE * k
+        ue[i] = kap
+        ue[i + 1] = info[INFO_CREEP + k]
+        ue[i + 2] = q[K.crp_s[k]]
+        ue[i + 3] = rate
+        ue[i + 4] = kap + 0.5 * h * rate
 
 
 @njit(cache=True, inline="always")
 def creep_kappa(K, u, k):
-    """1 + arriving strain of creep sheave k (1 when k < 0 or the inputs carry no creep part)."""
-    i = UE_CREEP + 3 * k
+    """kappa of creep sheave k at the step start (1 when k < 0 or the inputs carry no creep part)."""
+    i = UE_CREEP + UE_STRIDE * k
     if k < 0 or u.shape[0] <= i:
         return 1.0
     return u[i]
 
 
 @njit(cache=True, inline="always")
-def creep_angle(K, q, u, k):
-    """Sheave angle of creep sheave k: angle at step start - kappa (sigma - sigma_start) / R."""
-    i = UE_CREEP + 3 * k
-    return u[i + 1] - u[i] * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
+def creep_angle(K, q, u, k, kap):
+    """Sheave angle of creep sheave k at the current sigma, kap = its kappa there: the step start's
+    angle - kappa_mean (sigma - sigma_start) / R with the trapezoidal mean of kappa (the mean of the
+    forces the generalized-alpha step applies, so the drive's work is torque x angle), or the
+    predicted kappa of a speed-driven sheave (its angle is the profile's)."""
+    i = UE_CREEP + UE_STRIDE * k
+    kb = 0.5 * (u[i] + kap)
+    if k == K.mot_crp and K.presc.shape[0] > 0:
+        kb = u[i + 4]
+    return u[i + 1] - kb * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
 
 
 @njit(cache=True, inline="always")
@@ -350,7 +407,9 @@ def assemble_ws(K, W, c, q, v, t, u):
         j = K.drum_dof[k]
         M[j, j] += K.drum_rhoA[k] * q[j]
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
-    gain = K.mot_gain * creep_kappa(K, u, K.mot_crp)     # d(motor angle) / d(motor coordinate)
+    gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
+    if K.mot_crp >= 0 and u.shape[0] > UE_CREEP:
+        gain *= kappa_now(K, QE, VE, v, K.mot_crp)[0]
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
@@ -363,10 +422,13 @@ def assemble_ws(K, W, c, q, v, t, u):
         Q[K.trac_th] -= f * K.trac_R
     for k in range(K.crp_s.shape[0]):
         j = K.crp_s[k]
-        if K.crp_kind[k] == 0:
+        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
             # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
-            kap = creep_kappa(K, u, k)
-            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) / (K.crp_R[k] * K.crp_R[k])
+            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
+            kap, rate = kappa_now(K, QE, VE, v, k)
+            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
+            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
+            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
         Q[j] += creep_force(K, QE, v, k)
     return status
 
@@ -444,7 +506,9 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 for m in range(K.nq):
                     r += M[j, m] * qdd[m]
                 # generalized drive force / (d angle / d coordinate)
-                y[k] = K.out_scale[k] * r / creep_kappa(K, u, K.mot_crp)
+                if K.mot_crp >= 0:
+                    r /= kappa_now(K, QE, VE, v, K.mot_crp)[0]
+                y[k] = K.out_scale[k] * r
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
@@ -454,17 +518,19 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
         elif kind == 9:   # slip speed (scale R > 0) or cumulative slip (scale -R)
             i = K.out_i[k]
             j = K.out_j[k]
+            kap = _trac_kappa(K, u)   # the rope's speed at the strain it arrives with
             if K.out_scale[k] > 0.0:
-                y[k] = -v[i] - K.out_scale[k] * v[j]
+                y[k] = -kap * v[i] - K.out_scale[k] * v[j]
             else:
-                y[k] = -(q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
+                y[k] = -kap * (q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
         elif kind == 10:
             y[k] = traction_force(K, q, u, QE, QEs)
         elif kind == 11:
-            y[k] = creep_angle(K, q, u, K.out_i[k])
+            i = K.out_i[k]
+            y[k] = creep_angle(K, q, u, i, kappa_now(K, QE, VE, v, i)[0])
         elif kind == 12:
             i = K.out_i[k]
-            y[k] = -creep_kappa(K, u, i) * v[K.crp_s[i]] / K.crp_R[i]
+            y[k] = -kappa_now(K, QE, VE, v, i)[0] * v[K.crp_s[i]] / K.crp_R[i]
 
 
 @njit(cache=True)
@@ -537,10 +603,10 @@ def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
     x, xd, xdd = profile_eval(K.profile, t1)
     x0 = profile_eval(K.profile, t0)[0]
     m = K.mot_crp
-    kap = creep_kappa(K, u, m)
+    kap = u[UE_CREEP + UE_STRIDE * m + 4]
     for k in range(K.presc.shape[0]):
         j = K.presc[k]
         gsc = K.presc_gain[k] / kap
-        q[j] = u[UE_CREEP + 3 * m + 2] + gsc * (x - x0)
+        q[j] = u[UE_CREEP + UE_STRIDE * m + 2] + gsc * (x - x0)
         v[j] = gsc * xd
         qdd[j] = gsc * xdd
