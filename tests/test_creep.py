@@ -160,8 +160,9 @@ def test_energy_balance_with_drive_work_and_creep_dissipation():
     """Work of the drive torque = change of kinetic + gravity + strain energy + creep dissipation
     (no damping; generalized-alpha rho_inf = 1, h = 1e-3, the dissipation integrated by the trapezoid
     rule per step). Over 5 s (the rope runs ~7 m over the pulley, tensions differ by up to ~100 N at
-    EA = 2e4 N) the balance closes to <= 1e-6 of the largest kinetic energy (measured 4e-8 with a
-    creep dissipation of 0.3 J): the rim kinematics and the creep force are energy-consistent."""
+    EA = 2e4 N) the balance closes to <= 1e-6 of the largest kinetic energy (measured 6e-9 with a
+    creep dissipation of 0.07 J; second order: h / 2 divides it by 4): the rim kinematics, its inertia
+    and the creep force are energy-consistent."""
     tau, h, t_end = 3.0, 1e-3, 5.0
     m = build(_atwood_driven("creep", tau))
     sim = Simulator(m, step=h, rho_inf=1.0)
@@ -178,15 +179,16 @@ def test_energy_balance_with_drive_work_and_creep_dissipation():
         W = tau * sim.outputs(st)[ith]
         err = max(err, abs(T + Vg + U + D - W - E0))
         Tmax = max(Tmax, T)
-    print("energy", D, Tmax, err, err / Tmax)
     assert D > 0.05 and Tmax > 10.0
     assert err <= 1e-6 * Tmax
 
 
 def test_infinitely_stiff_rope_recovers_the_rigid_rim():
-    """A trip (1 m/s, 8 m at 0.5 m/s^2 ramps): the car's end position with creep minus that with the
-    rigid rim is -eps x travel (car on the arriving side, eps = m g / EA; within 5 %: the strain
-    differs in the ramps) and shrinks as 1/EA: EA x 1000 divides it by 1000 (within 1 %)."""
+    """A trip (1 m/s, 8 m at 0.5 m/s^2 ramps, no damping): the car's end position with creep minus that
+    with the rigid rim is -eps x travel (car on the arriving side, eps = m g / EA), within 5 % at
+    EA = 1e7 N (measured 3.6 %: the strain differs in the ramps and the car still oscillates) and
+    within 0.5 % at EA = 1e10 N (measured 0.2 %), where it is 8 um: the rigid rim is the EA -> inf
+    limit of the creep model."""
     table = [[0, 0.0], [2, 1.0], [8, 1.0], [10, 0.0], [12, 0.0]]
     diff = {}
     for EA in (1e7, 1e10):
@@ -201,14 +203,16 @@ def test_infinitely_stiff_rope_recovers_the_rigid_rim():
         diff[EA] = z["creep"] - z["rigid"]
     travel = 8.0
     assert abs(diff[1e7] / (-(M_CAR * G / 1e7) * travel) - 1.0) <= 0.05
-    assert abs(diff[1e7] / diff[1e10] / 1e3 - 1.0) <= 0.01
+    assert abs(diff[1e10] / (-(M_CAR * G / 1e10) * travel) - 1.0) <= 0.005
+    assert abs(diff[1e10]) <= 1e-5
 
 
 def test_reversal_is_smooth():
     """The rim decelerates at 1 m/s^2 through zero speed (a reversal at t = 1 s; the arriving side
     changes from the car span to the counterweight span). Tensions and the car's acceleration stay
-    continuous: their largest change between 1 ms samples around the reversal is that of the rigid
-    rim (no regime switch) to 1 % (measured ...), and creep and rigid differ by O(eps)."""
+    continuous: their largest change between 1 ms samples around the reversal is at most that of the
+    rigid rim (no regime switch; measured 0.2 % and 1.3 % below it) and creep and rigid tensions differ
+    by O(eps) (measured 8.4 N of 14.7 kN)."""
     table = [[0, 1.0], [2, -1.0], [100, -1.0]]
     out = {}
     for mode in ("creep", "rigid"):
@@ -223,5 +227,6 @@ def test_reversal_is_smooth():
     for n, y in out["creep"].items():
         jump_c = np.max(np.abs(np.diff(y)))
         jump_r = np.max(np.abs(np.diff(out["rigid"][n])))
-        print(n, jump_c, jump_r, np.max(np.abs(y - out["rigid"][n])))
-        assert jump_c <= 1.01 * jump_r + 1e-9 * np.max(np.abs(y))
+        assert jump_c <= 1.01 * jump_r
+        if "tension" in n:
+            assert np.max(np.abs(y - out["rigid"][n])) <= 5e-3 * M_CWT * G

@@ -41,7 +41,7 @@ DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
  OUT_FRICTION, OUT_CANGLE, OUT_CSPEED) = range(13)
 CREEP_VREG = 1e-3   # m/s: material speed over which the arriving side changes at a reversal (tanh blend)
 INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
-#                element of a vanishing span, traction friction deflection z, -], then one sheave angle
+#                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
 #                per creep sheave (sheave_contact = "creep": the angle is integrated, not a function of s)
 
 

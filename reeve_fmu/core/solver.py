@@ -25,7 +25,7 @@ from ._jit import njit
 from .model import Model, State, new_state
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
                      creep_inputs, kappa_now, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
-                     traction_deflection, workspace)
+                     traction_deflection, traction_slip, workspace)
 
 
 class SolverError(RuntimeError):
@@ -268,6 +268,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
         e1 = info[5]
         z1 = info[6]
         zt1 = info[8]
+        sl1 = info[9]
         for k in range(ncrp):
             th1[k] = info[INFO_CREEP + k]
         status = 1
@@ -283,6 +284,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 info[5] = e1
                 info[6] = z1
                 info[8] = zt1
+                info[9] = sl1
                 for k in range(ncrp):
                     info[INFO_CREEP + k] = th1[k]
             for sub in range(nsub):
@@ -295,6 +297,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     ue[5] = q[K.trac_s]
                     ue[6] = q[K.trac_th]
+                    ue[7] = info[9]
                 if ncrp > 0:
                     creep_inputs(K, c, q, v, info, ue, hs)
                 qo[:] = q
@@ -313,6 +316,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     info[6] = brake_deflection(K, q, ue)
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
+                    info[9] = traction_slip(K, q, ue)
                 for k in range(ncrp):   # W holds the converged iterate's element arrays
                     if K.crp_kind[k] == 0:
                         info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kappa_now(K, W.QE, W.VE, v, k)[0])
@@ -326,6 +330,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
             info[5] = e1
             info[6] = z1
             info[8] = zt1
+            info[9] = sl1
             for k in range(ncrp):
                 info[INFO_CREEP + k] = th1[k]
             if status == 1:
@@ -740,7 +745,7 @@ class Simulator:
         creep sheave (kappa, angle, sigma) at the state."""
         K = self.model.K
         ue = np.zeros(UE_CREEP + UE_STRIDE * K.crp_s.shape[0])
-        ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0)
+        ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0, st.info[9])
         if K.crp_s.shape[0]:
             creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue, 0.0)
         return ue

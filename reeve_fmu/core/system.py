@@ -19,7 +19,7 @@ from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
-UE_CREEP = 7      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
+UE_CREEP = 8      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
 UE_STRIDE = 5
 
 
@@ -265,6 +265,13 @@ def traction_deflection(K, q, u):
     # the rope's displacement along the route at the strain it arrives with (creep sheave)
     z = u[4] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
     return _elastoplastic(z, K.trac_zmax)
+
+
+@njit(cache=True, inline="always")
+def traction_slip(K, q, u):
+    """Cumulative slip [m] of the rope against the rim (rope minus rim along the route): u[7] at the
+    step start plus the step's relative displacement, the rope's at the strain it arrives with."""
+    return u[7] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
 
 
 @njit(cache=True, inline="always")
@@ -522,7 +529,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
             if K.out_scale[k] > 0.0:
                 y[k] = -kap * v[i] - K.out_scale[k] * v[j]
             else:
-                y[k] = -kap * (q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
+                y[k] = traction_slip(K, q, u)
         elif kind == 10:
             y[k] = traction_force(K, q, u, QE, QEs)
         elif kind == 11:
@@ -536,7 +543,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
 @njit(cache=True)
 def energy(K, c, q, v):
     """(kinetic, gravity potential, strain energy) of the whole system (rigid-rim kinetic energy)."""
-    return energy_u(K, c, q, v, np.zeros(UE_CREEP))
+    return energy_u(K, c, q, v, np.zeros(UE_CREEP))   # no creep part: rigid-rim inertia
 
 
 @njit(cache=True)
