@@ -24,7 +24,7 @@ import numpy as np
 from ._jit import njit
 from .model import Model, State, new_state
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_inputs, kappa_now, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
+                     creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
                      traction_deflection, traction_slip, workspace)
 
 
@@ -258,6 +258,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     target = 0.0 if u[1] >= 0.5 else 1.0
     t = t0
     row = 0
+    wfresh = False     # W holds the element arrays of the current (q, v) (creep_inputs)
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
         # start of the step (kept for a retry with substeps)
@@ -299,13 +300,14 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     ue[6] = q[K.trac_th]
                     ue[7] = info[9]
                 if ncrp > 0:
-                    creep_inputs(K, c, q, v, info, ue, hs)
+                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, wfresh)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
                 qddo[:] = qdd
                 status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
                                       piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                wfresh = status == 0
                 if status != 0:
                     q[:] = qo   # _newton_step leaves its last iterate
                     v[:] = vo
@@ -319,7 +321,7 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                     info[9] = traction_slip(K, q, ue)
                 for k in range(ncrp):   # W holds the converged iterate's element arrays
                     if K.crp_kind[k] == 0:
-                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kappa_now(K, W.QE, W.VE, v, k)[0])
+                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, creep_terms(K, W.QE, W.VE, v, k)[0])
             if status != 1:
                 break   # converged (0) or a vanishing span (2): substeps do not help
         if status != 0:
@@ -673,6 +675,7 @@ class Simulator:
         Q = np.empty(nq)
         base = self._kernel_inputs_at(st)
         info = st.info.copy()
+        QE, VE = self._element_buffers()
 
         def rhs(t, y):
             q = st.q.copy()
@@ -686,7 +689,7 @@ class Simulator:
                 info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
                 if K.mot_crp >= 0 and len(p):
                     q[p[0]] = y[-1]
-                creep_inputs(m.KJ, st.c, q, v, info, ue, 0.0)
+                creep_inputs(m.KJ, st.c, q, v, info, ue, 0.0, QE, VE, False)
             if K.mot_crp >= 0:
                 set_prescribed_creep(m.KJ, ue, t, t, q, v, qdd)
             else:
@@ -747,8 +750,13 @@ class Simulator:
         ue = np.zeros(UE_CREEP + UE_STRIDE * K.crp_s.shape[0])
         ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0, st.info[9])
         if K.crp_s.shape[0]:
-            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue, 0.0)
+            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue, 0.0,
+                         *self._element_buffers(), False)
         return ue
+
+    def _element_buffers(self):
+        n_el, ne = self.model.K.el_idx.shape
+        return np.empty((n_el, ne)), np.empty((n_el, ne))
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:
         ue = self.kernel_inputs(st)

@@ -54,106 +54,93 @@ def _elastoplastic(z, zmax):
 # ------------------------------------------------------------------ rope creep on the rim
 # sheave_contact = "creep" (docs/numerics.md "Rope creep on the rim"): the rope arrives on the groove
 # at its strain eps_a and rides the rim in adhesion, so the rim speed is the *strained* rope speed:
-# R dtheta = -(1 + eps_a) dsigma. kappa = 1 + eps_a is taken at the step start (lagged: the Newton
-# matrix and the per-step cost stay as for the rigid rim); the angle is integrated with it. The strain
-# change to the leaving span happens by creep, whose dissipation enters as the force creep_force.
+# R dtheta = -(1 + eps_a) dsigma, kappa = 1 + eps_a a function of the state (element strains). The
+# angle is not a coordinate: it is integrated per step with the trapezoidal mean of kappa (creep_inputs
+# keeps the step start's values). The strain change to the leaving span happens by creep, whose
+# dissipation enters as a force (creep_terms).
 
 @njit(cache=True, inline="always")
-def end_strain(K, x, end):
-    """Axial strain at an element end (0: start, 1: end) from the element coordinates x: linear
+def end_strain(K, X, ie, end):
+    """Axial strain at an end (0: start, 1: end) of element ie from its coordinates X[ie]: linear
     elements |r2 - r1| / (s2 - s1) - 1, cubic elements |d| - 1 at the node."""
     nd = K.nd
     acc = 0.0
     if K.el_type == 1:
         o = nd if end == 0 else 3 * nd + 1      # [r1, d1, s1, r2, d2, s2]
         for k in range(nd):
-            acc += x[o + k] * x[o + k]
+            acc += X[ie, o + k] * X[ie, o + k]
         return math.sqrt(acc) - 1.0
     for k in range(nd):
-        dk = x[nd + k] - x[k]
+        dk = X[ie, nd + k] - X[ie, k]
         acc += dk * dk
-    return math.sqrt(acc) / (x[2 * nd + 1] - x[2 * nd]) - 1.0
+    return math.sqrt(acc) / (X[ie, 2 * nd + 1] - X[ie, 2 * nd]) - 1.0
 
 
 @njit(cache=True, inline="always")
-def end_strain_rate(K, x, xd, end):
-    """Time derivative of end_strain at coordinates x moving at xd."""
+def end_strain_rate(K, X, XD, ie, end):
+    """Time derivative of end_strain at coordinates X[ie] moving at XD[ie]."""
     nd = K.nd
-    if K.el_type == 1:
-        o = nd if end == 0 else 3 * nd + 1
-        n2 = 0.0
-        dd = 0.0
-        for k in range(nd):
-            n2 += x[o + k] * x[o + k]
-            dd += x[o + k] * xd[o + k]
-        return dd / math.sqrt(n2)
     n2 = 0.0
     dd = 0.0
+    if K.el_type == 1:
+        o = nd if end == 0 else 3 * nd + 1
+        for k in range(nd):
+            n2 += X[ie, o + k] * X[ie, o + k]
+            dd += X[ie, o + k] * XD[ie, o + k]
+        return dd / math.sqrt(n2)
     for k in range(nd):
-        dk = x[nd + k] - x[k]
+        dk = X[ie, nd + k] - X[ie, k]
         n2 += dk * dk
-        dd += dk * (xd[nd + k] - xd[k])
+        dd += dk * (XD[ie, nd + k] - XD[ie, k])
     d = math.sqrt(n2)
-    l = x[2 * nd + 1] - x[2 * nd]
-    return dd / (d * l) - d * (xd[2 * nd + 1] - xd[2 * nd]) / (l * l)
+    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
+    return dd / (d * l) - d * (XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]) / (l * l)
 
 
 @njit(cache=True, inline="always")
-def _element_coords(K, c, q, ie, x):
-    for a in range(K.el_idx.shape[1]):
-        val = c[K.el_idx[ie, a]]
-        for w in range(K.el_map.shape[2]):
-            val += K.el_coef[ie, a, w] * q[K.el_map[ie, a, w]]
-        x[a] = val
-
-
-@njit(cache=True, inline="always")
-def kappa_rate(K, v, k, xi, xdi, xo, xdo):
-    """(kappa, d kappa/dt) of creep sheave k, kappa = 1 + arriving strain, from the coordinates and
-    velocities of the elements that meet it (in: xi, xdi; out: xo, xdo). The arriving side is the
-    in-span while material runs along the route (sigma dot < 0), the out-span when it runs back; a
-    tanh blend over crp_vreg makes a reversal smooth. A drum's only span arrives either way (its
-    stored rope is taken at that span's strain)."""
-    w = 0.5 * (1.0 - math.tanh(v[K.crp_s[k]] / K.crp_vreg))
-    if K.crp_el_in[k] < 0:
-        w = 0.0
-    elif K.crp_el_out[k] < 0:
-        w = 1.0
-    eps = 0.0
+def creep_terms(K, QE, VE, v, k):
+    """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly;
+    kappa = 1 + the arriving strain. The arriving side is the in-span while material runs along the
+    route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg makes a reversal
+    smooth (at rest kappa is the mean of both sides). A drum's only span arrives either way (its
+    stored rope is taken at that span's strain).
+    The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
+    -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
+    arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
+    ei = K.crp_el_in[k]
+    eo = K.crp_el_out[k]
+    if ei < 0:
+        return 1.0 + end_strain(K, QE, eo, 0), end_strain_rate(K, QE, VE, eo, 0), 0.0
+    if eo < 0:
+        return 1.0 + end_strain(K, QE, ei, 1), end_strain_rate(K, QE, VE, ei, 1), 0.0
+    x = v[K.crp_s[k]] / K.crp_vreg
+    th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
+    w = 0.5 * (1.0 - th)
+    e_in = end_strain(K, QE, ei, 1)
+    e_out = end_strain(K, QE, eo, 0)
     rate = 0.0
     if w > 0.0:
-        eps += w * end_strain(K, xi, 1)
-        rate += w * end_strain_rate(K, xi, xdi, 1)
+        rate += w * end_strain_rate(K, QE, VE, ei, 1)
     if w < 1.0:
-        eps += (1.0 - w) * end_strain(K, xo, 0)
-        rate += (1.0 - w) * end_strain_rate(K, xo, xdo, 0)
-    return 1.0 + eps, rate
-
-
-@njit(cache=True, inline="always")
-def kappa_now(K, QE, VE, v, k):
-    """kappa_rate from the element arrays of an assembly."""
-    ei = K.crp_el_in[k] if K.crp_el_in[k] >= 0 else K.crp_el_out[k]
-    eo = K.crp_el_out[k] if K.crp_el_out[k] >= 0 else K.crp_el_in[k]
-    return kappa_rate(K, v, k, QE[ei], VE[ei], QE[eo], VE[eo])
+        rate += (1.0 - w) * end_strain_rate(K, QE, VE, eo, 0)
+    d = e_in - e_out
+    return 1.0 + w * e_in + (1.0 - w) * e_out, rate, -th * 0.5 * K.el_EA[ei] * d * d
 
 
 @njit(cache=True)
-def creep_inputs(K, c, q, v, info, ue, h):
+def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
     """Kernel inputs of the creep sheaves at the start of a step of size h:
     ue[UE_CREEP + UE_STRIDE k ...] = (kappa, angle, sigma, kappa rate, kappa over the step predicted
-    to its middle, for a speed-driven sigma)."""
-    ne = K.el_idx.shape[1]
-    xi, xdi, xo, xdo = np.empty(ne), np.empty(ne), np.empty(ne), np.empty(ne)
-    zero = np.zeros(c.shape[0])
+    to its middle, for a speed-driven sigma). QE, VE: element work arrays; with fresh = True they hold
+    (q, v) already (the last residual of the step that ended here: its kappa closed that step's angle),
+    else they are gathered."""
     for k in range(K.crp_s.shape[0]):
-        ei = K.crp_el_in[k] if K.crp_el_in[k] >= 0 else K.crp_el_out[k]
-        eo = K.crp_el_out[k] if K.crp_el_out[k] >= 0 else K.crp_el_in[k]
-        _element_coords(K, c, q, ei, xi)
-        _element_coords(K, zero, v, ei, xdi)
-        _element_coords(K, c, q, eo, xo)
-        _element_coords(K, zero, v, eo, xdo)
-        kap, rate = kappa_rate(K, v, k, xi, xdi, xo, xdo)
+        if not fresh:
+            if K.crp_el_in[k] >= 0:
+                gather(K, c, q, v, K.crp_el_in[k], QE, VE)
+            if K.crp_el_out[k] >= 0:
+                gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+        kap, rate, _ = creep_terms(K, QE, VE, v, k)
         i = UE_CREEP + UE_STRIDE * k
         ue[i] = kap
         ue[i + 1] = info[INFO_CREEP + k]
@@ -184,31 +171,17 @@ def creep_angle(K, q, u, k, kap):
     return u[i + 1] - kb * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
 
 
-@njit(cache=True, inline="always")
-def creep_force(K, QE, v, k):
-    """Generalized force of the creep dissipation on sigma: -sign(sigma dot) EA (eps_in - eps_out)^2 / 2.
-    Its power -|sigma dot| EA d_eps^2 / 2 is the friction work in the creep arc, where the strain
-    changes from eps_a to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
-    ei = K.crp_el_in[k]
-    eo = K.crp_el_out[k]
-    if ei < 0 or eo < 0:
-        return 0.0
-    d = end_strain(K, QE[ei], 1) - end_strain(K, QE[eo], 0)
-    return -math.tanh(v[K.crp_s[k]] / K.crp_vreg) * 0.5 * K.el_EA[ei] * d * d
-
-
 @njit(cache=True)
 def creep_power(K, c, q, v):
     """Creep dissipation [W] of all sheaves at (q, v) (>= 0)."""
-    x = np.empty((K.el_idx.shape[0], K.el_idx.shape[1]))
-    for k in range(K.crp_s.shape[0]):
-        if K.crp_el_in[k] >= 0:
-            _element_coords(K, c, q, K.crp_el_in[k], x[K.crp_el_in[k]])
-        if K.crp_el_out[k] >= 0:
-            _element_coords(K, c, q, K.crp_el_out[k], x[K.crp_el_out[k]])
+    n_el, ne = K.el_idx.shape[0], K.el_idx.shape[1]
+    QE, VE = np.empty((n_el, ne)), np.empty((n_el, ne))
     P = 0.0
     for k in range(K.crp_s.shape[0]):
-        P -= creep_force(K, x, v, k) * v[K.crp_s[k]]
+        if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
+            gather(K, c, q, v, K.crp_el_in[k], QE, VE)
+            gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+            P -= creep_terms(K, QE, VE, v, k)[2] * v[K.crp_s[k]]
     return P
 
 
@@ -415,8 +388,18 @@ def assemble_ws(K, W, c, q, v, t, u):
         M[j, j] += K.drum_rhoA[k] * q[j]
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
     gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
-    if K.mot_crp >= 0 and u.shape[0] > UE_CREEP:
-        gain *= kappa_now(K, QE, VE, v, K.mot_crp)[0]
+    for k in range(K.crp_s.shape[0]):
+        j = K.crp_s[k]
+        kap, rate, fc = creep_terms(K, QE, VE, v, k)
+        Q[j] += fc
+        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
+            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
+            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
+            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
+            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
+            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
+            if k == K.mot_crp:
+                gain *= kap
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
@@ -427,16 +410,6 @@ def assemble_ws(K, W, c, q, v, t, u):
         f = traction_force(K, q, u, QE, QEs)
         Q[K.trac_s] -= f * _trac_kappa(K, u)
         Q[K.trac_th] -= f * K.trac_R
-    for k in range(K.crp_s.shape[0]):
-        j = K.crp_s[k]
-        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
-            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
-            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
-            kap, rate = kappa_now(K, QE, VE, v, k)
-            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
-            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
-            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
-        Q[j] += creep_force(K, QE, v, k)
     return status
 
 
@@ -465,6 +438,9 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
     MEs = W.MEs
     QEs = W.QEs
     n = K.out_kind.shape[0]
+    kaps = np.empty(K.crp_s.shape[0])
+    for k in range(K.crp_s.shape[0]):
+        kaps[k] = creep_terms(K, QE, VE, v, k)[0]
     for k in range(n):
         kind = K.out_kind[k]
         i = K.out_i[k]
@@ -514,7 +490,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                     r += M[j, m] * qdd[m]
                 # generalized drive force / (d angle / d coordinate)
                 if K.mot_crp >= 0:
-                    r /= kappa_now(K, QE, VE, v, K.mot_crp)[0]
+                    r /= kaps[K.mot_crp]
                 y[k] = K.out_scale[k] * r
             else:
                 y[k] = drive_torque(K, t, u)
@@ -534,10 +510,10 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
             y[k] = traction_force(K, q, u, QE, QEs)
         elif kind == 11:
             i = K.out_i[k]
-            y[k] = creep_angle(K, q, u, i, kappa_now(K, QE, VE, v, i)[0])
+            y[k] = creep_angle(K, q, u, i, kaps[i])
         elif kind == 12:
             i = K.out_i[k]
-            y[k] = -kappa_now(K, QE, VE, v, i)[0] * v[K.crp_s[i]] / K.crp_R[i]
+            y[k] = -kaps[i] * v[K.crp_s[i]] / K.crp_R[i]
 
 
 @njit(cache=True)
