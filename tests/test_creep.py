@@ -230,3 +230,17 @@ def test_reversal_is_smooth():
         assert jump_c <= 1.01 * jump_r
         if "tension" in n:
             assert np.max(np.abs(y - out["rigid"][n])) <= 5e-3 * M_CWT * G
+
+
+def test_drum_running_empty_is_an_event_naming_the_drum():
+    """Paying out 1 m/s from a drum that stores 1 m: the run stops at ~1 s with an error naming the
+    drum, the state left at the last good step (stored length still >= 0)."""
+    from reeve_fmu.core.solver import SolverError
+    d = drum_hoist("creep", 1.0)
+    d["sheaves"][0]["stored"] = 1.0
+    m = build(d)
+    sim = Simulator(m)
+    st = sim.initial_state()
+    with pytest.raises(SolverError, match=r"drum 'drum'.*stored length"):
+        sim.advance(st, 3.0)
+    assert 0.9 < st.t < 1.1 and st.q[m.sheave_dof["drum"]] > 0.0

@@ -36,6 +36,7 @@ STATUS_TEXT = {
     1: "Newton iteration did not converge",
     2: "a rope span reached the minimum material length (vanishing span)",
     3: "non-finite value in the state (NaN/Inf)",
+    4: "a drum has no stored rope left",
 }
 
 
@@ -308,6 +309,10 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
                                       piv, info, r, r0, am, af, beta, gamma, tol, maxit)
                 wfresh = status == 0
+                for k in range(K.drum_dof.shape[0]):
+                    if status == 0 and q[K.drum_dof[k]] <= 0.0:
+                        status = 4     # stored rope (s in [0, sigma]) used up: an event, not a retry
+                        info[7] = k
                 if status != 0:
                     q[:] = qo   # _newton_step leaves its last iterate
                     v[:] = vo
@@ -651,6 +656,9 @@ class Simulator:
 
     def _status_message(self, status: int, st: State) -> str:
         msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"
+        if status == 4:
+            j = int(self.model.K.drum_dof[int(st.info[7])])
+            msg += f": drum {self.model.q_names[j].rsplit('.', 1)[0]!r} (its stored length reached 0 m)"
         if status == 2:
             ie = int(st.info[7])
             ir, k = self.model.element_span[ie]
