@@ -1,5 +1,5 @@
 """Speed of the fmpy co-simulation of the full R1 2:1 round trip (plant + drive FMUs, 1 ms), and where
-the time goes. Target (issue 3): >= 50x faster than real time; plant doStep p99 <= 100 us.
+the time goes. Target: >= 50x faster than real time; plant doStep p99 <= 100 us.
 
     python benchmarks/cosim_trip.py [--fmus DIR] [--repeat 3] [--step 1e-3] [--json out.json]
     python benchmarks/cosim_trip.py --accuracy [--png docs/cosim_error.png] [--json out.json]
@@ -242,7 +242,7 @@ def main(argv=None):
     if args.accuracy:
         res = accuracy(plant_fmu, drive_fmu, dv, args.png)
         if args.json:
-            Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
+            Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
         return res
     res = {"step_s": args.step}
     for label, record in (("demo (all 25 plant outputs recorded)", None),
@@ -273,7 +273,7 @@ def main(argv=None):
         for name, p in parts.items():
             print(f"    {name:24s} mean {p['mean_us']:7.2f}  p50 {p['p50_us']:7.2f}  p99 {p['p99_us']:7.2f} us")
     if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
+        Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
     return res
 
 

@@ -40,7 +40,7 @@ class TrivialFloorSlave(Fmi2Slave):
 
 def build(tmp: str) -> str:
     src = os.path.join(tmp, "trivial_floor_slave.py")
-    with open(src, "w") as fh:
+    with open(src, "w", encoding="utf-8") as fh:
         fh.write(SLAVE)
     subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", src, "-d", tmp], check=True,
                    capture_output=True)
@@ -87,7 +87,7 @@ def main() -> int:
               f"{args.repeat} x {args.steps}) -> at most {h / best:.1f}x real time at a 1 ms step; "
               f"load average {os.getloadavg()[0]:.2f}")
         sys.stdout.flush()
-        os._exit(0)   # pythonfmu instances can crash the interpreter at exit (fmi.md)
+        os._exit(0)   # pythonfmu instances can crash the interpreter at exit (docs/cosim.md, 'pythonfmu and fmpy' item 4)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Long run of the plant FMU (issue 6 item 9): 10^6 doSteps in one instance through fmpy.
+"""Long run of the plant FMU (docs/hard-cases.md, "Long run"): 10^6 doSteps in one instance through fmpy.
 
 Reports resident memory growth and the step time over the run (first vs last 10 % of the steps).
 The brake is released and the motor holds the car with a PD loop on the motor angle around the
@@ -20,7 +20,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def rss_mb():
-    with open("/proc/self/statm") as fh:
+    with open("/proc/self/statm", encoding="utf-8") as fh:
         return int(fh.read().split()[1]) * resource.getpagesize() / 2 ** 20
 
 
@@ -77,9 +77,9 @@ def main():
            "car_position_end_m": z[0]}
     print(json.dumps(res, indent=2))
     if args.out:
-        Path(args.out).write_text(json.dumps(res, indent=2))
+        Path(args.out).write_text(json.dumps(res, indent=2), encoding="utf-8")
     import os
-    os._exit(0)   # skip interpreter finalisation (pythonfmu exit-time heap corruption, fmi.md §5.2)
+    os._exit(0)   # skip interpreter finalisation (pythonfmu exit-time heap corruption, docs/cosim.md, 'pythonfmu and fmpy' item 4)
 
 
 if __name__ == "__main__":

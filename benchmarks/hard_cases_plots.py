@@ -108,7 +108,7 @@ def main():
     curves_r.append((curves_r[0][0], np.full_like(curves_r[0][0], lim), "e^(f α) = %.4f" % lim))
     fig("hard_traction.png", [("T1/T2", curves_r), ("slip [mm]", curves_s)],
         "Emergency braking, empty car going up, μ = 0.0758 (EN 81-50)")
-    (IMG / "hard_cases.json").write_text(json.dumps(facts, indent=2))
+    (IMG / "hard_cases.json").write_text(json.dumps(facts, indent=2), encoding="utf-8")
     print(json.dumps(facts, indent=2))
 
 

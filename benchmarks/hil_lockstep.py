@@ -1,10 +1,10 @@
-"""HIL over CAN: lock-step throughput and real-time step timing (issue 7). Target: lock-step >= 2000 steps/s
+"""HIL over CAN: lock-step throughput and real-time step timing. Target: lock-step >= 2000 steps/s
 (2x real time at a 1 ms SYNC); report p50/p99 step time of the real-time mode.
 
     python benchmarks/hil_lockstep.py [--t-end 10] [--repeat 3] [--out bench/hil.json] [--quick]
 
 Every configuration runs `reeve_fmu.hil.run.run_hil` in a fresh interpreter (the plant FMU is loaded there,
-fmi.md §5), with the demo's scenario (R1 2:1, rated load, the built-in ElectricDrive controller) over the
+docs/cosim.md, 'pythonfmu and fmpy' item 4), with the demo's scenario (R1 2:1, rated load, the built-in ElectricDrive controller) over the
 first --t-end seconds of the trip (pre-torque, brake lift, acceleration, full speed). Lock-step rows give
 the wall-clock rate (steps/s over the whole run, bench + controller + bus); real-time rows give the bench's
 per-cycle work (SYNC -> TPDOs -> plant step) p50/p99, the SYNC lateness p50/p99/max and deadline misses.
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     out["loadavg_end"] = os.getloadavg()
     p = Path(a.out)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(out, indent=1, default=str) + "\n")
+    p.write_text(json.dumps(out, indent=1, default=str) + "\n", encoding="utf-8")
     print(f"-> {p}  (target: lock-step >= 2000 steps/s)")
     return 0
 

@@ -54,7 +54,7 @@ def main():
             print(f"{scheme:12s} {h * 1e3:4g} ms: max |dx| {abs(err[k]) * 1e3:9.3f} mm at {r.time[k]:6.2f} s; "
                   + cosim.monitor_line(r.info), flush=True)
     out["wall_s"] = time.perf_counter() - t0
-    (IMG / "hard_large_steps.json").write_text(json.dumps(out, indent=1) + "\n")
+    (IMG / "hard_large_steps.json").write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
 
     fig, ax = plt.subplots(4, 1, figsize=(10, 11))
     for h in STEPS:

@@ -1,5 +1,5 @@
 """Real-time factor of the full R1 2:1 trip (bottom to top landing, S-curve drive, outputs every
-1 ms), single core. Target (issue 2): >= 200x faster than real time.
+1 ms), single core. Target: >= 200x faster than real time.
 
     python benchmarks/trip_2to1.py
 """

@@ -9,7 +9,7 @@ The FMUs are those `reeve-fmu build` wrote into fmus/ (SystemStructure.ssd refer
 ../../fmus/*.fmu). libcosimpy is an optional dependency: pip install -e '.[cosim]'.
 
 `run_ssp()` is what tests/test_cosim.py calls (in a fresh interpreter: the FMUs run Python inside
-this process, fmi.md §5.2). It imports nothing from reeve_fmu, so the FMUs load the package they
+this process, docs/cosim.md, 'pythonfmu and fmpy' item 4). It imports nothing from reeve_fmu, so the FMUs load the package they
 carry, as in any third-party host.
 """
 from __future__ import annotations
@@ -98,7 +98,7 @@ def main(argv=None) -> int:
     info = res.pop("info")
     res.pop("step_numbers")
     cols = ["time"] + [k for k in res if k != "time"]
-    with open(args.out, "w", newline="") as fh:
+    with open(args.out, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for row in zip(*(res[c] for c in cols)):

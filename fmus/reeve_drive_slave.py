@@ -12,8 +12,9 @@ Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end
         samples at the start of the step).
 Parameters: reeve_fmu.fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
 """
+from reeve_fmu.core.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
+                                  _X_XREF, PHASE_NAMES)
 from reeve_fmu.fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
-from reeve_fmu.core.drive import PHASE_NAMES
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 #: largest communication step (s) the speed loop is meant for: beyond it the drive logs a warning (once)
@@ -72,6 +73,9 @@ class ElectricDriveSlave(ReeveSlave):
         self.drive = make_drive({name: v[name] for name, *_ in DRIVE_PARAMETERS})
         self.drive.warm_up()     # JIT load/compile here, not inside the first doStep
         self._outputs()
+        # per step only the exchanged outputs are written; the references etc. come from a snapshot
+        # of the drive state when something reads them (ReeveSlave.defer_outputs)
+        self.set_eager_outputs(("motor.torque", "brake.command"))
 
     def _outputs(self, torque=None, brake=None):
         d = self.drive
@@ -88,6 +92,21 @@ class ElectricDriveSlave(ReeveSlave):
         v["drive.phase"] = d.phase
         v["drive.move"] = d.move_index
 
+    def _write_snapshot(self, xs, xi):
+        """The outputs of _outputs() (same expressions as the drive's properties) from a snapshot."""
+        v = self.values
+        p = self.drive.params
+        v["car.position_ref"] = xs[_X_XREF]
+        v["car.velocity_ref"] = xs[_X_VREF]
+        v["car.acceleration_ref"] = xs[_X_AREF]
+        v["motor.speed_ref"] = xs[_X_VREF] * p.roping / p.sheave_radius
+        v["drive.torque_ref"] = xs[_X_TREF]
+        v["drive.position_error"] = xs[_X_EPOS] * p.sheave_radius / p.roping
+        v["motor.current_d"] = xs[_X_ID]
+        v["motor.current_q"] = xs[_X_IQ]
+        v["drive.phase"] = xi[_I_PHASE]
+        v["drive.move"] = xi[_I_MOVE]
+
     def step(self, t, dt):
         if dt > MAX_DESIGN_STEP and not self._step_warned:
             self._step_warned = True
@@ -98,8 +117,11 @@ class ElectricDriveSlave(ReeveSlave):
                         f"from 10 ms (Gauss-Seidel) / 5 ms (Jacobi) on (docs/hard-cases.md, 'Large "
                         f"communication steps')", Fmi2Status.warning)
         v = self.values
-        tau, brake = self.drive.step(t, dt, v["motor.speed"], v["motor.angle"])
-        self._outputs(tau, brake)
+        d = self.drive
+        v["motor.torque"], v["brake.command"] = d.step(t, dt, v["motor.speed"], v["motor.angle"])
+        xs = d._xs[:_X_IQ + 1].tolist()
+        xi = d._xi.tolist()
+        self.defer_outputs(lambda: self._write_snapshot(xs, xi))
         return True
 
     def get_hidden_state(self):

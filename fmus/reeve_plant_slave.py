@@ -23,7 +23,7 @@ class ReevingPlantSlave(ReeveSlave):
     description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
 
     def define(self):
-        with open(self.resource_path(PLANT_CONFIG)) as fh:
+        with open(self.resource_path(PLANT_CONFIG), encoding="utf-8") as fh:
             cfg = json.load(fh)
         self.config = cfg
         self.modelName = cfg["name"]
@@ -69,6 +69,9 @@ class ReevingPlantSlave(ReeveSlave):
                                f"(resources out of date?)")
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
+        # per step only what the drive needs is written at once; the other outputs when read
+        self._eager = [(n, names.index(n)) for n in ("motor.speed", "motor.angle")]
+        self.set_eager_outputs(n for n, _ in self._eager)
         self.plant.warm_up()     # JIT load/compile here, not inside the first doStep
 
     def _write(self, y):
@@ -76,7 +79,10 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        self._write(self.plant.step(dt, v["motor.torque"], v["brake.command"]))
+        y = self.plant.step(dt, v["motor.torque"], v["brake.command"]).tolist()
+        for name, i in self._eager:
+            v[name] = y[i]
+        self.defer_outputs(lambda: self._write(y))
         return True
 
     def get_hidden_state(self):

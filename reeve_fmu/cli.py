@@ -6,7 +6,6 @@ is imported only when used, so `reeve-fmu simulate` does not load fmpy or python
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -151,24 +150,7 @@ def main(argv=None) -> int:
     except (SceneError, SolverError, ValueError, FileNotFoundError) as exc:
         print(f"reeve-fmu {args.command}: error: {exc}", file=sys.stderr)
         rc = 2
-    if args.command in FMU_HOST_COMMANDS and _is_cli_process():
-        # everything is written: skip interpreter finalisation, where pythonfmu FMUs loaded in this
-        # process occasionally corrupt the heap at exit ("corrupted double-linked list", measured
-        # 1 in 4 demo runs; fmi.md §5.2, PythonFMU #228) and would turn a good run into exit 134
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(rc)
     return rc
-
-
-FMU_HOST_COMMANDS = {"demo", "hil"}   # commands that load pythonfmu FMUs into this process
-
-
-def _is_cli_process() -> bool:
-    """True when this process is the `reeve-fmu` console script or `python -m reeve_fmu.cli` (not a
-    test or a script calling main())."""
-    p = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
-    return p is not None and (p.name == "reeve-fmu" or (p.name == "cli.py" and p.parent.name == "reeve_fmu"))
 
 
 if __name__ == "__main__":

@@ -187,7 +187,7 @@ def cli_demo(args) -> int:
                   "fmu_warnings": res.info["fmu_warnings"],
                   **{k: res.info[k] for k in cosim.MONITOR_FIELDS}},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     print_table(summary)
     first = res.info["first_step_wall_s"]
     print(f"co-simulation: {res.info['steps']} steps in {res.info['loop_wall_s']:.2f} s "

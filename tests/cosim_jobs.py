@@ -1,5 +1,5 @@
 """Jobs for tests/test_plant_fmu.py and tests/test_cosim.py, each run in a fresh interpreter by
-reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, fmi.md §5.2).
+reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, docs/cosim.md, 'pythonfmu and fmpy' item 4).
 
 FMU jobs load the runner *by file path* and do not import reeve_fmu from the checkout: the FMUs then
 run the package they carry (bootstrapped into ~/.cache/reeve_fmu/<source hash>/, where numba's cache
@@ -416,7 +416,7 @@ def reference_error(results_csv, summary_json, ref_step=1e-4):
 
     from reeve_fmu.fmu.cosim import monolithic
 
-    with open(summary_json) as fh:
+    with open(summary_json, encoding="utf-8") as fh:
         sc = json.load(fh)["scenario"]
     d = np.genfromtxt(results_csv, delimiter=",", names=True, deletechars="")
     drive_values = {"pretorque[1]": sc["pretorque_Nm"][0], "pretorque[2]": sc["pretorque_Nm"][1],
@@ -470,7 +470,7 @@ def ensure_test_fmus(base, timeout=600.0):
         ssp = base / "cosim" / "ReevingSystem"
         ssp.mkdir(parents=True, exist_ok=True)
         shutil.copy2(os.path.join(REPO, "cosim", "ReevingSystem", "SystemStructure.ssd"), ssp)
-        marker.write_text(p.stdout)
+        marker.write_text(p.stdout, encoding="utf-8")
     return {"base": str(base), "plant": str(base / "fmus" / "ReevingPlant.fmu"),
             "drive": str(base / "fmus" / "ElectricDrive.fmu"), "ssp": str(base / "cosim" / "ReevingSystem"),
-            "build_log": marker.read_text()}
+            "build_log": marker.read_text(encoding="utf-8")}

@@ -1,5 +1,5 @@
 """Jobs for tests/test_hil.py that load the plant FMU, each run in a fresh interpreter by
-reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, fmi.md §5). Results travel as
+reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job, docs/cosim.md, 'pythonfmu and fmpy' item 4). Results travel as
 JSON (floats exactly)."""
 import os
 import sys

@@ -13,7 +13,7 @@ from reeve_fmu.core.profiles import scurve, trip_sequence
 
 @pytest.mark.parametrize("case, expected", [("loading", 1.8582), ("emergency", 1.5990), ("stalled", 3.4528)])
 def test_en81_check_vector(case, expected):
-    """ZAlift check vector (domain.md §3.3): beta 95°, gamma 30°, alpha 180°, rope speed 3.2 m/s."""
+    """ZAlift check vector (docs/reference-sets.md §4.2): beta 95°, gamma 30°, alpha 180°, rope speed 3.2 m/s."""
     mu = A.en81_mu(case, rope_speed=3.2)
     assert round(A.traction_limit(mu, 95.0, 30.0, 180.0, groove="u-undercut"), 4) == expected
 
@@ -147,7 +147,7 @@ def test_trip_summary_of_ideal_round_trip():
     s = A.trip_summary(t, x, v, a, landings=[0.0, 39.0], torque=torque, traction_ratio=ratio,
                        traction_limit=1.599)
     assert s["n_trips"] == 2
-    t_flight = D / 1.6 + 1.6 / 0.8 + 0.8 / 1.0        # domain.md §2.5
+    t_flight = D / 1.6 + 1.6 / 0.8 + 0.8 / 1.0        # docs/reference-sets.md §3.3
     for tt in s["trip_times_s"]:
         assert tt == pytest.approx(t_flight, abs=0.15)     # motion below v_rest (1 mm/s) not counted
     assert [r["direction"] for r in s["trips"]] == [1, -1]

@@ -25,7 +25,7 @@ def test_simulate_writes_csv_and_png(tmp_path):
 
 def test_simulate_bad_scene_exit_code(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text((ROOT / "scenes" / "hanging_rope.toml").read_text().replace("EA = 2.9e6", "EA = 0"))
+    bad.write_text((ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8").replace("EA = 2.9e6", "EA = 0"), encoding="utf-8")
     rc = main(["simulate", str(bad), "--out", str(tmp_path)])
     assert rc == 2
     err = capsys.readouterr().err

@@ -60,7 +60,7 @@ def test_demo_writes_results_plots_and_summary(demo):
     out = demo["out"]
     for f in ("results.csv", "results.png", "traction.png", "motor.png", "summary.json"):
         assert (out / f).is_file() and (out / f).stat().st_size > 1000, f
-    with open(out / "results.csv") as fh:
+    with open(out / "results.csv", encoding="utf-8") as fh:
         header = next(csv.reader(fh))
         n_rows = sum(1 for _ in fh)
     for name in ("time", "car.position", "car.velocity", "car.acceleration", "counterweight.position",
@@ -68,7 +68,7 @@ def test_demo_writes_results_plots_and_summary(demo):
                  "motor.speed", "motor.torque", "brake.torque"):
         assert name in header, name
     assert header.index("motor.torque") == header.index("motor.speed") + 1
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert n_rows == s["cosim"]["steps"] + 1
     assert s["scenario"]["car_load_kg"] == 1000.0 and s["scenario"]["communication_step_s"] == 1e-3
     up, down = s["trips"]
@@ -103,7 +103,7 @@ def test_cosim_error_at_1ms_is_below_half_a_millimetre(demo):
 
 def test_demo_coupling_monitor_reports_a_stable_run(demo):
     """1 ms Gauss-Seidel (the demo): the monitor finds nothing; its figures are in summary.json."""
-    c = json.loads((demo["out"] / "summary.json").read_text())["cosim"]
+    c = json.loads((demo["out"] / "summary.json").read_text(encoding="utf-8"))["cosim"]
     assert c["coupling_stable"] is True and c["instability_detected_at"] is None, c["instability"]
     assert c["torque_chatter_max"] < 0.02 and c["energy_residual_max_ratio"] < 0.2
     assert 0.0 < c["coupling_energy_residual_J"] < 1e-3 * c["transmitted_energy_J"]

@@ -1,12 +1,12 @@
-"""Crane hoist statics with axial-torsion coupling (method.md §1.5, §3.2, §5.3, §7 item 11).
+"""Crane hoist statics with axial-torsion coupling (docs/theory.md §1.5, §3.2, §5.3, §7 item 11).
 
 Oracles:
 - the coupling laws are the derivatives of their energy density (S = dw/deps, M = dw/dkappa) and the
   torsion span's generalized forces are the gradient of its potential (finite differences);
 - with the tangent points frozen in their body frames the crane residual is grad Pi (energy laws);
 - two falls, torque-factor law M = k S d, no torsional stiffness: sin psi = 4 k d h / (a b) and the
-  critical height a b / (4 k d) (closed form, method §5.3);
-- 8 falls (domain.md §4.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
+  critical height a b / (4 k d) (closed form, docs/theory.md §5.3);
+- 8 falls (docs/reference-sets.md §5.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
   (H_crit about 1200 m with S = 0.8 m), 6-strand rope k = 0.08 cabling at about 90 m.
 """
 from __future__ import annotations
@@ -174,7 +174,7 @@ def test_two_falls_against_the_closed_form():
 
 
 def test_eight_falls_large_crane():
-    """domain.md §4.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
+    """docs/reference-sets.md §5.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
     m = load_crane(EIGHT)
     assert m.S_eff == pytest.approx(0.80, abs=0.01)
     res = sweep(m)
@@ -207,12 +207,12 @@ def test_bad_crane_section_names_file_and_key(tmp_path):
     ]
     for src, old, new, msg in cases:
         p = tmp_path / "bad.toml"
-        head, tail = src.read_text().rsplit("\n[crane]", 1)
+        head, tail = src.read_text(encoding="utf-8").rsplit("\n[crane]", 1)
         if old.startswith("model"):
             head = head.replace(old, new, 1)
         else:
             tail = tail.replace(old, new, 1)
-        p.write_text(head + "\n[crane]" + tail)
+        p.write_text(head + "\n[crane]" + tail, encoding="utf-8")
         with pytest.raises(SceneError) as exc:
             load_crane(p)
         assert str(exc.value).startswith(f"{p}: ") and msg in str(exc.value), str(exc.value)
@@ -222,12 +222,12 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
     from reeve_fmu.cli import main
     out = tmp_path / "two"
     assert main(["crane", str(TWO), "--out", str(out), "--heights", "40"]) == 0
-    header = (out / "rotation.csv").read_text().splitlines()[0].split(",")
+    header = (out / "rotation.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
     assert header[:2] == ["height", "block.yaw"]
     assert {"fall1.tension", "fall2.tension", "rope.torque"} <= set(header)
     data = np.genfromtxt(out / "rotation.csv", delimiter=",", skip_header=1)
     assert data.shape == (40, len(header))
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["critical_height"] == pytest.approx(35.5, rel=0.01)
     assert (out / "rotation.png").stat().st_size > 10_000
     assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
@@ -293,7 +293,7 @@ def test_three_falls_dead_end_on_the_block_and_crossed_sheave_axes(tmp_path):
     tangents between sheaves with perpendicular axes). Tension W/3 per fall (frictionless),
     the block turns the way of the rope torque, steadily with the height."""
     p = tmp_path / "three.toml"
-    p.write_text(THREE)
+    p.write_text(THREE, encoding="utf-8")
     m = load_crane(p)
     assert [m.span_names[k] for k in m.falls] == ["fall1", "fall2", "fall3"]
     res = sweep(m)

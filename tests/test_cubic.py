@@ -1,4 +1,4 @@
-"""Cubic ALE-ANCF element (method.md §1.3, §2, §3.1, §3.3, §7 items 5, 7) against its energies.
+"""Cubic ALE-ANCF element (docs/theory.md §1.3, §2, §3.1, §3.3, §7 items 5, 7) against its energies.
 
 - closed-form mass matrix = rhoA l int N^T N (4-point Gauss), and T = 1/2 qdot^T M qdot;
 - Q_v = dT/dq - (dM/dt) qdot by central differences of T and M, with sdot != 0 (2D, 3D);

@@ -1,4 +1,4 @@
-"""Cubic ALE-ANCF elements assembled in the engine (issue 4): planar 2:1 elevator without bending
+"""Cubic ALE-ANCF elements assembled in the engine: planar 2:1 elevator without bending
 stiffness against the 1D model, and energy conservation of a swinging cubic-element rope."""
 from dataclasses import replace
 from pathlib import Path
@@ -73,6 +73,6 @@ route = [ { anchor = "ground", at = [0, 0, 10] }, { anchor = "mass", at = [0, 0,
 
 def test_cubic_needs_a_bending_model():
     sc = load_scene(ROOT / "scenes" / "hanging_rope.toml")
-    text = (ROOT / "scenes" / "hanging_rope.toml").read_text().replace('length = 50.0', 'length = 50.0\nelement = "cubic"')
+    text = (ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8").replace('length = 50.0', 'length = 50.0\nelement = "cubic"')
     with pytest.raises(SceneError, match=r"\[ropes\[0\].element\] cubic elements bend"):
         loads_scene(text, "h.toml")

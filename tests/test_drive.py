@@ -1,7 +1,7 @@
 """Electric drive against an ideal rigid plant simulated here: J dω/dt = T - T_load, brake holds when applied.
 
 Reference numbers are independent of the drive code: the trip time comes from the S-curve formulas of
-domain.md §2.5, the event times from the parameters, the torque-path response from the analytic
+docs/reference-sets.md §3.3, the event times from the parameters, the torque-path response from the analytic
 response of a delayed first-order lag to a ramp.
 """
 import json
@@ -14,12 +14,12 @@ from reeve_fmu.core.drive import (PHASE_DONE, PHASE_IDLE, PHASE_RUN, DriveParams
 
 R, ROPING = 0.16, 2.0
 G = ROPING / R                      # motor rad per metre of car travel
-J_EMPTY, T_EMPTY = 24.6, -353.0     # R1 empty car: inertia at the motor, static torque (domain §1.3)
+J_EMPTY, T_EMPTY = 24.6, -353.0     # R1 empty car: inertia at the motor, static torque (docs/reference-sets.md §1)
 J_FULL, T_FULL = 31.0, 432.0        # R1 full car
 
 
 def scurve_time(D, v, a, j):
-    """Flight time of a full-speed S-curve (domain.md §2.5): D/v + v/a + a/j."""
+    """Flight time of a full-speed S-curve (docs/reference-sets.md §3.3): D/v + v/a + a/j."""
     return D / v + v / a + a / j
 
 
@@ -135,7 +135,7 @@ def test_brake_sequencing_follows_parameters():
     assert [cmd[i] for i in edges] == [1.0, 0.0, 1.0, 0.0]
     tf = 4.8   # 3 m floor-to-floor does not reach 1.6 m/s: use the schedule only for the flight time
     sched = d.schedule
-    assert sched[0]["t_profile_end"] - sched[0]["t_profile_start"] == pytest.approx(tf, abs=0.05)  # domain §1.3
+    assert sched[0]["t_profile_end"] - sched[0]["t_profile_start"] == pytest.approx(tf, abs=0.05)  # docs/reference-sets.md §1
     t_rel0 = p.start_delay + p.pretorque_time
     t_app0 = sched[0]["t_profile_end"] + p.hold_time
     expected = [t_rel0, t_app0]

@@ -1,4 +1,4 @@
-"""Linear ALE rope element (method.md §1.2, §2.2-2.4, §3.1, §3.3) against its defining energies.
+"""Linear ALE rope element (docs/theory.md §1.2, §2.2-2.4, §3.1, §3.3) against its defining energies.
 
 The element returns M(q), the generalized force Q(q, qdot) and the potential V(q). Each term must
 follow from the scalar functions it is derived from, which are written out independently here:

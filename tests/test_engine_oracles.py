@@ -1,4 +1,4 @@
-"""The engine against exact results (method.md §7 test oracles).
+"""The engine against exact results (docs/theory.md §7 test oracles).
 
 Every reference value below is computed here from closed-form physics (statics of a hanging rope,
 the beta tan(beta) frequency equation, the rigid Atwood cosh law, the jerk-limited S-curve, hand
@@ -347,7 +347,7 @@ def test_rope_material_conserved_over_trip(elevator):
 
 
 def test_elevator_static_tensions_hand_calculation(elevator):
-    """§7 item 10 / domain §1.3 by hand. Spans vertical; rope rhoA, EA are per rope times count.
+    """§7 item 10 / docs/reference-sets.md §1 by hand. Spans vertical; rope rhoA, EA are per rope times count.
     Car pulley: each fall carries T_c = (m_car + rhoA pi R_c) g / 2 (W1 wrap mass on the pulley).
     Up to the traction sheave the span adds its rope weight rhoA g l2, with l2 the *material* length
     of the 40 m span: 40 = l2 (1 + (T_c + rhoA g l2/2)/EA) (mean tension, exact for a linear
@@ -417,7 +417,7 @@ def test_elevator_static_tensions_hand_calculation(elevator):
 # 6. 2:1 kinematics in the rigid limit (§7 item 10)
 # =============================================================================================
 def scurve_speed(t, D, v, a, j, t0):
-    """Jerk-limited S-curve speed (domain §2.5) from its definition: +j to a, constant a, -j to v,
+    """Jerk-limited S-curve speed (docs/reference-sets.md §3.3) from its definition: +j to a, constant a, -j to v,
     cruise, mirror image. Assumes full speed and acceleration are reached (true for R1)."""
     tj = a / j
     ta = v / a - tj

@@ -73,7 +73,7 @@ def test_report_lists_every_rejected_candidate_with_its_reason(reports, tmp_path
         assert max(c.ratios.values()) > rep.margin
     labels = {c.config.label() for c in rep.candidates}
     assert len(labels) == 4 * 2 * 4      # elements x wraps x steps, one model
-    d = json.loads(rep.write_json(tmp_path / "f.json").read_text())
+    d = json.loads(rep.write_json(tmp_path / "f.json").read_text(encoding="utf-8"))
     assert d["chosen_label"] == rep.chosen.config.label()
     assert {c["label"] for c in d["candidates"]} == labels
     assert all(c["reason"] for c in d["candidates"] if c["status"] == "rejected")
@@ -81,7 +81,7 @@ def test_report_lists_every_rejected_candidate_with_its_reason(reports, tmp_path
     assert "chosen:" in text and all(c.config.label() in text for c in cheaper)
 
 
-BASE = (ROOT / "tests" / "scenes" / "atwood.toml").read_text()
+BASE = (ROOT / "tests" / "scenes" / "atwood.toml").read_text(encoding="utf-8")
 
 
 @pytest.mark.parametrize("section, key", [
@@ -124,7 +124,7 @@ def test_cli_runs_the_chosen_configuration(tmp_path, capsys):
                "--accuracy-tol", "1e-2", "--out", str(out)])
     assert rc == 0
     text = capsys.readouterr().out
-    rep = json.loads((out / "fidelity.json").read_text())
+    rep = json.loads((out / "fidelity.json").read_text(encoding="utf-8"))
     assert rep["chosen_label"] in text and "fidelity selection" in text
     assert rep["chosen"]["step"] == pytest.approx(4e-3)            # the cheapest rung passes at 1 cm
     rc = main(["simulate", str(HOIST), "--t-end", "1.0", "--accuracy-tol", "0", "--accuracy-outputs",

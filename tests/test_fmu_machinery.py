@@ -2,7 +2,7 @@
 
 The toy FMU (tests/fmu_toy/reeve_toy_slave.py) is built once per module from a *snapshot* of the
 package (other engineers edit reeve_fmu/ concurrently; a snapshot keeps the source hash stable for
-the stale/hash tests). Every FMU-loading check runs in its own fresh interpreter (fmi.md §5.2); the
+the stale/hash tests). Every FMU-loading check runs in its own fresh interpreter (docs/cosim.md, 'pythonfmu and fmpy' item 4); the
 job functions live in tests/fmu_toy/toy_jobs.py.
 """
 from __future__ import annotations
@@ -69,7 +69,8 @@ def test_model_description_units_structure_and_resources(toy):
     assert "resources/reeve_fmu_vendor/reeve_fmu/fmu/slave.py" in names
     assert not any("__pycache__" in n or n.endswith((".pyc", ".nbi", ".nbc")) for n in names)
     assert stamp["sha256"] == toy["hash"] and stamp["entry"]["name"] == "reeve_toy_slave.py"
-    assert "numpy" in reqs and "scipy" in reqs and scene == SCENE
+    assert "numpy>=1.24" in reqs and "scipy" not in reqs and scene == SCENE   # only what the model imports
+    assert "tomli>=2.0; python_version < '3.11'" in reqs
     # capability flags
     cs = xml.find("CoSimulation").attrib
     assert cs["canGetAndSetFMUstate"] == "true" and cs["canSerializeFMUstate"] == "true"
@@ -109,7 +110,7 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
     from reeve_fmu.fmu.build import FmuBuildError, build_fmu
 
     generic = tmp_path / "model.py"
-    generic.write_text("x = 1\n")
+    generic.write_text("x = 1\n", encoding="utf-8")
     with pytest.raises(FmuBuildError, match="too generic"):
         build_fmu(generic, tmp_path / "out")
     body = ("from reeve_fmu.fmu.slave import ReeveSlave\n"
@@ -134,7 +135,7 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
     (out / "ReeveBadnameProbe.fmu").write_bytes(b"previous good build")
     for stem, (line, err) in cases.items():
         src = tmp_path / f"{stem}.py"
-        src.write_text(body.format(cls=stem.title().replace("_", ""), line=line))
+        src.write_text(body.format(cls=stem.title().replace("_", ""), line=line), encoding="utf-8")
         with pytest.raises(FmuBuildError, match=err):
             build_fmu(src, out)
         assert stem not in sys.modules and str(tmp_path) not in sys.path
@@ -319,7 +320,7 @@ def test_run_in_subprocess_results_errors_and_exit_aborts(tmp_path):
     assert len(runner.last_run_info["attempts"]) == 1
     # interpreter finalisation is skipped once the result is written (os._exit), so an abort that
     # would happen at exit (here: an atexit handler; in real life pythonfmu's heap corruption,
-    # fmi.md §5.2) cannot fail the job: no retry is needed
+    # docs/cosim.md, 'pythonfmu and fmpy' item 4) cannot fail the job: no retry is needed
     code = ("import atexit, os\n"
             "atexit.register(os.abort)\n"
             "result = 'fine'\n")

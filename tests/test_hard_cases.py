@@ -1,4 +1,4 @@
-"""Hard cases (issue 6): slack and snap, vanishing span, buffer impact, emergency stop, extreme
+"""Hard cases (docs/hard-cases.md): slack and snap, vanishing span, buffer impact, emergency stop, extreme
 parameters. Each must run or stop with a clear event - never NaN or an unexplained failure."""
 from dataclasses import replace
 from pathlib import Path
@@ -70,7 +70,7 @@ def test_buffer_impact_at_115_percent_speed():
 
 def test_emergency_stop_peak_tension():
     """Drum stops within 1 ms while lowering 1000 kg at 1 m/s: the peak rope force at the mass equals
-    m g + V m sqrt(k/m_eff) (k = EA/L, m_eff = m + rhoA L/3, method §7 item 8) within 1 %; the
+    m g + V m sqrt(k/m_eff) (k = EA/L, m_eff = m + rhoA L/3, docs/theory.md §7 item 8) within 1 %; the
     massless-rope formula m g + V sqrt(k m) overestimates by the rope-mass correction."""
     sc = load_scene(HARD / "emergency_stop.toml")
     m = build_model(sc)

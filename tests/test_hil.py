@@ -1,4 +1,4 @@
-"""Motor controller in the loop over CAN (issue 7, docs/hil.md).
+"""Motor controller in the loop over CAN (docs/hil.md).
 
 * protocol: the DBC (cantools) and the EDS (canopen) describe the same frames; the fast frame codec
   equals cantools bit for bit; the CiA 402 state machine;
@@ -198,7 +198,7 @@ def test_lockstep_virtual_fmu_reproduces_inprocess_cosimulation(plant_fmu, tmp_p
     assert abs(x[-1] - 1.0) < 0.01                               # stopped at the landing (±10 mm)
     assert np.max(x) > 0.99
     assert (out / "summary.json").is_file() and (out / "timing.csv").is_file()
-    assert json.loads((out / "summary.json").read_text())["steps"] == 5500
+    assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["steps"] == 5500
 
 
 def test_lockstep_is_deterministic_and_realtime_reports_timing(tmp_path):

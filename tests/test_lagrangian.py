@@ -1,5 +1,5 @@
 """Lagrangian finite-element baseline (reeve_fmu/studies/lagrangian.py) and the work-precision bench, against
-exact results (method.md §7) and the ALE engine. Short runs only: speed is measured by the bench, not here."""
+exact results (docs/theory.md §7) and the ALE engine. Short runs only: speed is measured by the bench, not here."""
 import math
 from pathlib import Path
 
@@ -22,7 +22,7 @@ def _hanging(statics=None):
 
 
 def test_hanging_static_elongation_exact():
-    """method.md §7 item 1: linear elements with consistent gravity give the exact elongation."""
+    """docs/theory.md §7 item 1: linear elements with consistent gravity give the exact elongation."""
     sc = _hanging()
     m = lag.build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
     sim = lag.LagrangianSimulator(m)
@@ -37,7 +37,7 @@ def test_hanging_static_elongation_exact():
 
 
 def test_hanging_first_axial_frequency_beta_tan_beta():
-    """method.md §7 item 2: first axial frequency from beta tan beta = rhoA L / m (Newton matrices of
+    """docs/theory.md §7 item 2: first axial frequency from beta tan beta = rhoA L / m (Newton matrices of
     the baseline at the static state; the planar mesh also has transverse string modes, the axial
     one is picked by its motion)."""
     sc = _hanging()

@@ -164,7 +164,7 @@ def test_planar_linear_multi_element_spans_match_1d():
 
 
 def test_statics_names_a_body_no_rope_holds():
-    txt = (ROOT / "scenes" / "hanging_rope.toml").read_text() + (
+    txt = (ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8") + (
         '\n[[bodies]]\nname = "loose"\nmass = 10.0\nposition = [5.0, 0.0, 0.0]\nfree = ["z"]\n')
     with pytest.raises(SolverError, match="loose.toml: initial statics: singular .* not held by any rope"):
         Simulator(build_model(loads_scene(txt, "loose.toml"))).initial_state()

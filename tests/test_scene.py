@@ -60,7 +60,7 @@ def test_bad_scene_names_key(old, new, key, problem):
 
 def test_invalid_toml_and_missing_file(tmp_path):
     p = tmp_path / "x.toml"
-    p.write_text("[scene\n")
+    p.write_text("[scene\n", encoding="utf-8")
     with pytest.raises(SceneError, match=r"x.toml: invalid TOML"):
         load_scene(p)
     with pytest.raises(SceneError, match="cannot read scene file"):

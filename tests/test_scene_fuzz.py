@@ -1,4 +1,4 @@
-"""Property-based bad-scene tests (issue 6 item 8): delete, retype or negate any key of the shipped
+"""Property-based bad-scene tests (docs/hard-cases.md, "Bad scene files"): delete, retype or negate any key of the shipped
 scenes. Every mutation must either still build or fail with a SceneError that names the file and the
 mutated key - never an unhandled exception from inside the code."""
 from pathlib import Path
@@ -62,7 +62,7 @@ def mutate(doc, path, how):
     return doc
 
 
-DOCS = {p.name: tomllib.loads(p.read_text()) for p in SCENES}
+DOCS = {p.name: tomllib.loads(p.read_text(encoding="utf-8")) for p in SCENES}
 PATHS = {name: leaves(doc) for name, doc in DOCS.items()}
 
 

@@ -1,5 +1,5 @@
-"""Traction slip (issue 6 item 3): groove friction with the Euler-Eytelwein limit on a slipping
-traction sheave, against the EN 81-50 cases (domain.md §3.3)."""
+"""Traction slip (docs/hard-cases.md, "Traction slip"): groove friction with the Euler-Eytelwein limit on a slipping
+traction sheave, against the EN 81-50 cases (docs/reference-sets.md §4.2)."""
 from dataclasses import replace
 from pathlib import Path
 import math
@@ -39,7 +39,7 @@ def run(sc, t_end):
 
 
 def test_check_vector_and_model_limit():
-    """e^(f alpha) of domain.md §3.3 exactly, and the model's capacity uses the same limit with the
+    """e^(f alpha) of docs/reference-sets.md §4.2 exactly, and the model's capacity uses the same limit with the
     geometric wrap angle (180 deg)."""
     v_rope = 3.2
     assert round(traction_limit(en81_mu("loading"), 95, 30, 180), 4) == 1.8582

@@ -1,4 +1,4 @@
-"""W2 wraps (method.md §4.4): short cubic ALE-ANCF elements on the sheave wraps, against exact results.
+"""W2 wraps (docs/theory.md §4.4): short cubic ALE-ANCF elements on the sheave wraps, against exact results.
 
 The scenes are planar Atwood-type machines written below (statics "none": released at rest from the
 geometry with the rope unstretched, or "rope-length" for the statics test). Reference values are closed
@@ -100,7 +100,7 @@ def test_w2_rope_mass_conserved_with_moving_s():
 
 
 def cosh_law(t, mA, mB, rhoA, L_tot, J, R):
-    """Rigid frictionless Atwood with rope mass (method.md §7 item 6) and sheave inertia J."""
+    """Rigid frictionless Atwood with rope mass (docs/theory.md §7 item 6) and sheave inertia J."""
     M = mA + mB + rhoA * L_tot + J / R ** 2
     a0 = (mA - mB) * G / M
     k = math.sqrt(2 * rhoA * G / M)
@@ -275,12 +275,12 @@ route = [ { anchor = "A", at = [0, 0, 0] }, { sheave = "pulley", wrap = "cw" },
 
 
 def test_w2_scene_errors():
-    base = (ROOT / "scenes" / "hanging_rope.toml").read_text()
+    base = (ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8")
     txt = base.replace('length = 50.0', 'length = 50.0\nwrap_model = "W2"')
     with pytest.raises(SceneError, match=r"\[ropes\[0\]\.wrap_model\] 'W2'.*element = 'cubic'"):
         loads_scene(txt, "h.toml")
     sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml")
-    d = (ROOT / "scenes" / "elevator_2to1.toml").read_text()
+    d = (ROOT / "scenes" / "elevator_2to1.toml").read_text(encoding="utf-8")
     d2 = d.replace('damping = 2e-3                 # s, Kelvin-Voigt', 'damping = 2e-3\nwrap_elements = 3')
     with pytest.raises(SceneError, match=r"\[ropes\[0\]\.wrap_elements\] only used with wrap_model = 'W2'"):
         loads_scene(d2, "e.toml")

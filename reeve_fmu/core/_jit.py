@@ -27,14 +27,14 @@ def _compiled_sources(pkg) -> list:
     import re
     rel_import = re.compile(r"^\s*from\s+(\.+)([\w.]*)\s+import\s+([\w, ()]+)", re.M)
     files = {p for p in pkg.rglob("*.py") if "__pycache__" not in p.parts}
-    todo = [p for p in files if re.search(r"from\s+\.+_jit\s+import|\bnjit\b", p.read_text())]
+    todo = [p for p in files if re.search(r"from\s+\.+_jit\s+import|\bnjit\b", p.read_text(encoding="utf-8"))]
     seen = set()
     while todo:
         p = todo.pop()
         if p in seen:
             continue
         seen.add(p)
-        for dots, mod, names in rel_import.findall(p.read_text()):
+        for dots, mod, names in rel_import.findall(p.read_text(encoding="utf-8")):
             base = p.parent
             for _ in range(len(dots) - 1):
                 base = base.parent
@@ -75,7 +75,7 @@ def _cache_dir():
     try:
         target.mkdir(parents=True, exist_ok=True)
         probe = target / ".write-test"
-        probe.write_text("ok")
+        probe.write_text("ok", encoding="utf-8")
         probe.unlink()
     except OSError:
         return None

@@ -64,7 +64,7 @@ _STATE_FORMAT = "reeve_fmu.drive/1"
 
 @dataclass
 class DriveParams:
-    """Drive parameters, SI units. Defaults: reference set R1 of domain.md (1000 kg, 1.6 m/s, 2:1 MRL).
+    """Drive parameters, SI units. Defaults: reference set R1 of docs/reference-sets.md §1 (1000 kg, 1.6 m/s, 2:1 MRL).
 
     Sequence per move: pre-torque ramp (`pretorque_time`) -> brake release command -> wait
     `brake_lift_delay` -> S-curve to the target landing -> zero-speed hold (`hold_time`) -> brake apply
@@ -84,7 +84,7 @@ class DriveParams:
     dead_time: float = 0.25e-3         # s, rounded to whole `Ts` sub-steps
     # speed / position control
     Ts: float = 125e-6                 # s, speed-loop sample time and Level-1 internal sub-step
-    Kp: float = 970.0                  # N m s/rad, symmetric optimum at ~5 Hz (domain §2.2)
+    Kp: float = 970.0                  # N m s/rad, symmetric optimum at ~5 Hz (docs/reference-sets.md §3.1)
     Ti: float = 0.127                  # s, speed PI integral time (math.inf disables the integrator)
     Kpos: float = 2.0                  # 1/s, position P gain added to the speed reference
     # S-curve and trip sequence

@@ -1,4 +1,4 @@
-"""Rope-sheave tangent points (method.md §4.2).
+"""Rope-sheave tangent points (docs/theory.md §4.2).
 
 A route stop is a circle (centre c, radius R, unit axis a, wrap sense sigma = +1 for a positive
 rotation about a) or a point (R = 0). The rope leaves stop A and arrives at stop B along the common

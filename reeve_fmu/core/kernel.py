@@ -32,9 +32,9 @@ Kernel = namedtuple("Kernel", [
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
 ])
 
-# Work arrays of one assembly: the q-space M and Q and every element's coordinates, velocities,
-# mass matrix and force vector. Bundled for the same reason as the kernel (one refcount per call).
-Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs"])
+# Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
+# mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as the kernel (one refcount per call).
+Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs", "Md"])
 
 if JIT:
     from numba import njit
@@ -132,6 +132,7 @@ if JIT:
         ("VE", types.float64[:, ::1]),
         ("MEs", types.float64[:, :, ::1]),
         ("QEs", types.float64[:, ::1]),
+        ("Md", types.float64[::1]),
     ])
 
     @structref.register
@@ -169,7 +170,7 @@ if JIT:
         return s
 
     @njit(cache=True)
-    def new_work(M, Q, QE, VE, MEs, QEs):
+    def new_work(M, Q, QE, VE, MEs, QEs, Md):
         w = structref.new(WORK_TYPE)
         w.M = M
         w.Q = Q
@@ -177,12 +178,13 @@ if JIT:
         w.VE = VE
         w.MEs = MEs
         w.QEs = QEs
+        w.Md = Md
         return w
 else:
     StateArrays = namedtuple("StateArrays", ["c", "q_ref", "q", "v", "a", "qdd", "u", "jac", "piv", "info"])
 
-    def new_work(M, Q, QE, VE, MEs, QEs):
-        return Work(M, Q, QE, VE, MEs, QEs)
+    def new_work(M, Q, QE, VE, MEs, QEs, Md):
+        return Work(M, Q, QE, VE, MEs, QEs, Md)
 
     def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
         return StateArrays(c, q_ref, q, v, a, qdd, u, jac, piv, info)

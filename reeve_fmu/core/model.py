@@ -1,8 +1,8 @@
 """Compile a Scene into an immutable Model (arrays) and create States.
 
-Coordinates (method.md §4.3, §4.6). Every rope node is either *Eulerian* (a tangent point fixed on a
+Coordinates (docs/theory.md §4.3, §4.6). Every rope node is either *Eulerian* (a tangent point fixed on a
 sheave or its body; its material coordinate s is free) or *Lagrangian* (a rope end; s fixed), so the
-ALE mass matrix has no null vector (§6.2). The generalized coordinates q are:
+ALE mass matrix has no null vector (docs/theory.md §6 item 2). The generalized coordinates q are:
 
     body translations          one per free axis (absolute coordinate of the body's reference point)
     sigma per sheave/drum      material coordinate s at the sheave's in-tangent node [m]
@@ -715,7 +715,7 @@ def _rotate(v, a, ang):
 
 def _wrap_elements(nodes, elements, n_in, n_out, geo, wrap, sh, j_sig, n_w, ir, stop,
                    body_point, world):
-    """W2 (method.md §4.4): n_w cubic elements on the wrap of one sheave, between the tangent points
+    """W2 (docs/theory.md §4.4): n_w cubic elements on the wrap of one sheave, between the tangent points
     of the incoming span (node n_in) and the outgoing span (node n_out). The wrap nodes sit on the
     pitch circle at equal angles, fixed to the sheave's body (Eulerian); their slope is the unit
     tangent of the circle (|d| = 1: the holonomic no-slip model neglects creep, so the wrap rope

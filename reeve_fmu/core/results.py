@@ -13,12 +13,12 @@ def write_csv(path, time, columns: dict):
     names = list(columns)
     data = np.column_stack([np.asarray(time, float)] + [np.asarray(columns[n], float) for n in names])
     header = ",".join(["time"] + names)
-    np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g")
+    np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g", encoding="utf-8")
     return path
 
 
 def read_csv(path) -> dict:
-    data = np.genfromtxt(path, delimiter=",", names=True, deletechars="", dtype=float)
+    data = np.genfromtxt(path, delimiter=",", names=True, deletechars="", dtype=float, encoding="utf-8")
     return {n: np.asarray(data[n]) for n in data.dtype.names}
 
 

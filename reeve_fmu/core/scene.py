@@ -110,7 +110,7 @@ class Buffer:
 
 @dataclass(frozen=True)
 class Brake:
-    """Spring-applied machine brake on the driven sheave (domain.md §2.4), elasto-plastic friction:
+    """Spring-applied machine brake on the driven sheave (docs/reference-sets.md §3.2), elasto-plastic friction:
     a stiff torsional spring (deflection z, stiffness e*T/stick_angle) whose deflection saturates
     smoothly at stick_angle, where the brake slips at the capacity e*T. It holds a load below 90 % of
     the capacity without creep. e in [0, 1] follows the command with a first-order lag."""
@@ -286,7 +286,11 @@ def _unique_name(r: _Reader, d, path, seen):
 
 
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:
-    """Validate a parsed TOML document and return a Scene."""
+    """Validate a parsed TOML document and return a Scene.
+
+    Section by section, in this order (the first error found is raised, naming the file and key):
+    [scene], [solver], [initial], [[bodies]], [[sheaves]], [[ropes]] with their routes, [drive],
+    [brake], [[buffers]]; then the scene's name and description."""
     r = _Reader(source)
     if not isinstance(data, dict):
         r.fail("", "the document must be a TOML table")
@@ -299,7 +303,29 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     gravity = r.vector(sc, "scene", "gravity", default=(0.0, 0.0, -9.81))
     t_end = r.number(sc, "scene", "t_end", 10.0, positive=True)
     output_step = r.number(sc, "scene", "output_step", 1e-3, positive=True)
+    solver = _parse_solver(r, data)
+    ini = r.table(data.get("initial", {}), "initial", SCHEMA_KEYS["initial"])
+    statics = r.string(ini, "initial", "statics", "positions", ("positions", "rope-length", "none"))
 
+    names: dict[str, str] = {}      # every named item: bodies, sheaves, ropes and buffers share one namespace
+    bodies = _parse_bodies(r, data, names)
+    sheaves = _parse_sheaves(r, data, names, model, {b.name for b in bodies})
+    used_sheaves: dict[str, str] = {}
+    ropes = _parse_ropes(r, data, names, model, statics, {b.name for b in bodies}, {s.name: s for s in sheaves},
+                         used_sheaves)
+    drive = _parse_drive(r, data, sheaves, ropes, used_sheaves)
+    brake = _parse_brake(r, data, drive)
+    buffers = _parse_buffers(r, data, names, bodies)
+
+    extra = {k: data[k] for k in EXTRA_SECTIONS if k in data}
+    return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
+                 bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
+                 solver=solver, brake=brake, buffers=tuple(buffers), statics=statics, t_end=t_end, output_step=output_step, source=source,
+                 description=r.string(sc, "scene", "description", ""), extra=extra,
+                 sheave_contact=r.string(sc, "scene", "sheave_contact", "creep", ("creep", "rigid")))
+
+
+def _parse_solver(r: _Reader, data) -> Solver:
     sv = r.table(data.get("solver", {}), "solver", SCHEMA_KEYS["solver"])
     solver = Solver(
         method=r.string(sv, "solver", "method", "gen-alpha", ("gen-alpha", "radau", "dop853")),
@@ -312,11 +338,10 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     )
     if solver.rho_inf > 1.0:
         r.fail("solver.rho_inf", f"must be in [0, 1], got {solver.rho_inf:g}")
+    return solver
 
-    ini = r.table(data.get("initial", {}), "initial", SCHEMA_KEYS["initial"])
-    statics = r.string(ini, "initial", "statics", "positions", ("positions", "rope-length", "none"))
 
-    names: dict[str, str] = {}
+def _parse_bodies(r: _Reader, data, names) -> list:
     bodies = []
     for i, b in enumerate(r.array_of_tables(data, "bodies")):
         path = f"bodies[{i}]"
@@ -329,8 +354,12 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                            position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
                            free=tuple(a for a in AXES if a in free),
                            damping=r.number(b, path, "damping", 0.0, nonneg=True)))
-    body_names = {b.name for b in bodies}
+    return bodies
 
+
+def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
+    """Sheaves, drums and traction sheaves; a slipping sheave's groove must give a friction; the
+    coplanar models need axes along y."""
     sheaves = []
     for i, s in enumerate(r.array_of_tables(data, "sheaves")):
         path = f"sheaves[{i}]"
@@ -365,14 +394,17 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                                     sheaves[-1].groove)
             except ValueError as exc:
                 r.fail(path, f"groove: {exc}")
-    sheave_names = {s.name: s for s in sheaves}
     if model in ("axial-1d", "planar"):
         for i, s in enumerate(sheaves):
             if abs(abs(s.axis[1]) - 1.0) > 1e-9:
                 r.fail(f"sheaves[{i}].axis", f"model {model!r} needs sheave axes along y, got {list(s.axis)}")
+    return sheaves
 
+
+def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_names, used_sheaves) -> list:
+    """Ropes with their routes (`used_sheaves` collects sheave -> route stop path); element, wrap
+    model and rope length checked against the model and the statics mode."""
     ropes = []
-    used_sheaves: dict[str, str] = {}
     rope_list = r.array_of_tables(data, "ropes")
     if not rope_list:
         r.fail("ropes", "a scene needs at least one [[ropes]] table")
@@ -380,39 +412,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         path = f"ropes[{i}]"
         r.table(rp, path, SCHEMA_KEYS["ropes"])
         name = _unique_name(r, rp, path, names)
-        route_raw = rp.get("route")
-        if not isinstance(route_raw, list) or len(route_raw) < 2 or not all(isinstance(x, dict) for x in route_raw):
-            r.fail(f"{path}.route", "must be a list of at least two inline tables (anchor, sheaves..., anchor)")
-        stops = []
-        for k, st in enumerate(route_raw):
-            sp = f"{path}.route[{k}]"
-            r.table(st, sp, SCHEMA_KEYS["route"])
-            end = k in (0, len(route_raw) - 1)
-            if "sheave" in st:
-                sh = r.string(st, sp, "sheave")
-                if sh not in sheave_names:
-                    r.fail(f"{sp}.sheave", f"unknown sheave {sh!r}; sheaves: {', '.join(sorted(sheave_names)) or 'none'}")
-                if sh in used_sheaves:
-                    r.fail(f"{sp}.sheave", f"sheave {sh!r} is already used at {used_sheaves[sh]}")
-                used_sheaves[sh] = sp
-                if "anchor" in st or "at" in st:
-                    r.fail(sp, "a route stop is either a sheave or an anchor, not both")
-                if sheave_names[sh].kind == "drum":
-                    if k != 0:
-                        r.fail(f"{sp}.sheave", f"drum {sh!r} must be the first stop of the route "
-                                               "(the rope end is fixed on the drum)")
-                elif end:
-                    r.fail(f"{sp}", "the route must start and end at an anchor (or a drum)")
-                stops.append(RouteStop(sheave=sh, wrap=r.string(st, sp, "wrap", "ccw", ("ccw", "cw"))))
-            else:
-                if not end:
-                    r.fail(sp, "only the first and last route stops may be anchors; give 'sheave = ...'")
-                anchor = r.string(st, sp, "anchor", required=True)
-                if anchor != "ground" and anchor not in body_names:
-                    r.fail(f"{sp}.anchor", f"must be 'ground' or a body name, got {anchor!r}")
-                stops.append(RouteStop(anchor=anchor, at=r.vector(st, sp, "at", required=True),
-                                       hitch_stiffness=r.number(st, sp, "hitch_stiffness", 0.0, nonneg=True),
-                                       hitch_damping=r.number(st, sp, "hitch_damping", 0.0, nonneg=True)))
+        stops = _parse_route(r, rp, path, body_names, sheave_names, used_sheaves)
         length = r.number(rp, path, "length", None, positive=True) if "length" in rp else None
         ropes.append(Rope(name=name, EA=r.number(rp, path, "EA", positive=True, required=True),
                           rhoA=r.number(rp, path, "rhoA", positive=True, required=True),
@@ -439,7 +439,50 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                                       f"{ropes[0].element!r})")
         if statics == "rope-length" and length is None:
             r.fail(f"{path}.length", "missing: initial.statics = 'rope-length' needs each rope's unstretched length")
+    return ropes
 
+
+def _parse_route(r: _Reader, rp, path, body_names, sheave_names, used_sheaves) -> list:
+    """One rope's route: an anchor (or a drum), sheaves each used once, an anchor."""
+    route_raw = rp.get("route")
+    if not isinstance(route_raw, list) or len(route_raw) < 2 or not all(isinstance(x, dict) for x in route_raw):
+        r.fail(f"{path}.route", "must be a list of at least two inline tables (anchor, sheaves..., anchor)")
+    stops = []
+    for k, st in enumerate(route_raw):
+        sp = f"{path}.route[{k}]"
+        r.table(st, sp, SCHEMA_KEYS["route"])
+        end = k in (0, len(route_raw) - 1)
+        if "sheave" in st:
+            sh = r.string(st, sp, "sheave")
+            if sh not in sheave_names:
+                r.fail(f"{sp}.sheave", f"unknown sheave {sh!r}; sheaves: {', '.join(sorted(sheave_names)) or 'none'}")
+            if sh in used_sheaves:
+                r.fail(f"{sp}.sheave", f"sheave {sh!r} is already used at {used_sheaves[sh]}")
+            used_sheaves[sh] = sp
+            if "anchor" in st or "at" in st:
+                r.fail(sp, "a route stop is either a sheave or an anchor, not both")
+            if sheave_names[sh].kind == "drum":
+                if k != 0:
+                    r.fail(f"{sp}.sheave", f"drum {sh!r} must be the first stop of the route "
+                                           "(the rope end is fixed on the drum)")
+            elif end:
+                r.fail(f"{sp}", "the route must start and end at an anchor (or a drum)")
+            stops.append(RouteStop(sheave=sh, wrap=r.string(st, sp, "wrap", "ccw", ("ccw", "cw"))))
+        else:
+            if not end:
+                r.fail(sp, "only the first and last route stops may be anchors; give 'sheave = ...'")
+            anchor = r.string(st, sp, "anchor", required=True)
+            if anchor != "ground" and anchor not in body_names:
+                r.fail(f"{sp}.anchor", f"must be 'ground' or a body name, got {anchor!r}")
+            stops.append(RouteStop(anchor=anchor, at=r.vector(st, sp, "at", required=True),
+                                   hitch_stiffness=r.number(st, sp, "hitch_stiffness", 0.0, nonneg=True),
+                                   hitch_damping=r.number(st, sp, "hitch_damping", 0.0, nonneg=True)))
+    return stops
+
+
+def _parse_drive(r: _Reader, data, sheaves, ropes, used_sheaves) -> Drive:
+    """The drive on a traction sheave or drum of a route (and the slipping-sheave rules)."""
+    sheave_names = {s.name: s for s in sheaves}
     dv = r.table(data.get("drive", {}), "drive", SCHEMA_KEYS["drive"])
     kind = r.string(dv, "drive", "kind", "none", ("none", "speed", "torque", "external"))
     dsheave = r.string(dv, "drive", "sheave", None)
@@ -469,15 +512,21 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         r.fail("drive.table", "missing: drive.profile = 'table' needs a [[t, v], ...] speed table")
     if kind == "torque" and not drive.torque:
         r.fail("drive.torque", "missing: drive.kind = 'torque' needs a [[t, tau], ...] torque table")
+    return drive
 
+
+def _parse_brake(r: _Reader, data, drive: Drive) -> Brake:
     bk = r.table(data.get("brake", {}), "brake", SCHEMA_KEYS["brake"])
     brake = Brake(torque=r.number(bk, "brake", "torque", 0.0, nonneg=True),
                   stick_angle=r.number(bk, "brake", "stick_angle", 1e-4, positive=True),
                   engage_time=r.number(bk, "brake", "engage_time", 0.02, positive=True),
                   initially_applied=r.boolean(bk, "brake", "initially_applied", True))
-    if brake.torque > 0 and kind == "none":
+    if brake.torque > 0 and drive.kind == "none":
         r.fail("brake", "a brake acts on the driven sheave: give a [drive] with kind and sheave")
+    return brake
 
+
+def _parse_buffers(r: _Reader, data, names, bodies) -> list:
     buffers = []
     bodies_by_name = {b.name: b for b in bodies}
     for i, bf in enumerate(r.array_of_tables(data, "buffers")):
@@ -494,13 +543,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                               stiffness=r.number(bf, path, "stiffness", positive=True, required=True),
                               damping=r.number(bf, path, "damping", 0.0, nonneg=True), axis=axis,
                               side=r.string(bf, path, "side", "below", ("below", "above"))))
-
-    extra = {k: data[k] for k in EXTRA_SECTIONS if k in data}
-    return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
-                 bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
-                 solver=solver, brake=brake, buffers=tuple(buffers), statics=statics, t_end=t_end, output_step=output_step, source=source,
-                 description=r.string(sc, "scene", "description", ""), extra=extra,
-                 sheave_contact=r.string(sc, "scene", "sheave_contact", "creep", ("creep", "rigid")))
+    return buffers
 
 
 def load_scene(path) -> Scene:

@@ -1,4 +1,4 @@
-"""Integrators for M(q) qdd = Q(q, qdot, t, u) and the static equilibrium (method.md §4.7).
+"""Integrators for M(q) qdd = Q(q, qdot, t, u) and the static equilibrium (docs/theory.md §4.7).
 
 After the linear constraints are eliminated (p = B q + c, model.py) the equations are an ODE of index
 0 in q: no multipliers, no drift. Prescribed coordinates (a speed-driven sheave) are rheonomic: they
@@ -23,6 +23,8 @@ import numpy as np
 
 from ._jit import njit
 from .model import Model, State, new_state
+from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
+                     newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
                      creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
                      traction_deflection, traction_slip, workspace)
@@ -91,6 +93,9 @@ def lu_solve(LU, piv, b):
 
 
 # --------------------------------------------------------------------------------- generalized-alpha
+# From this many free coordinates on the Newton matrix is banded (core/sparse.py); below, the dense
+# path is faster (measured in benchmarks/scaling.py, docs/performance.md).
+SPARSE_MIN_FREE = 40
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
 
 @njit(cache=True, inline="always")
@@ -213,13 +218,94 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
 
 
 @njit(cache=True)
+def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, R,
+                        R0, rb, am, af, beta, gamma, tol, maxit):
+    """_newton_step with the banded Newton matrix of core/sparse.py (coloured differences, band LU)
+    and the element-wise residual; same iteration, retries and return codes."""
+    n = SP.n
+    perm = SP.perm
+    bq = h * h * beta * (1.0 - af) / (1.0 - am)
+    gv = h * gamma * (1.0 - af) / (1.0 - am)
+    if K.mot_crp >= 0:
+        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
+    for k in range(K.presc.shape[0]):
+        a[K.presc[k]] = qdd[K.presc[k]]
+    for attempt in range(4):
+        if attempt == 0 or attempt == 3:
+            for fi in range(K.free.shape[0]):   # predictor: constant acceleration
+                qdd[K.free[fi]] = qddo[K.free[fi]]
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[0] != h or attempt > 0:
+            ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+            info[3] += 1
+            if ok < 0:
+                info[7] = -ok - 1
+                return 2
+            if ok == 0:
+                info[0] = 0.0
+                continue
+            info[0] = h
+        for it in range(maxit):
+            if attempt > 0 and it > 0:
+                ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+                info[3] += 1
+                if ok <= 0:
+                    info[0] = 0.0
+                    break
+            st = residual_sparse(K, SP, W, c, q, v, qdd, t1, ue, R)
+            if st < 0:
+                info[7] = -st - 1
+                return 2
+            for b in range(n):
+                rb[b] = R[perm[b]]
+            bordered_solve(jac, piv, n, SP.nb, SP.kl, SP.ku, rb)
+            dmax = 0.0
+            amax = 0.0
+            qmax = 0.0
+            for b in range(n):
+                i = perm[b]
+                qdd[i] -= rb[b]
+                if abs(rb[b]) > dmax:
+                    dmax = abs(rb[b])
+                if abs(qdd[i]) > amax:
+                    amax = abs(qdd[i])
+                if abs(q[i]) > qmax:
+                    qmax = abs(q[i])
+            _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[2] += 1
+            if not (dmax == dmax) or dmax > 1e300:
+                break
+            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+                if it >= REFRESH_AFTER:
+                    info[0] = 0.0
+                return 0
+    return 1
+
+
+@njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
     Newton iteration fails is redone as 4, 16 and 64 substeps (sharp events: slack -> taut, buffer
     contact, brake engagement). Writes outputs every out_every steps into ybuf rows (0: none).
     S.info = [h of jac, steps, iterations, jacobian builds, status, brake engagement,
     brake deflection, element of a vanishing span]. Returns (status, t, steps done); on failure the
-    state is the last good step."""
+    state is the last good step. Dense Newton matrix (S.jac is nf x nf)."""
+    return _integrate(K, None, S, t0, h, nsteps, params, ybuf, out_every)
+
+
+@njit(cache=True)
+def integrate_sparse(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
+    """integrate() with the banded Newton matrix SP (core/sparse.py); S.jac has shape
+    sparse.jac_shape(SP)."""
+    return _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every)
+
+
+@njit(cache=True)
+def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
+    """The stepping loop of integrate / integrate_sparse (SP None: dense; the branch is resolved at
+    compile time)."""
     c = S.c
     q_ref = S.q_ref
     q = S.q
@@ -238,8 +324,16 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     maxit = int(params[5])
     nq = K.nq
     nf = K.free.shape[0]
-    r = np.empty(nf)
-    r0 = np.empty(nf)
+    if SP is None:
+        W = workspace(K)
+        r = np.empty(nf)
+        r0 = np.empty(nf)
+        rb = r
+    else:
+        W = workspace(K, False)
+        r = np.empty(nq)
+        r0 = np.empty(nq)
+        rb = np.empty(max(nf, 1))
     qo = np.empty(nq)
     vo = np.empty(nq)
     ao = np.empty(nq)
@@ -249,7 +343,6 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     a1 = np.empty(nq)
     qdd1 = np.empty(nq)
     y = np.empty(K.out_kind.shape[0])
-    W = workspace(K)
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
     ncrp = K.crp_s.shape[0]
@@ -306,8 +399,13 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
                 vo[:] = v
                 ao[:] = a
                 qddo[:] = qdd
-                status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
-                                      piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                if SP is None:
+                    status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
+                                          piv, info, r, r0, am, af, beta, gamma, tol, maxit)
+                else:
+                    status = _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs,
+                                                 ue, jac, piv, info, r, r0, rb, am, af, beta, gamma, tol,
+                                                 maxit)
                 wfresh = status == 0
                 for k in range(K.drum_dof.shape[0]):
                     if status == 0 and q[K.drum_dof[k]] <= 0.0:
@@ -357,6 +455,20 @@ def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     return 0, t, nsteps
 
 
+def _solve(J, b):
+    """J^-1 b for a dense or scipy sparse J; LinAlgError when J is singular."""
+    if not hasattr(J, "toarray"):
+        return np.linalg.solve(J, b)
+    from scipy.sparse.linalg import splu
+    try:
+        x = splu(J.tocsc()).solve(b)
+    except RuntimeError as exc:      # "Factor is exactly singular"
+        raise np.linalg.LinAlgError(str(exc)) from None
+    if not np.all(np.isfinite(x)):
+        raise np.linalg.LinAlgError("singular matrix")
+    return x
+
+
 def gen_alpha_params(rho_inf: float):
     """Chung-Hulbert parameters: alpha_m, alpha_f, beta, gamma."""
     r = float(rho_inf)
@@ -400,7 +512,10 @@ class Simulator:
     """A step is a function of (Model, State, inputs); the simulator only holds settings."""
 
     def __init__(self, model: Model, method: str | None = None, step: float | None = None,
-                 rho_inf: float | None = None, newton_tol: float | None = None, max_iter: int = 12):
+                 rho_inf: float | None = None, newton_tol: float | None = None, max_iter: int = 12,
+                 sparse: bool | None = None):
+        """sparse: banded Newton matrix (True), dense (False) or by size (None: banded from
+        SPARSE_MIN_FREE free coordinates on, when the ordered band is narrower than the matrix)."""
         sv = model.scene.solver
         self.model = model
         self.method = method or sv.method
@@ -416,8 +531,54 @@ class Simulator:
         self.params = np.array([*gen_alpha_params(self.rho_inf), self.tol, max_iter], float)
         self._fast_integrate = None
         self._stepbuf = None
+        self.sparse = sparse
+        self._sp = None          # core/sparse.SparseNewton of the banded path, None: dense
+        self._sp_chosen = False
+        self._sp_state = None    # the State whose jac layout was last checked by step()
         self.warnings: list[str] = []   # conditions a user should know about (not errors)
         self.rtol, self.atol = sv.rtol, sv.atol
+
+    # ------------------------------------------------------------------ Newton matrix layout
+    def _newton_path(self, st: State):
+        """The banded structure for the step (None: dense), chosen once; st.jac/st.piv are reshaped
+        to hold its factors (a State from the other layout gets fresh ones)."""
+        if not self._sp_chosen:
+            self._sp = self._choose_sparse(st)
+            self._sp_chosen = True
+        SP = self._sp
+        nf = len(self.model.K.free)
+        shape = (nf, nf) if SP is None else jac_shape(SP)
+        if st.jac.shape != shape:
+            st.jac = np.zeros(shape)
+            st.piv = np.zeros(shape[0], np.int64)
+            st.info[0] = 0.0          # no valid factors: rebuild on the next step
+            st.__dict__.pop("_arrays", None)
+        return SP
+
+    def _choose_sparse(self, st: State):
+        m = self.model
+        nf = len(m.K.free)
+        if self.method != "gen-alpha" or self.sparse is False or (self.sparse is None and nf < SPARSE_MIN_FREE):
+            return None
+        SP = build_sparse(m.K)
+        if self.sparse is None and 3 * SP.kl + SP.ku + 1 + 2 * SP.nb >= nf:
+            return None               # the band is the whole matrix: dense LU is as cheap
+        am, af, beta, gamma = self.params[:4]
+        bq = self.h ** 2 * beta * (1.0 - af) / (1.0 - am)
+        gv = self.h * gamma * (1.0 - af) / (1.0 - am)
+        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
+                              st.t, self._kernel_inputs_at(st), bq, gv)
+        if leaks:
+            self.warnings.append(f"{m.scene.source}: {leaks} residual rows depend on coordinates outside the "
+                                 f"banded Newton pattern; the dense Newton matrix is used")
+            return None
+        return SP
+
+    def _integrate(self, st: State, t0, h, n, ybuf, every):
+        SP = self._newton_path(st)
+        if SP is None:
+            return integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
+        return integrate_sparse(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
 
     # ------------------------------------------------------------------ statics / initial state
     def initial_state(self, statics: str | None = None, t0: float = 0.0) -> State:
@@ -441,6 +602,7 @@ class Simulator:
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
+        self._newton_path(st)
         return st
 
     def _preload_traction(self, st: State):
@@ -519,16 +681,11 @@ class Simulator:
                 raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
                                   f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
-            J = np.empty((len(eqs), len(x)))
-            for j in range(len(x)):
-                dx = 1e-7 * (1.0 + abs(x[j]))
-                xp = x.copy()
-                xp[j] += dx
-                rp = resid(xp)[0]
-                J[:, j] = (rp - r) / dx
+            J = self._statics_jacobian(resid, x, r, unknowns, eqs, KS, u, st.t)
             try:
-                step = np.linalg.solve(J, -r)
+                step = _solve(J, -r)
             except np.linalg.LinAlgError:
+                J = J.toarray() if hasattr(J, "toarray") else J
                 # Exactly singular: e.g. interior nodes of a straight, still unstretched span in the
                 # planar model have no transverse stiffness until the rope carries tension. The
                 # minimum-norm step leaves those directions alone (their residual is zero) and loads
@@ -566,6 +723,89 @@ class Simulator:
                     raise SolverError(f"{m.scene.source}: initial statics: rope {m.scene.ropes[ir].name!r} "
                                       f"span {k} would be in compression (a tension-only rope cannot hold)")
         return st
+
+    def _statics_jacobian(self, resid, x, r, unknowns, eqs, KS, u, t):
+        """d r / d x by forward differences. From SPARSE_MIN_FREE unknowns on, unknowns that share no
+        equation (structural pattern, core/sparse.py) are perturbed together: every entry is computed
+        from the same numbers as with one residual per unknown, with far fewer residuals; the
+        coordinates' columns then come from compiled element-wise residuals (a scipy sparse matrix
+        is returned) and each rope length (positions mode) from one residual."""
+        n = len(x)
+        if n >= SPARSE_MIN_FREE:
+            J = self._statics_jacobian_banded(resid, x, r, unknowns, eqs, KS, u, t)
+            if J is not None:
+                return J
+        J = np.zeros((len(eqs), n))
+        if n >= SPARSE_MIN_FREE:
+            groups, rows = self._statics_groups(tuple(unknowns), tuple(eqs))
+        else:
+            groups, rows = [np.array([j]) for j in range(n)], None
+        for g in groups:
+            dx = 1e-7 * (1.0 + np.abs(x[g]))
+            xp = x.copy()
+            xp[g] += dx
+            d = resid(xp)[0] - r
+            for j, dj in zip(g, dx):
+                if rows is None:
+                    J[:, j] = d / dj
+                else:
+                    J[rows[j], j] = d[rows[j]] / dj
+        return J
+
+    def _statics_jacobian_banded(self, resid, x, r, unknowns, eqs, KS, u, t):
+        import scipy.sparse as sp
+        nq = self.model.nq
+        qcols = [k for k, (kind, _) in enumerate(unknowns) if kind == "q"]
+        U = tuple(sorted(set(eqs) | {unknowns[k][1] for k in qcols}))
+        cached = self.__dict__.get("_statics_sp")
+        if cached is None or cached[0] != U:
+            cached = self.__dict__["_statics_sp"] = (U, build_sparse(self.model.K._replace(free=np.array(U, np.int64))))
+        SPs = cached[1]
+        _, qq, _, c = resid(x)
+        Jb = np.zeros(jac_shape(SPs))
+        status = newton_matrix_sparse(KS, SPs, workspace(KS, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
+                                      np.empty(nq), np.empty(nq), np.empty(SPs.n), 0.0, 1.0, 0.0, 1e-7)
+        if status != 1:
+            return None
+        A = unpack_sparse(Jb, SPs)                    # d(M qdd - Q)/dq = -dQ/dq in SPs order
+        pos = np.empty(nq, np.int64)
+        pos[SPs.perm] = np.arange(SPs.n)
+        rows = pos[np.asarray(eqs, np.int64)]
+        blocks = [-A[rows][:, pos[[unknowns[k][1] for k in qcols]]]]
+        order = list(qcols)
+        for k, (kind, _) in enumerate(unknowns):     # rope lengths: one residual each
+            if kind != "q":
+                dx = 1e-7 * (1.0 + abs(x[k]))
+                xp = x.copy()
+                xp[k] += dx
+                blocks.append(sp.csr_matrix(((resid(xp)[0] - r) / dx)[:, None]))
+                order.append(k)
+        J = sp.hstack(blocks).tocsc()
+        inv = np.empty(len(order), np.int64)
+        inv[order] = np.arange(len(order))
+        return J[:, inv]
+
+    def _statics_groups(self, unknowns, eqs):
+        """Column groups and the equation rows of each unknown (a rope length touches all)."""
+        key = (unknowns, eqs)
+        cached = self.__dict__.get("_statics_groups_cache")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        P = newton_pattern(self.model.K).tocsc()
+        pos = np.full(self.model.nq, -1)
+        pos[list(eqs)] = np.arange(len(eqs))
+        rows = []
+        for kind, i in unknowns:
+            if kind == "q":
+                rr = pos[P.indices[P.indptr[i]:P.indptr[i + 1]]]
+                rows.append(np.sort(rr[rr >= 0]))
+            else:
+                rows.append(np.arange(len(eqs)))
+        ptr = np.concatenate([[0], np.cumsum([len(rr) for rr in rows])]).astype(np.int64)
+        gptr, gcols = colour_columns(ptr, np.concatenate(rows).astype(np.int64), len(eqs), len(unknowns))
+        groups = [gcols[gptr[k]:gptr[k + 1]] for k in range(len(gptr) - 1)]
+        self.__dict__["_statics_groups_cache"] = (key, (groups, rows))
+        return groups, rows
 
     def _consistent_acceleration(self, st: State):
         m = self.model
@@ -612,7 +852,7 @@ class Simulator:
             h = span / n
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
-        status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
+        status, t, done = self._integrate(st, t0, h, n, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
             raise SolverError(self._status_message(status, st))
@@ -644,10 +884,17 @@ class Simulator:
         fast = self._fast_integrate
         if fast is None:
             buf = self._stepbuf = np.empty((1, len(self.model.output_names) + 1))
-            status, t, done = integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
-            self._fast_integrate = _entry_point(integrate)
+            status, t, done = self._integrate(st, t0, h, n, buf, n)
+            self._sp_state = st
+            self._fast_integrate = _entry_point(integrate if self._sp is None else integrate_sparse)
         else:
-            status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
+            if st is not self._sp_state:
+                self._newton_path(st)
+                self._sp_state = st
+            if self._sp is None:
+                status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
+            else:
+                status, t, done = fast(self.model.KJ, self._sp, st.arrays(), t0, h, n, self.params, buf, n)
         if status != 0:
             st.t = t0 + done * h
             raise SolverError(self._status_message(status, st))

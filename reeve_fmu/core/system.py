@@ -3,7 +3,7 @@
 Element matrices live in p-space (node positions and material coordinates); p = B q + c with B
 sparse (CSR), so M = B^T M_p B and Q = B^T Q_p are accumulated element by element through the few
 non-zeros of each B row. q-level terms: body/sheave/wrap inertia (M0), body and wrap gravity (F0),
-hitch springs and guide damping, rope stored on drums (variable mass, method §2.5), motor torque.
+hitch springs and guide damping, rope stored on drums (variable mass, docs/theory.md §2.5), motor torque.
 """
 from __future__ import annotations
 
@@ -302,12 +302,13 @@ def gather(K, c, q, v, ie, QE, VE):
 
 
 @njit(cache=True)
-def workspace(K):
-    """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work)."""
+def workspace(K, dense=True):
+    """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work). dense=False: no q-space
+    matrix (the sparse residual, core/sparse.py, never forms it)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    return new_work(np.empty((K.nq, K.nq)), np.empty(K.nq), np.empty((n_el, ne)), np.empty((n_el, ne)),
-                    np.empty((n_el, ne, ne)), np.empty((n_el, ne)))
+    return new_work(np.empty((K.nq, K.nq if dense else 0)), np.empty(K.nq), np.empty((n_el, ne)),
+                    np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)), np.empty(K.nq))
 
 
 @njit(cache=True)
@@ -316,14 +317,84 @@ def assemble(K, c, q, v, t, u, M, Q):
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
     W = new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)),
-                 np.empty((n_el, ne)))
+                 np.empty((n_el, ne)), np.empty(K.nq))
     return assemble_ws(K, W, c, q, v, t, u)
+
+
+@njit(cache=True, inline="always")
+def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
+    """Gather element ie and evaluate its kernel into MEs[ie], QEs[ie] (the element step of
+    assemble_ws, which writes it out for speed). Returns (status, evaluated):
+    status -1 - ie when the span is shorter than l_min (checked before any 1/l; the element is then
+    evaluated only while its material length is positive), else 0."""
+    nd = K.nd
+    ne = K.el_idx.shape[1]
+    gather(K, c, q, v, ie, QE, VE)
+    status = 0
+    if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
+        status = -1 - ie
+        if not QE[ie, ne - 1] - QE[ie, 2 * nd] > 0.0:
+            return status, False
+    if K.el_type == 1:
+        cubic_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                         K.el_g, QE, VE, MEs, QEs, ie)
+    elif nd == 1:
+        linear_element_1d_at(K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g[ie, 0],
+                             K.el_C[ie], QE, VE, MEs, QEs, ie)
+    else:
+        linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g,
+                          K.el_C[ie], QE, VE, MEs, QEs, ie)
+    return status, True
+
+
+@njit(cache=True, inline="always")
+def q_terms(K, W, q, v, t, u):
+    """q-level terms after the element pass: generalized forces added to W.Q (hitch springs, buffers,
+    stored drum rope, drive, brake, groove friction) and the diagonal q-level mass set in W.Md."""
+    Q = W.Q
+    Md = W.Md
+    for j in range(K.nq):
+        Md[j] = 0.0
+    for k in range(K.spr_dof.shape[0]):
+        j = K.spr_dof[k]
+        Q[j] -= K.spr_k[k] * q[j] + K.spr_c[k] * v[j]
+    for k in range(K.buf_dof.shape[0]):
+        Q[K.buf_dof[k]] += K.buf_sign[k] * buffer_force(K, q, v, k)
+    for k in range(K.drum_dof.shape[0]):
+        # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (docs/theory.md §2.5, variable mass)
+        # drums start the route: the stored rope is s in [0, sigma]
+        j = K.drum_dof[k]
+        Md[j] += K.drum_rhoA[k] * q[j]
+        Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
+    gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
+    for k in range(K.crp_s.shape[0]):
+        j = K.crp_s[k]
+        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k)
+        Q[j] += fc
+        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
+            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
+            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
+            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
+            Md[j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
+            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
+            if k == K.mot_crp:
+                gain *= kap
+    if K.mot_dof >= 0 and K.drive_kind >= 2:
+        Q[K.mot_dof] += drive_torque(K, t, u) * gain
+    if K.brake_T > 0.0 and K.mot_dof >= 0:
+        Q[K.mot_dof] += brake_torque(K, q, v, u) * gain
+    if K.trac_s >= 0:
+        # friction f on the rope along the route: virtual work f * (-kappa d sigma) on the rope and
+        # -f * R d theta on the sheave
+        f = traction_force(K, q, u, W.QE, W.QEs)
+        Q[K.trac_s] -= f * _trac_kappa(K, u)
+        Q[K.trac_th] -= f * K.trac_R
 
 
 @njit(cache=True)
 def assemble_ws(K, W, c, q, v, t, u):
     """W.M (nq x nq) and W.Q (nq) at (q, v, t), keeping every element's qe, ve, Me, Qe in W.
-    Returns -1 if an element has non-positive material length (vanishing span), else 0.
+    Returns -1 - element if a span is shorter than l_min (vanishing span), else 0.
     Kernel fields are read into locals once: attribute access inside the loops measurably costs."""
     nq = K.nq
     nd = K.nd
@@ -344,13 +415,15 @@ def assemble_ws(K, W, c, q, v, t, u):
     tonly = K.el_tonly
     G = K.el_g
     C = K.el_C
-    W = el_map.shape[2]
+    nw = el_map.shape[2]
     for i in range(nq):
         Q[i] = F0[i]
         for j in range(nq):
             M[i, j] = M0[i, j]
     status = 0
     for ie in range(el_map.shape[0]):
+        # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
+        # this loop cost ~30 % of the 1D step
         gather(K, c, q, v, ie, QE, VE)
         if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
             status = -1 - ie   # vanishing span: the event names the element (checked before any 1/l)
@@ -366,7 +439,7 @@ def assemble_ws(K, W, c, q, v, t, u):
             linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
                               QE, VE, MEs, QEs, ie)
         for a in range(ne):
-            for wa in range(W):
+            for wa in range(nw):
                 ba = el_coef[ie, a, wa]
                 if ba == 0.0:
                     continue
@@ -374,42 +447,12 @@ def assemble_ws(K, W, c, q, v, t, u):
                 Q[ia] += ba * QEs[ie, a]
                 for b in range(ne):
                     mab = ba * MEs[ie, a, b]
-                    for wb in range(W):
+                    for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
-    for k in range(K.spr_dof.shape[0]):
-        j = K.spr_dof[k]
-        Q[j] -= K.spr_k[k] * q[j] + K.spr_c[k] * v[j]
-    for k in range(K.buf_dof.shape[0]):
-        Q[K.buf_dof[k]] += K.buf_sign[k] * buffer_force(K, q, v, k)
-    for k in range(K.drum_dof.shape[0]):
-        # stored rope: T = 1/2 rhoA L_st sdot^2 with dL_st/ds = sign (method §2.5, variable mass)
-        # drums start the route: the stored rope is s in [0, sigma]
-        j = K.drum_dof[k]
-        M[j, j] += K.drum_rhoA[k] * q[j]
-        Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
-    gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
-    for k in range(K.crp_s.shape[0]):
-        j = K.crp_s[k]
-        kap, rate, fc = creep_terms(K, QE, VE, v, k)
-        Q[j] += fc
-        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
-            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
-            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
-            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
-            M[j, j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
-            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
-            if k == K.mot_crp:
-                gain *= kap
-    if K.mot_dof >= 0 and K.drive_kind >= 2:
-        Q[K.mot_dof] += drive_torque(K, t, u) * gain
-    if K.brake_T > 0.0 and K.mot_dof >= 0:
-        Q[K.mot_dof] += brake_torque(K, q, v, u) * gain
-    if K.trac_s >= 0:
-        # friction f on the rope along the route: virtual work f * (-kappa d sigma) on the rope and
-        # -f * R d theta on the sheave
-        f = traction_force(K, q, u, QE, QEs)
-        Q[K.trac_s] -= f * _trac_kappa(K, u)
-        Q[K.trac_th] -= f * K.trac_R
+    q_terms(K, W, q, v, t, u)
+    Md = W.Md
+    for j in range(nq):
+        M[j, j] += Md[j]
     return status
 
 
@@ -486,7 +529,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 # reaction of the prescribed sheave coordinate: tau = -R (M qdd - Q)_sigma
                 j = K.out_i[k]
                 r = -Q[j]
-                for m in range(K.nq):
+                for m in range(M.shape[1]):   # no columns on the sparse path: there Q = -(M qdd - Q)
                     r += M[j, m] * qdd[m]
                 # generalized drive force / (d angle / d coordinate)
                 if K.mot_crp >= 0:

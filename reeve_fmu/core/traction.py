@@ -6,7 +6,7 @@ import math
 
 
 def equivalent_friction(mu: float, beta_deg: float, gamma_deg: float, groove: str = "u-undercut") -> float:
-    """Equivalent friction coefficient f of a groove (EN 81-50, domain.md §3.3).
+    """Equivalent friction coefficient f of a groove (EN 81-50, docs/reference-sets.md §4.2).
 
     groove: "u-undercut" / "semicircular" (same formula, beta = undercut angle, 0 for none),
     "v-hardened" (f = mu / sin(gamma/2)), "v" (not hardened, uses beta)."""

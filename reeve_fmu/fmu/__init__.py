@@ -5,6 +5,9 @@
 * `reeve_fmu.fmu.runner`  -- `run_in_subprocess`, `SlaveHandle` (fmpy FMU2Slave wrapper)
 * `reeve_fmu.fmu._bootstrap` -- stdlib-only shim that runs inside FMUs (stable numba cache dir)
 * `reeve_fmu.fmu.cosim`   -- plant/drive FMU build inputs, the fmpy master `cosimulate`, the monolithic reference
+* `reeve_fmu.fmu.native`  -- the C loader put in front of pythonfmu's binary at build time (any FMI host, no
+  LD_PRELOAD, clean exit, errors always logged; docs/fmu-hosts.md)
+* `reeve_fmu.fmu.container` -- plant + drive as one FMU (fmpy's container FMU)
 
 Names are imported lazily so that `import reeve_fmu.fmu` costs nothing.
 """

@@ -48,6 +48,7 @@ import sys
 import tempfile
 
 STAMP_NAME = "reeve_fmu_stamp.json"
+ENV_NAME = "reeve_env.json"
 VENDOR_DIR = "reeve_fmu_vendor"
 PACKAGE = "reeve_fmu"
 
@@ -115,7 +116,7 @@ def ensure_cached_copy(src_pkg_dir: str, digest: str) -> str:
     tmp = tempfile.mkdtemp(prefix=f".{digest[:16]}-", dir=root)
     try:
         copy_package(src_pkg_dir, os.path.join(tmp, PACKAGE))
-        with open(os.path.join(tmp, STAMP_NAME), "w") as fh:
+        with open(os.path.join(tmp, STAMP_NAME), "w", encoding="utf-8") as fh:
             json.dump({"sha256": digest}, fh)
         try:
             os.rename(tmp, final)
@@ -130,6 +131,99 @@ def ensure_cached_copy(src_pkg_dir: str, digest: str) -> str:
     return final
 
 
+def _site_dirs_first(dirs) -> list:
+    """site.addsitedir each directory (with its .pth files) and move what that added in front of the
+    interpreter's own site-packages, so that the recorded environment wins over the base one."""
+    import site
+
+    before = list(sys.path)
+    for d in dirs:
+        if os.path.isdir(d):
+            site.addsitedir(d)
+    added = [p for p in sys.path if p not in before]
+    if not added:
+        return []
+    rest = [p for p in sys.path if p not in added]
+    pos = next((i for i, p in enumerate(rest) if os.path.basename(p) in ("site-packages", "dist-packages")),
+               len(rest))
+    sys.path[:] = rest[:pos] + added + rest[pos:]
+    return added
+
+
+def _applies(req: dict) -> bool:
+    below = req.get("python_below")
+    if not below:
+        return True
+    major, minor = (int(x) for x in str(below).split(".")[:2])
+    return sys.version_info[:2] < (major, minor)
+
+
+def preflight(resources: str, embedded: bool = False, where: str = "") -> tuple:
+    """Run by the FMU's native loader before pythonfmu instantiates the model: returns
+    (error or None, warning or None), both plain text for the host's logger.
+
+    * REEVE_FMU_SITE_PACKAGES (os.pathsep-separated directories) is added in any host;
+    * otherwise, when the loader started the interpreter itself (a non-Python host) and it is the
+      Python version the FMU was built with, the build environment's site-packages recorded in
+      resources/reeve_env.json are added (before the interpreter's own);
+    * then every requirement recorded there is imported; a missing one is an error naming the
+      package, the Python in use and what to install (an optional one only a warning)."""
+    try:
+        with open(os.path.join(resources, ENV_NAME), encoding="utf-8") as fh:
+            env = json.load(fh)
+    except FileNotFoundError:
+        return None, None
+    except Exception as exc:
+        return f"resources/{ENV_NAME} is unreadable: {exc!r}", None
+    import importlib
+
+    cur = f"{sys.version_info.major}.{sys.version_info.minor}"
+    built = env.get("python_version")
+    override = os.environ.get("REEVE_FMU_SITE_PACKAGES", "")
+    added = []
+    if override:
+        added = _site_dirs_first([d for d in override.split(os.pathsep) if d])
+    elif embedded and built == cur:
+        added = _site_dirs_first(env.get("site_packages") or [])
+    missing, optional = [], []
+    for req in env.get("requirements") or []:
+        if not _applies(req):
+            continue
+        try:
+            importlib.import_module(req["module"])
+        except Exception as exc:  # ImportError, or a broken/incompatible binary package
+            (optional if req.get("optional") else missing).append((req, f"{type(exc).__name__}: {exc}"))
+    python = (f"Python {sys.version.split()[0]} ("
+              + (f"loaded by the FMU from {where}" if embedded else f"the host's, {sys.executable}") + ")")
+    if embedded:
+        exe = env.get("executable") if built == cur else f"python{cur}"
+    else:
+        exe = sys.executable or f"python{cur}"
+    warning = None
+    if optional:
+        warning = "; ".join(f"optional package {r['module']} is not usable in {python} ({why}): "
+                            f"{r.get('why') or 'the model runs without it'}" for r, why in optional)
+    if not missing:
+        return None, warning
+    pkgs = ", ".join(r["module"] for r, _ in missing)
+    reqs = " ".join(f"'{r['requirement'].split(';')[0].strip()}'" for r, _ in missing)
+    lines = [f"the Python package(s) {pkgs} the model needs cannot be imported in {python}:"]
+    lines += [f"  {r['module']}: {why}" for r, why in missing]
+    lines.append(f"Install them into that Python: {exe} -m pip install {reqs} (the FMU's "
+                 f"resources/requirements.txt lists all it needs).")
+    if embedded:
+        lines.append(
+            f"This FMU was built with Python {env.get('python_full_version')} ({env.get('executable')}; "
+            f"site-packages {', '.join(env.get('site_packages') or []) or 'none recorded'}"
+            + (", added to sys.path" if added else "") + "). Or point REEVE_FMU_SITE_PACKAGES to a "
+            f"site-packages directory of a Python {cur} environment that has them, or "
+            f"REEVE_FMU_LIBPYTHON to the libpython of another Python.")
+    else:
+        lines.append("Or set REEVE_FMU_SITE_PACKAGES to a site-packages directory of a Python "
+                     f"{cur} environment that has them.")
+    return "\n".join(lines), warning
+
+
 def _install_from_resources() -> None:  # pragma: no cover - runs inside FMUs (tested via subprocess)
     """Executed when this file is imported as the module ``reeve_fmu`` from an FMU's resources."""
     import importlib.util
@@ -138,7 +232,7 @@ def _install_from_resources() -> None:  # pragma: no cover - runs inside FMUs (t
     src_pkg = os.path.join(here, VENDOR_DIR, PACKAGE)
     info = {"hash": None, "location": None, "warning": None, "resources": here}
     try:
-        with open(os.path.join(here, STAMP_NAME)) as fh:
+        with open(os.path.join(here, STAMP_NAME), encoding="utf-8") as fh:
             digest = json.load(fh)["sha256"]
         info["hash"] = digest
         base = ensure_cached_copy(src_pkg, digest)

@@ -3,13 +3,18 @@
 `build_fmu(entry_script, dest_dir, project_files, resources)` produces an FMI 2.0 co-simulation FMU:
 
     modelDescription.xml                    from the entry's ReeveSlave subclass (validated by fmpy)
-    binaries/{linux64,win64}/<Model>.*      pythonfmu's prebuilt loader (needs a Python host or LD_PRELOAD)
+    binaries/linux64/<Model>.so             the native loader (reeve_fmu/fmu/native/fmu_loader.c, compiled
+                                            here) in front of <Model>_pythonfmu.so, pythonfmu's binary:
+                                            any FMI host, no LD_PRELOAD, clean exit, errors always logged
+    binaries/win64/<Model>.dll              pythonfmu's prebuilt binary
     resources/<entry>.py, slavemodule.txt   the entry module (its name must be unique per FMU)
     resources/pythonfmu/                    embedded pythonfmu
     resources/reeve_fmu.py                  bootstrap shim (reeve_fmu/fmu/_bootstrap.py, see there)
     resources/reeve_fmu_vendor/reeve_fmu/   the package sources (no caches)
     resources/reeve_fmu_stamp.json          version, sha256 of the package sources, entry/resource hashes
-    resources/requirements.txt              what the *importing* interpreter needs (numpy, scipy, numba)
+    resources/requirements.txt              what the Python running the model needs (pip format)
+    resources/reeve_env.json                the build's Python (version, libpython, site-packages) and the
+                                            requirements as modules; used by the loader in non-Python hosts
     resources/<your resources>              e.g. the scene TOML
 
 Capabilities: canGetAndSetFMUstate and canSerializeFMUstate are declared (ReeveSlave implements them
@@ -36,16 +41,44 @@ from . import _bootstrap
 from ._bootstrap import PACKAGE, STAMP_NAME, VENDOR_DIR, copy_package, package_files, package_hash
 
 __all__ = ["build_fmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
-           "FmuBuildError", "DEFAULT_REQUIREMENTS"]
+           "FmuBuildError", "DEFAULT_REQUIREMENTS", "NUMPY", "NUMBA", "TOMLI", "requirements_txt"]
 
-DEFAULT_REQUIREMENTS = (
-    "numpy>=1.24",
-    "scipy>=1.10",
-    "numba>=0.59  # optional: without numba the kernels run as plain Python (identical, ~100x slower)",
-)
+#: what the model code of an FMU imports (module, pip requirement, optional?, only below Python X.Y)
+NUMPY = {"module": "numpy", "requirement": "numpy>=1.24", "optional": False}
+NUMBA = {"module": "numba", "requirement": "numba>=0.59", "optional": True,
+         "why": "without numba the kernels run as plain Python (identical results, ~100x slower)"}
+TOMLI = {"module": "tomli", "requirement": "tomli>=2.0; python_version < '3.11'", "optional": False,
+         "python_below": "3.11"}
+#: default: everything the package's model code may import (the plant FMU needs all three; the
+#: drive FMU passes (NUMPY, NUMBA): it reads no TOML)
+DEFAULT_REQUIREMENTS = (NUMPY, NUMBA, TOMLI)
+
+
+def _requirement_dicts(requirements) -> list:
+    out = []
+    for r in requirements:
+        if isinstance(r, str):  # plain pip line: module name = distribution name
+            line = r.split("#")[0].strip()
+            name = line.split(";")[0]
+            for ch in "<>=!~[ ":
+                name = name.split(ch)[0]
+            out.append({"module": name.replace("-", "_"), "requirement": line, "optional": False})
+        else:
+            out.append(dict(r))
+    return out
+
+
+def requirements_txt(requirements) -> str:
+    lines = []
+    for r in _requirement_dicts(requirements):
+        line = r["requirement"]
+        if r.get("optional"):
+            line += f"  # optional: {r.get('why') or 'the model runs without it'}"
+        lines.append(line)
+    return "\n".join(lines) + "\n"
 
 _RESERVED = {PACKAGE, f"{PACKAGE}.py", VENDOR_DIR, STAMP_NAME, "requirements.txt", "pythonfmu",
-             "slavemodule.txt"}
+             "slavemodule.txt", "reeve_env.json"}
 _GENERIC_ENTRY_NAMES = {"model", "slave", "fmu", "plant", "drive", "main", "entry", "module", "test",
                         "sim", "simulation", "controller", PACKAGE, "pythonfmu", "fmpy"}
 
@@ -90,7 +123,7 @@ def _check_entry_name(entry: Path) -> str:
         raise FmuBuildError(
             f"entry module name {stem!r} is too generic: pythonfmu imports it by name, and a second "
             f"FMU with the same module name in one process silently runs the first one's code "
-            f"(fmi.md §5.2). Use a unique name such as 'reeve_<model>_slave'.")
+            f"(docs/cosim.md, 'pythonfmu and fmpy' item 4). Use a unique name such as 'reeve_<model>_slave'.")
     import importlib.util
 
     try:
@@ -126,8 +159,8 @@ def _stage_resources(staging: Path, resources: Mapping[str, Union[bytes, str, os
 def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
               project_files: Iterable[Union[str, Path]] = (),
               resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
-              validate: bool = True, requirements: Iterable[str] = DEFAULT_REQUIREMENTS,
-              **options) -> Path:
+              validate: bool = True, requirements: Iterable = DEFAULT_REQUIREMENTS,
+              native_loader="auto", log=None, **options) -> Path:
     """Build the FMU of `entry_script` into `dest_dir` and return its path.
 
     entry_script   file defining exactly one deepest ReeveSlave subclass; its module name must be
@@ -136,6 +169,12 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                    always vendored; passing it here is accepted and ignored).
     resources      {relative name: bytes or path} written into resources/ (e.g. {"scene.toml": p}).
                    At run time: Path(self.resources) / name.
+    requirements   what the model imports: dicts like NUMPY/NUMBA/TOMLI or pip lines; written to
+                   resources/requirements.txt and reeve_env.json (checked by the loader at instantiate).
+    native_loader  "auto": put the native loader in front of pythonfmu's linux64 binary when a C
+                   compiler is found (reeve_fmu.fmu.native), else keep pythonfmu's binary and report
+                   what to install through `log` (default: print to stderr); True: required (raise
+                   FmuBuildError without a compiler); False: never.
     options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
 
     Raises FmuBuildError if pythonfmu fails or `fmpy validate` finds problems; an existing FMU at
@@ -153,6 +192,23 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                             "fmi2SetRealInputDerivatives is a stub returning fmi2Error")
     opts = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
     opts.update(options)
+    from . import native
+
+    if log is None:
+        def log(msg):
+            print(msg, file=sys.stderr)
+    compiler = None
+    loader_note = None
+    if native_loader and native.loader_supported():
+        try:
+            compiler = native.find_compiler()
+        except native.NoCompiler as exc:
+            if native_loader is True:
+                raise FmuBuildError(str(exc)) from None
+            loader_note = str(exc)
+    elif native_loader is True:
+        raise FmuBuildError(f"the native loader is only built on Linux x86-64, not on {sys.platform}")
+    reqs = _requirement_dicts(requirements)
 
     pkg = package_dir()
     dest_dir = Path(dest_dir)
@@ -189,11 +245,14 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             "python": sys.version.split()[0],
             "built_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         }
-        (staging / STAMP_NAME).write_text(json.dumps(stamp, indent=1) + "\n")
-        (staging / "requirements.txt").write_text("\n".join(requirements) + "\n")
+        (staging / STAMP_NAME).write_text(json.dumps(stamp, indent=1) + "\n", encoding="utf-8")
+        (staging / "requirements.txt").write_text(requirements_txt(reqs), encoding="utf-8")
+        env = native.environment_record(reqs)
+        env["loader"] = {"compiler": compiler, "note": loader_note}
+        (staging / native.ENV_NAME).write_text(json.dumps(env, indent=1) + "\n", encoding="utf-8")
 
         files = [vendor, staging / f"{PACKAGE}.py", staging / STAMP_NAME,
-                 staging / "requirements.txt", *extra]
+                 staging / "requirements.txt", staging / native.ENV_NAME, *extra]
         for pf in project_files:
             pf = Path(pf).resolve()
             if pf == pkg:
@@ -213,7 +272,17 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
                                 f"{type(exc).__name__}: {exc}") from exc
         built = Path(fmu_path)
-        # 3. validation gate
+        # 3. the native loader in front of pythonfmu's linux64 binary
+        if compiler is not None:
+            try:
+                native.install_loader(built, _model_identifier(built), compiler=compiler,
+                                      libpython=env["libpython"] or "",
+                                      py_version=env["python_version"])
+            except Exception as exc:
+                raise FmuBuildError(f"building the native loader of {built.name} failed: {exc}") from exc
+        elif loader_note:
+            log(f"reeve_fmu build: {built.name} keeps pythonfmu's own binary: {loader_note}")
+        # 4. validation gate
         if validate:
             from fmpy.validation import validate_fmu
 
@@ -231,6 +300,14 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
         shutil.rmtree(staging, ignore_errors=True)
         shutil.rmtree(out_tmp, ignore_errors=True)
     return final
+
+
+def _model_identifier(fmu_path: Path) -> str:
+    from xml.etree import ElementTree as ET
+
+    with zipfile.ZipFile(fmu_path) as zf:
+        root = ET.fromstring(zf.read("modelDescription.xml"))
+    return root.find("CoSimulation").get("modelIdentifier")
 
 
 def read_stamp(fmu_path: Union[str, Path]) -> Optional[dict]:

@@ -33,7 +33,7 @@ import shutil
 import sys
 import tempfile
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Optional, Sequence
 
@@ -434,13 +434,13 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
 
 
 def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
-    from .build import build_fmu, fmu_is_stale
+    from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
     if not force and not fmu_is_stale(path, entry):
         return path, False
-    return build_fmu(entry, dest), True
+    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA)), True   # the drive reads no TOML
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
@@ -775,6 +775,10 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     Per step the master makes exactly one setReal, doStep and getReal call per FMU through fmpy's
     ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
     motor.speed/angle straight into the buffer the drive's setReal reads, and vice versa.
+
+    Steps: check the arguments; open and initialize both FMUs (`_open_pair`); set up the exchange
+    buffers (`_Exchange`); run the communication steps (`_master_loop`); close the FMUs; assemble the
+    result (`_cosim_result`).
     """
     from .runner import SlaveHandle
 
@@ -793,139 +797,15 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     handles = []
     t_wall0 = time.perf_counter()
     try:
-        plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log)
-        handles.append(plant)
-        drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log)
-        handles.append(drive)
-        plant.setup(0.0, t_end, start_values=dict(plant_values or {}))
-        drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
-        for h in handles:
-            errs = h.errors()
-            if errs:
-                raise CosimError(f"{h.instance_name}: initialization failed\n{h.log_text()}")
-        plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
-        rec = [r for r in (record if record is not None else plant_outputs) if r not in PLANT_EXCHANGE]
-        missing = [r for r in rec if r not in plant.variables]
-        if missing:
-            raise ValueError(f"plant FMU has no variables {missing}")
-        P = _FastReal(plant, list(PLANT_EXCHANGE) + rec)
-        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
-        D = _FastReal(drive, list(DRIVE_EXCHANGE) + drive_rec)
-        # the exchange: drive.setReal reads the head of the plant's output buffer and vice versa
-        DI = _FastReal(drive, PLANT_EXCHANGE, buf=P.buf)
-        PI = _FastReal(plant, DRIVE_EXCHANGE, buf=D.buf)
-        fp, fd = plant.fmu, drive.fmu
-        cp, cd = fp.component, fd.component
-        getp, getd = fp.dll.fmi2GetReal, fd.dll.fmi2GetReal
-        setp, setd = fp.dll.fmi2SetReal, fd.dll.fmi2SetReal
-        stepp, stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
-        _check(getp(cp, P.vr, P.n, P.buf), "plant getReal", handles, 0.0)
-        _check(getd(cd, D.vr, D.n, D.buf), "drive getReal", handles, 0.0)
+        plant, drive = _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles, t_end, plant_values,
+                                  drive_values, echo_log)
+        x = _Exchange(plant, drive, record, handles)
         mon = None
         if monitor:
             scale = drive.get("torque.max") if "torque.max" in drive.variables else None
             mon = CouplingMonitor(step, scale)
-            upd = mon.update
-        # recording
-        nrec = n // record_every + 1
-        Prec = np.empty((nrec, P.n))
-        Drec = np.empty((nrec, D.n))
-        Prec[0] = P.view
-        Drec[0] = D.view
-        tns_p = np.zeros(n, dtype=np.int64) if timing else None
-        tns_d = np.zeros(n, dtype=np.int64) if timing else None
-        every = max(1, int(round(progress_every / step))) if progress is not None else n + 1
-        Pv, Dv = P.view, D.view
-        PIvr, PIn, DIvr, DIn = PI.vr, PI.n, DI.vr, DI.n
-        Pvr, Pn, Pbuf, Dvr, Dn, Dbuf = P.vr, P.n, P.buf, D.vr, D.n, D.buf
-        gs = scheme == "gauss-seidel"
-        perf = time.perf_counter_ns
-        tk = _time_grid(step)
-        j = 1
-        t_first = 0.0
-        t_loop0 = time.perf_counter()
-        h = step
-        stop = False
-        for k in range(n):
-            t = tk(k)
-            if ns_step_differences:
-                h = tk(k + 1) - t
-            if mon is not None:
-                w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
-            if gs:
-                s = setd(cd, DIvr, DIn, Pbuf)
-                if s > 1:
-                    _check(s, "drive setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepd(cd, t, h, 1)
-                    tns_d[k] = perf() - a
-                else:
-                    s = stepd(cd, t, h, 1)
-                if s > 1:
-                    _check(s, "drive doStep", handles, t)
-                s = getd(cd, Dvr, Dn, Dbuf)
-                if s > 1:
-                    _check(s, "drive getReal", handles, t)
-                s = setp(cp, PIvr, PIn, Dbuf)
-                if s > 1:
-                    _check(s, "plant setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepp(cp, t, h, 1)
-                    tns_p[k] = perf() - a
-                else:
-                    s = stepp(cp, t, h, 1)
-                if s > 1:
-                    _check(s, "plant doStep", handles, t)
-                s = getp(cp, Pvr, Pn, Pbuf)
-                if s > 1:
-                    _check(s, "plant getReal", handles, t)
-            else:
-                s = setd(cd, DIvr, DIn, Pbuf)
-                if s > 1:
-                    _check(s, "drive setReal", handles, t)
-                s = setp(cp, PIvr, PIn, Dbuf)
-                if s > 1:
-                    _check(s, "plant setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepd(cd, t, h, 1)
-                    b = perf()
-                    s2 = stepp(cp, t, h, 1)
-                    tns_p[k] = perf() - b
-                    tns_d[k] = b - a
-                else:
-                    s = stepd(cd, t, h, 1)
-                    s2 = stepp(cp, t, h, 1)
-                if s > 1:
-                    _check(s, "drive doStep", handles, t)
-                if s2 > 1:
-                    _check(s2, "plant doStep", handles, t)
-                s = getd(cd, Dvr, Dn, Dbuf)
-                if s > 1:
-                    _check(s, "drive getReal", handles, t)
-                s = getp(cp, Pvr, Pn, Pbuf)
-                if s > 1:
-                    _check(s, "plant getReal", handles, t)
-            if mon is not None:
-                ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
-                if ep is not None:
-                    stop = _on_detection(mon, ep, scheme, on_instability)
-            if (k + 1) % record_every == 0 or stop:
-                Prec[j] = Pv
-                Drec[j] = Dv
-                j += 1
-            if (k + 1) % every == 0:
-                progress((k + 1) * step)
-            if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
-                t_first = time.perf_counter() - t_loop0
-            if stop:
-                n = k + 1
-                break
-        loop_wall = time.perf_counter() - t_loop0
-        if progress is not None:
-            progress(n * step)
+        run = _master_loop(x, handles, mon, n, step, scheme, record_every, progress, progress_every, timing,
+                           ns_step_differences, on_instability)
         warnings = [str(m) for h in handles for m in h.messages if m.status >= 1]
     finally:
         for h in reversed(handles):
@@ -934,15 +814,190 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
             except Exception:  # pragma: no cover - teardown must not hide the real error
                 pass
     total_wall = time.perf_counter() - t_wall0
+    return _cosim_result(x, run, mon, scheme, step, record_every, total_wall, warnings)
+
+
+def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_values, drive_values, echo_log):
+    """Open, set up and initialize both FMUs (appended to `handles` as they open, so that the caller
+    closes whatever was opened); an initialization error raises CosimError with the FMU's log."""
+    plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log)
+    handles.append(plant)
+    drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log)
+    handles.append(drive)
+    plant.setup(0.0, t_end, start_values=dict(plant_values or {}))
+    drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
+    for h in handles:
+        errs = h.errors()
+        if errs:
+            raise CosimError(f"{h.instance_name}: initialization failed\n{h.log_text()}")
+    return plant, drive
+
+
+class _Exchange:
+    """The value buffers of the two FMUs and their fmi2 functions. P holds the plant's exchange
+    outputs (PLANT_EXCHANGE) then the recorded outputs, D the drive's (DRIVE_EXCHANGE, then
+    DRIVE_RECORD); the drive's setReal (DI) reads the head of P's buffer and the plant's (PI) the head
+    of D's. Reads the initial outputs."""
+
+    def __init__(self, plant, drive, record, handles):
+        self.plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
+        rec = [r for r in (record if record is not None else self.plant_outputs) if r not in PLANT_EXCHANGE]
+        missing = [r for r in rec if r not in plant.variables]
+        if missing:
+            raise ValueError(f"plant FMU has no variables {missing}")
+        self.P = P = _FastReal(plant, list(PLANT_EXCHANGE) + rec)
+        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
+        self.D = D = _FastReal(drive, list(DRIVE_EXCHANGE) + drive_rec)
+        # the exchange: drive.setReal reads the head of the plant's output buffer and vice versa
+        self.DI = _FastReal(drive, PLANT_EXCHANGE, buf=P.buf)
+        self.PI = _FastReal(plant, DRIVE_EXCHANGE, buf=D.buf)
+        fp, fd = plant.fmu, drive.fmu
+        self.cp, self.cd = fp.component, fd.component
+        self.getp, self.getd = fp.dll.fmi2GetReal, fd.dll.fmi2GetReal
+        self.setp, self.setd = fp.dll.fmi2SetReal, fd.dll.fmi2SetReal
+        self.stepp, self.stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
+        _check(self.getp(self.cp, P.vr, P.n, P.buf), "plant getReal", handles, 0.0)
+        _check(self.getd(self.cd, D.vr, D.n, D.buf), "drive getReal", handles, 0.0)
+
+
+@dataclass
+class _LoopRun:
+    Prec: np.ndarray        # recorded plant values, rows 0..j-1
+    Drec: np.ndarray        # recorded drive values
+    j: int                  # recorded rows
+    n: int                  # steps made (fewer than asked if the monitor stopped the run)
+    stop: bool              # stopped by the coupling monitor
+    t_first: float          # wall time of the first step (loads/compiles the FMUs' kernels)
+    loop_wall: float
+    tns_p: Optional[np.ndarray]
+    tns_d: Optional[np.ndarray]
+
+
+def _master_loop(x: _Exchange, handles, mon, n, step, scheme, record_every, progress, progress_every, timing,
+                 ns_step_differences, on_instability) -> _LoopRun:
+    """The communication steps. Everything the loop touches is bound to a local name first and the
+    two schemes and the timing variant are written out: this loop is the master's whole per-step
+    cost (docs/cosim.md, Performance), a few microseconds."""
+    P, D = x.P, x.D
+    cp, cd = x.cp, x.cd
+    getp, getd, setp, setd, stepp, stepd = x.getp, x.getd, x.setp, x.setd, x.stepp, x.stepd
+    upd = mon.update if mon is not None else None
+    # recording
+    nrec = n // record_every + 1
+    Prec = np.empty((nrec, P.n))
+    Drec = np.empty((nrec, D.n))
+    Prec[0] = P.view
+    Drec[0] = D.view
+    tns_p = np.zeros(n, dtype=np.int64) if timing else None
+    tns_d = np.zeros(n, dtype=np.int64) if timing else None
+    every = max(1, int(round(progress_every / step))) if progress is not None else n + 1
+    Pv, Dv = P.view, D.view
+    PIvr, PIn, DIvr, DIn = x.PI.vr, x.PI.n, x.DI.vr, x.DI.n
+    Pvr, Pn, Pbuf, Dvr, Dn, Dbuf = P.vr, P.n, P.buf, D.vr, D.n, D.buf
+    gs = scheme == "gauss-seidel"
+    perf = time.perf_counter_ns
+    tk = _time_grid(step)
+    j = 1
+    t_first = 0.0
+    t_loop0 = time.perf_counter()
+    h = step
+    stop = False
+    for k in range(n):
+        t = tk(k)
+        if ns_step_differences:
+            h = tk(k + 1) - t
+        if mon is not None:
+            w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
+        if gs:
+            s = setd(cd, DIvr, DIn, Pbuf)
+            if s > 1:
+                _check(s, "drive setReal", handles, t)
+            if timing:
+                a = perf()
+                s = stepd(cd, t, h, 1)
+                tns_d[k] = perf() - a
+            else:
+                s = stepd(cd, t, h, 1)
+            if s > 1:
+                _check(s, "drive doStep", handles, t)
+            s = getd(cd, Dvr, Dn, Dbuf)
+            if s > 1:
+                _check(s, "drive getReal", handles, t)
+            s = setp(cp, PIvr, PIn, Dbuf)
+            if s > 1:
+                _check(s, "plant setReal", handles, t)
+            if timing:
+                a = perf()
+                s = stepp(cp, t, h, 1)
+                tns_p[k] = perf() - a
+            else:
+                s = stepp(cp, t, h, 1)
+            if s > 1:
+                _check(s, "plant doStep", handles, t)
+            s = getp(cp, Pvr, Pn, Pbuf)
+            if s > 1:
+                _check(s, "plant getReal", handles, t)
+        else:
+            s = setd(cd, DIvr, DIn, Pbuf)
+            if s > 1:
+                _check(s, "drive setReal", handles, t)
+            s = setp(cp, PIvr, PIn, Dbuf)
+            if s > 1:
+                _check(s, "plant setReal", handles, t)
+            if timing:
+                a = perf()
+                s = stepd(cd, t, h, 1)
+                b = perf()
+                s2 = stepp(cp, t, h, 1)
+                tns_p[k] = perf() - b
+                tns_d[k] = b - a
+            else:
+                s = stepd(cd, t, h, 1)
+                s2 = stepp(cp, t, h, 1)
+            if s > 1:
+                _check(s, "drive doStep", handles, t)
+            if s2 > 1:
+                _check(s2, "plant doStep", handles, t)
+            s = getd(cd, Dvr, Dn, Dbuf)
+            if s > 1:
+                _check(s, "drive getReal", handles, t)
+            s = getp(cp, Pvr, Pn, Pbuf)
+            if s > 1:
+                _check(s, "plant getReal", handles, t)
+        if mon is not None:
+            ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
+            if ep is not None:
+                stop = _on_detection(mon, ep, scheme, on_instability)
+        if (k + 1) % record_every == 0 or stop:
+            Prec[j] = Pv
+            Drec[j] = Dv
+            j += 1
+        if (k + 1) % every == 0:
+            progress((k + 1) * step)
+        if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
+            t_first = time.perf_counter() - t_loop0
+        if stop:
+            n = k + 1
+            break
+    loop_wall = time.perf_counter() - t_loop0
+    if progress is not None:
+        progress(n * step)
+    return _LoopRun(Prec, Drec, j, n, stop, t_first, loop_wall, tns_p, tns_d)
+
+
+def _cosim_result(x: _Exchange, run: _LoopRun, mon, scheme, step, record_every, total_wall, warnings):
+    """Columns by variable name, the time axis and the run's info (walls, real-time factors, monitor
+    report, doStep timings)."""
+    j, n, stop, loop_wall, t_first = run.j, run.n, run.stop, run.loop_wall, run.t_first
     cols = {}
-    for i, name in enumerate(P.names):
-        cols[name] = Prec[:j, i]
-    for i, name in enumerate(D.names):
-        cols[name] = Drec[:j, i]
+    for i, name in enumerate(x.P.names):
+        cols[name] = run.Prec[:j, i]
+    for i, name in enumerate(x.D.names):
+        cols[name] = run.Drec[:j, i]
     tt = np.arange(j) * (step * record_every)
     if stop and (n % record_every):
         tt[-1] = n * step
-    info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": plant_outputs, "t_end_s": n * step, "steps": n,
+    info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": x.plant_outputs, "t_end_s": n * step, "steps": n,
             "loop_wall_s": loop_wall, "total_wall_s": total_wall, "first_step_wall_s": t_first,
             "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf,
             "rtf_after_first_step": ((n - 1) * step / (loop_wall - t_first)
@@ -950,9 +1005,9 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
             "fmu_warnings": warnings, "stopped_by_monitor": stop}
     if mon is not None:
         info.update(mon.report(scheme))
-    if timing:
-        info["plant_doStep_ns"] = tns_p
-        info["drive_doStep_ns"] = tns_d
+    if run.tns_p is not None:
+        info["plant_doStep_ns"] = run.tns_p
+        info["drive_doStep_ns"] = run.tns_d
     return CosimResult(tt, cols, info)
 
 

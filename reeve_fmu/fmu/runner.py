@@ -1,6 +1,6 @@
 """Helpers for tests and masters: FMU jobs in fresh subprocesses, and a thin fmpy FMU2Slave wrapper.
 
-Why subprocesses (fmi.md §5.2): pythonfmu FMUs share the host interpreter, so an FMU's entry module,
+Why subprocesses (docs/cosim.md, 'pythonfmu and fmpy' item 4): pythonfmu FMUs share the host interpreter, so an FMU's entry module,
 its embedded packages and pythonfmu itself land in the host's `sys.modules`; two FMUs with the same
 module names silently run each other's code, and rarely the process aborts at exit with heap
 corruption. So every FMU-loading job runs in its own interpreter and is judged by its result file
@@ -50,14 +50,14 @@ result_path, spec, args_path = sys.argv[1:4]
 
 def _write(obj):
     tmp = result_path + ".tmp"
-    with open(tmp, "w") as fh:
+    with open(tmp, "w", encoding="utf-8") as fh:
         json.dump(obj, fh, allow_nan=True)
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, result_path)
 
 try:
-    with open(args_path) as fh:
+    with open(args_path, encoding="utf-8") as fh:
         args = json.load(fh)
     if spec.startswith("code:"):
         ns = {"__name__": "__reeve_job__", "ARGS": args}
@@ -90,7 +90,7 @@ except BaseException:
     os._exit(1)
 sys.stdout.flush(); sys.stderr.flush()
 # The result is on disk: skip interpreter finalisation, where pythonfmu FMUs occasionally corrupt
-# the heap at exit (fmi.md §5.2, PythonFMU #228; seen here as "corrupted double-linked list").
+# the heap at exit (docs/cosim.md, 'pythonfmu and fmpy' item 4, PythonFMU #228; seen here as "corrupted double-linked list").
 os._exit(0)
 """
 
@@ -138,7 +138,7 @@ def _run_once(spec: str, args_path: str, workdir: str, timeout: float, env: dict
             os.unlink(p)
     proc = subprocess.Popen([python, "-c", _CHILD, result_path, spec, args_path], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            errors="replace", start_new_session=True)
+                            encoding="utf-8", errors="replace", start_new_session=True)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -152,7 +152,7 @@ def _run_once(spec: str, args_path: str, workdir: str, timeout: float, env: dict
     payload = None
     if os.path.exists(result_path):
         try:
-            with open(result_path) as fh:
+            with open(result_path, encoding="utf-8") as fh:
                 payload = json.load(fh)
         except ValueError:
             payload = None
@@ -176,7 +176,7 @@ def run_in_subprocess(func_path_or_code: str, *args, timeout: float = 120.0,
     attempts = []
     with tempfile.TemporaryDirectory(prefix="reeve_job_") as workdir:
         args_path = os.path.join(workdir, "args.json")
-        with open(args_path, "w") as fh:
+        with open(args_path, "w", encoding="utf-8") as fh:
             json.dump(list(args), fh, allow_nan=True, default=_json_default)
         for attempt in (1, 2):
             rc, payload, out, err = _run_once(spec, args_path, workdir, timeout, child_env,

@@ -1,7 +1,7 @@
 """`ReeveSlave`: the pythonfmu base class every reeve_fmu FMU entry subclasses.
 
 It adds to `pythonfmu.Fmi2Slave` (0.7.0) what the FMI standard, `fmpy validate` and robust masters need
-and pythonfmu does not do (see /work/shared/reference/fmi.md §1.4-1.6, domain.md §6):
+and pythonfmu does not do (docs/cosim.md, 'pythonfmu and fmpy', items 1-3):
 
 * declarative variables: `add_real/add_integer/add_boolean/add_string` with causality, variability,
   initial, unit (SI, with `UnitDefinitions` + `BaseUnit` exponents and display units such as rpm/mm),
@@ -40,9 +40,13 @@ Subclass contract (see the example in tests/fmu_toy/reeve_toy_slave.py)::
 Do not override `__init__`/`do_step`/`set_real`/... (override the hooks instead), and never raise out
 of them on purpose: return False from `step` after `self.log(reason, Fmi2Status.error)`.
 
-Logging reaches the master only when it instantiates with loggingOn=True (pythonfmu forwards messages
-only in debug-logging mode). Messages are passed to the C logger as a printf *format*, so '%' is
-escaped here.
+Logging: pythonfmu alone forwards messages only when the master instantiates with loggingOn=True; the
+FMU's native loader (reeve_fmu.fmu.native, Linux) always relays warnings and errors and OK messages
+only with logging on. Messages are passed to the C logger as a printf *format*, so '%' is escaped
+here.
+
+Speed: `set_eager_outputs(names)` + `defer_outputs(write)` let step() write only the exchanged outputs
+each step and the rest (from a snapshot) only when something reads them.
 """
 from __future__ import annotations
 
@@ -244,6 +248,8 @@ class ReeveSlave(Fmi2Slave):
         self._real_names: list = []            # vr -> name of a Real kept in self.values (else None)
         self._user_setters: dict[str, Callable] = {}
         self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
+        self._deferred: Optional[Callable] = None  # writes the outputs step() left for later
+        self._eager_vrs: frozenset = frozenset()   # Reals step() always writes (see defer_outputs)
         self._mode = "instantiated"
         self._initialized = False
         self.start_time: Optional[float] = None
@@ -424,6 +430,26 @@ class ReeveSlave(Fmi2Slave):
     def vr(self, name: str) -> int:
         return self._by_name[name].vr
 
+    # ------------------------------------------------------------------ deferred outputs (speed)
+    def set_eager_outputs(self, names: Iterable[str]) -> None:
+        """The Real outputs step() writes into self.values on every step (typically what the master
+        exchanges); all others may be left to `defer_outputs`."""
+        self._eager_vrs = frozenset(self._by_name[n].vr for n in names)
+
+    def defer_outputs(self, write: Optional[Callable[[], None]]) -> None:
+        """Called by step(): `write()` puts the remaining outputs into self.values. It runs only when
+        something reads them (a getReal of another variable, getInteger/Boolean/String, getFMUstate),
+        at most once per step, so a master that reads only the eager outputs never pays for it.
+        `write` must use a snapshot taken in step() (the next step replaces it unrun), never live
+        model state."""
+        self._deferred = write
+
+    def _flush(self) -> None:
+        write = self._deferred
+        if write is not None:
+            self._deferred = None
+            write()
+
     def resource_path(self, name: str) -> str:
         """Absolute path of a file shipped with build_fmu(resources={name: ...})."""
         if not self.resources:
@@ -450,7 +476,7 @@ class ReeveSlave(Fmi2Slave):
         path = os.path.join(res, STAMP_NAME)
         if not os.path.isfile(path):
             return
-        with open(path) as fh:
+        with open(path, encoding="utf-8") as fh:
             stamp = json.load(fh)
         loaded, location, warning = _loaded_package_info()
         self.package_info = {"fmu_sha256": stamp.get("sha256"), "loaded_sha256": loaded,
@@ -602,6 +628,7 @@ class ReeveSlave(Fmi2Slave):
     def _get_values(self, kind, vrs, conv, bad):
         g = self._get[kind]
         try:
+            self._flush()
             return [conv(g[vr]()) for vr in vrs]
         except Exception:
             out = []
@@ -628,6 +655,8 @@ class ReeveSlave(Fmi2Slave):
         # no getter call per variable (the plant's 25 outputs: ~3x faster); anything else (a user
         # getter, a bad value reference, a non-float value) takes the checked path
         try:
+            if self._deferred is not None and not self._eager_vrs.issuperset(vrs):
+                self._flush()
             vals = self.values
             names = self._real_names
             out = [vals[names[vr]] for vr in vrs]
@@ -745,6 +774,7 @@ class ReeveSlave(Fmi2Slave):
     # ------------------------------------------------------------------ FMU state
     def _get_fmu_state(self):
         try:
+            self._flush()
             hidden = self.get_hidden_state() if self._initialized else {}
             return canonical_state({
                 "format": STATE_FORMAT,
@@ -783,6 +813,7 @@ class ReeveSlave(Fmi2Slave):
             if self._fault is not None and state["initialized"]:
                 raise RuntimeError("cannot restore into a faulty instance (reset it first):\n"
                                    + self._fault)
+            self._deferred = None
             self.values.update(values)
             self.time = state["time"]
             self.start_time = state["start_time"]

@@ -58,7 +58,7 @@ class InProcessPlant:
 
 
 class FmuPlant:
-    """The plant FMU (fmi.md §2.2: fmpy FMU2Slave, one setReal/doStep/getReal per step).
+    """The plant FMU (docs/cosim.md, 'pythonfmu and fmpy' item 7: fmpy FMU2Slave, one setReal/doStep/getReal per step).
 
     Inputs are found by name: `motor.torque` and `brake.command` (the plant FMU of `reeve-fmu build`).
     `motor.torque` is an input of that FMU, not an output; the adapter appends it to the outputs (the

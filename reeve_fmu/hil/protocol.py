@@ -42,7 +42,7 @@ BENCH_TX = frozenset({COB_SYNC, COB_EMCY, COB_TPDO1, COB_TPDO2, COB_TPDO3, COB_S
 # --- units of the default object dictionary ---------------------------------------------------------
 INC_PER_REV = 1 << 20                    # 0x608F: encoder increments per motor revolution
 RAD_PER_INC = 2.0 * math.pi / INC_PER_REV
-RATED_TORQUE = 550.0                     # 0x6076 = 550000 mN m (R1 machine, domain.md §1.3)
+RATED_TORQUE = 550.0                     # 0x6076 = 550000 mN m (R1 machine, docs/reference-sets.md §1)
 NM_PER_PERMILLE = RATED_TORQUE / 1000.0  # 0.55 N m per unit of 0x6071/0x6077
 SYNC_COUNTER_MAX = 240                   # 0x1019
 

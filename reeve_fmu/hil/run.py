@@ -75,7 +75,7 @@ def _multicast_dev() -> str | None:
     if ip is None:
         return None
     try:
-        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, timeout=10).stdout
+        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, encoding="utf-8", errors="replace", timeout=10).stdout
     except (OSError, subprocess.SubprocessError):
         return None
     parts = out.split()
@@ -84,7 +84,7 @@ def _multicast_dev() -> str | None:
 
 def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
     """Is udp_multicast usable on this host? As root (and with `ip`), first keep the bench's multicast on
-    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (fmi.md §7.1)
+    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (docs/hil.md, "Connecting a real controller")
     unless 239.74.163.2 already routes to lo: through a NIC (default route) the frames leave the host, and
     on the test VM the real-time bench then had a p99 SYNC lateness of 2.9 ms instead of 52 us (docs/hil.md).
     Then probe with two buses. Returns (ok, what was done or why not)."""
@@ -93,7 +93,7 @@ def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
     if setup_route and ip is not None and hasattr(os, "geteuid") and os.geteuid() == 0 \
             and _multicast_dev() != "lo":
         subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
-        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True,
+        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True, encoding="utf-8", errors="replace",
                            timeout=10)
         note = " (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)" if r.returncode == 0 \
             else f" (ip route add 239.0.0.0/8 dev lo failed: {r.stderr.strip()})"
@@ -271,7 +271,7 @@ class _ProcessController:
         env = dict(os.environ)
         root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        self._log = open(self.log_path, "w")
+        self._log = open(self.log_path, "w", encoding="utf-8")
         self.proc = subprocess.Popen(args, env=env, stdout=self._log, stderr=subprocess.STDOUT,
                                      start_new_session=True)
 
@@ -292,7 +292,7 @@ class _ProcessController:
             rc = self.proc.wait(timeout=10)
         self._log.close()
         try:
-            st = json.loads(self.stats_path.read_text())
+            st = json.loads(self.stats_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             st = {"stopped": f"controller process wrote no statistics (exit code {rc}); see {self.log_path.name}"}
         st["exit_code"] = rc
@@ -309,18 +309,37 @@ def _pct(a, q):
 
 def run_hil(cfg: HilConfig, log=print) -> dict:
     """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
-    from .bridge import Bridge, BridgeConfig, FaultSpec, HilError, Injector, effective_rt_priority
-    from .controller import ControllerConfig
-    from .protocol import EDS_PATH, DBC_PATH, ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
+    from .bridge import FaultSpec
 
     log = log or (lambda *a, **k: None)
+    _check_config(cfg)
+    faults = FaultSpec.parse(cfg.inject)
+    cfg, n = _with_defaults(cfg)
+    res, plant, ctl_stats = _run_bench(cfg, faults, n, log)
+    st = res.stats
+    cols = res.columns() if res.outputs is not None else {}
+    summary = _summary(cfg, faults, res, plant, cols, ctl_stats)
+    if cols:
+        _add_trip_figures(summary, cfg, res.time, cols)
+    if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
+        _add_reference_comparison(summary, cfg, cols, st.steps)
+    if cfg.out:
+        _write_results(Path(cfg.out), cfg, summary, res.time, cols, st)
+    return json.loads(json.dumps(summary, default=_json_default))
+
+
+def _check_config(cfg: HilConfig):
+    """Bus, controller and step of the configuration; raises ValueError naming the option."""
     if cfg.bus not in ("virtual", "udp_multicast"):
         raise ValueError(f"--bus must be virtual or udp_multicast, got {cfg.bus!r}")
     if cfg.controller not in ("builtin", "external"):
         raise ValueError(f"--controller must be builtin or external, got {cfg.controller!r}")
     if not (cfg.dt > 0 and math.isfinite(cfg.dt)):
         raise ValueError(f"step must be > 0, got {cfg.dt!r}")
-    faults = FaultSpec.parse(cfg.inject)
+
+
+def _with_defaults(cfg: HilConfig):
+    """The demo's scenario where the configuration gives none, and the number of SYNC cycles."""
     if cfg.plant_values is None or cfg.drive_values is None:
         pv, dv = demo_scenario()
         cfg = replace(cfg, plant_values=pv if cfg.plant_values is None else cfg.plant_values,
@@ -331,6 +350,17 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     n = int(math.floor(t_end / cfg.dt + 1e-9))
     if n < 1:
         raise ValueError(f"--t-end {t_end} s is shorter than one SYNC period")
+    return cfg, n
+
+
+def _run_bench(cfg: HilConfig, faults, n: int, log):
+    """Bus, plant, bridge and controller (a thread on the virtual bus, a process on udp_multicast, or
+    an external CANopen master): run n SYNC cycles, then shut everything down. Returns the bridge's
+    result, the (closed) plant and the controller's statistics."""
+    from .bridge import Bridge, BridgeConfig, HilError, Injector, effective_rt_priority
+    from .controller import ControllerConfig
+    from .protocol import EDS_PATH, DBC_PATH
+
     if cfg.bus == "udp_multicast":
         ok, why = ensure_multicast()
         if not ok:
@@ -375,9 +405,14 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
             out_dir.mkdir(parents=True, exist_ok=True)
             shutil.copy(ctl.log_path, out_dir / "controller.log")
         shutil.rmtree(workdir, ignore_errors=True)
+    return res, plant, ctl_stats
+
+
+def _summary(cfg: HilConfig, faults, res, plant, cols: dict, ctl_stats) -> dict:
+    """The run's summary: mode and timing, fault handling, frame counts, step-time percentiles."""
+    from .protocol import ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
+
     st = res.stats
-    cols = res.columns() if res.outputs is not None else {}
-    time_ = res.time
     names_err = {ERR_RPDO_TIMEOUT: "command watchdog (RPDO timeout)", ERR_HEARTBEAT: "controller heartbeat lost",
                  ERR_PLANT: "plant error", ERR_SYNC: "SYNC from the controller lost"}
     summary = {
@@ -431,53 +466,62 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
                         "sync_jitter_max_us": float(np.max(st.sync_jitter)) * 1e6})
     if ctl_stats is not None:
         summary["controller_stats"] = ctl_stats
+    return summary
+
+
+def _add_trip_figures(summary: dict, cfg: HilConfig, time_, cols: dict):
+    """Car travel and speed, peak tension and torque, and the demo's trip metrics of the record."""
+    x = cols.get("car.position")
+    v = cols.get("car.velocity")
+    if x is not None:
+        summary.update({"car_travel_max_m": float(np.max(x) - x[0]), "car_position_final_m": float(x[-1]),
+                        "car_speed_max_m_s": float(np.max(np.abs(v))) if v is not None else None})
+    if "traction.tension_in" in cols:
+        summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
+    summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
+    try:   # the demo's trip metrics (stopping error, ride quality, traction) of the same record
+        from ..studies.trip import summarize, traction_limits
+
+        dv = cfg.drive_values or {}
+        lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
+        summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
+    except Exception as exc:  # a record without a complete trip, or an older demo module
+        summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
+
+
+def _add_reference_comparison(summary: dict, cfg: HilConfig, cols: dict, m: int):
+    """The record against in-process runs of the same plant and drive: with the bench's one-cycle
+    delay and CAN quantization ("reference"), and with the demo's Gauss-Seidel coupling."""
+    names = ("car.position", "car.velocity", "motor.speed")
+    for key, scheme in (("reference", "hil"), ("vs_demo_scheme", "gauss-seidel")):
+        t0 = time.perf_counter()
+        ref = reference_run(m, cfg.dt, drive_values=cfg.drive_values, plant_values=cfg.plant_values,
+                            scheme=scheme, names=names)
+        d = {f"max_abs_diff_{n.replace('.', '_')}": float(np.max(np.abs(cols[n][:m + 1] - ref[n])))
+             for n in names}
+        d["scheme"] = ("in-process Plant + ElectricDrive, same step, one-cycle transport delay (Jacobi), same "
+                       "CAN quantization" if scheme == "hil" else
+                       "in-process Plant + ElectricDrive, same step, Gauss-Seidel (the demo's coupling), "
+                       "no CAN quantization")
+        d["wall_s"] = time.perf_counter() - t0
+        summary[key] = d
+
+
+def _write_results(out: Path, cfg: HilConfig, summary: dict, time_, cols: dict, st):
+    """results.csv (the record), timing.csv (per-cycle latency) and summary.json."""
+    from ..core.results import write_csv
+
+    out.mkdir(parents=True, exist_ok=True)
     if cols:
-        x = cols.get("car.position")
-        v = cols.get("car.velocity")
-        if x is not None:
-            summary.update({"car_travel_max_m": float(np.max(x) - x[0]), "car_position_final_m": float(x[-1]),
-                            "car_speed_max_m_s": float(np.max(np.abs(v))) if v is not None else None})
-        if "traction.tension_in" in cols:
-            summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
-        summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
-        try:   # the demo's trip metrics (stopping error, ride quality, traction) of the same record
-            from ..studies.trip import summarize, traction_limits
-
-            dv = cfg.drive_values or {}
-            lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
-            summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
-        except Exception as exc:  # a record without a complete trip, or an older demo module
-            summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
-    if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
-        names = ("car.position", "car.velocity", "motor.speed")
-        m = st.steps
-        for key, scheme in (("reference", "hil"), ("vs_demo_scheme", "gauss-seidel")):
-            t0 = time.perf_counter()
-            ref = reference_run(m, cfg.dt, drive_values=cfg.drive_values, plant_values=cfg.plant_values,
-                                scheme=scheme, names=names)
-            d = {f"max_abs_diff_{n.replace('.', '_')}": float(np.max(np.abs(cols[n][:m + 1] - ref[n])))
-                 for n in names}
-            d["scheme"] = ("in-process Plant + ElectricDrive, same step, one-cycle transport delay (Jacobi), same "
-                           "CAN quantization" if scheme == "hil" else
-                           "in-process Plant + ElectricDrive, same step, Gauss-Seidel (the demo's coupling), "
-                           "no CAN quantization")
-            d["wall_s"] = time.perf_counter() - t0
-            summary[key] = d
-    if cfg.out:
-        from ..core.results import write_csv
-
-        out = Path(cfg.out)
-        out.mkdir(parents=True, exist_ok=True)
-        if cols:
-            write_csv(out / "results.csv", time_, cols)
-        if len(st.step_time):
-            # per-cycle latency log: work time SYNC -> plant stepped, and (real time) SYNC lateness
-            tcols = {"step_time_us": st.step_time * 1e6}
-            if cfg.realtime and len(st.sync_jitter):
-                tcols["sync_late_us"] = st.sync_jitter * 1e6
-            write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n")
-    return json.loads(json.dumps(summary, default=_json_default))
+        write_csv(out / "results.csv", time_, cols)
+    if len(st.step_time):
+        # per-cycle latency log: work time SYNC -> plant stepped, and (real time) SYNC lateness
+        tcols = {"step_time_us": st.step_time * 1e6}
+        if cfg.realtime and len(st.sync_jitter):
+            tcols["sync_late_us"] = st.sync_jitter * 1e6
+        write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
+                                       encoding="utf-8")
 
 
 def _json_default(o):
@@ -551,7 +595,7 @@ def _controller_main(argv) -> int:
         bus.shutdown()
     d = st.as_dict()
     if a.stats:
-        Path(a.stats).write_text(json.dumps(d))
+        Path(a.stats).write_text(json.dumps(d), encoding="utf-8")
     print(json.dumps(d))
     return 0
 

@@ -3,7 +3,7 @@
 Pure numpy/scipy, SI units. The ride-quality processing follows the structure of ISO 18738-1 (10 Hz
 low-pass for performance parameters, ISO 8041 Wk/Wd weighting for vibration, peak-to-peak per half
 cycle, max and A95). The region boundaries of the standard were not available when this was written
-(domain.md §3.1 caveat), so the ones used here are our own and are stated in `ride_metrics`: do not
+(docs/reference-sets.md §4.1 caveat), so the ones used here are our own and are stated in `ride_metrics`: do not
 quote the numbers as certified ISO 18738 results.
 """
 from __future__ import annotations

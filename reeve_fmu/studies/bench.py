@@ -1,4 +1,4 @@
-"""Benchmarks: real-time factor of the elevator trips (issue 2) and the work-precision study (issue 5):
+"""Benchmarks: real-time factor of the elevator trips and the work-precision study:
 ALE against the Lagrangian finite-element baseline (lagrangian.py) on the same scenes and outputs.
 
 Speed is measured here, never asserted in tests. Wall times are of the time integration from the
@@ -69,7 +69,7 @@ def hanging_release_exact(scene, t, n_modes=4000):
     unstretched state, no damping: u(s, t) = u_s(s) + sum_n a_n sin(beta_n s/L) cos(omega_n t), with
     u_s the static displacement (downward, s from the top), beta_n tan beta_n = rhoA L/m,
     omega_n = beta_n c/L and a_n = -<u_s, phi_n>/<phi_n, phi_n> in the mass inner product
-    <f, g> = int rhoA f g ds + m f(L) g(L) (method.md §7 items 1-2). Returns (z_mass(t), N_top(t))."""
+    <f, g> = int rhoA f g ds + m f(L) g(L) (docs/theory.md §7 items 1-2). Returns (z_mass(t), N_top(t))."""
     from scipy.optimize import brentq
     rope, body = scene.ropes[0], scene.bodies[0]
     EA, rhoA, L, m = rope.EA * rope.count, rope.rhoA * rope.count, rope.length, body.mass
@@ -234,8 +234,10 @@ def trip_study(scene_path, quick=True, window=None, log=print):
         if not quick and case == "trip_2to1_window":
             # scipy Radau (rtol 1e-8) took 207 s for this 4 s window in a first run: left out
             # (the planar ALE model with 4 linear elements per span ran > 3 min on it: left out too)
+            # planar cubic at 8 and 16 elements per span (129 / 257 coordinates: banded Newton matrix)
             for kw in (dict(rho_inf=1.0), dict(rho_inf=0.5), dict(model="planar"),
-                       dict(model="planar", element="cubic")):
+                       dict(model="planar", element="cubic"), dict(model="planar", element="cubic", eps=8),
+                       dict(model="planar", element="cubic", eps=16)):
                 res, rec = _ale_run(scene, t_end, out_dt, **kw)
                 records.append(_finish(rec, case, t_end, res, ref, "car.position", TRIP_TENSIONS))
                 log(_fmt(records[-1]))
@@ -337,8 +339,8 @@ def cli_bench(args) -> int:
     for h in heads:
         print("headline:", json.dumps(h))
     figs = plot(records, out)
-    (out / "bench.json").write_text(json.dumps(records, indent=1))
-    (out / "headline.json").write_text(json.dumps(heads, indent=1))
+    (out / "bench.json").write_text(json.dumps(records, indent=1), encoding="utf-8")
+    (out / "headline.json").write_text(json.dumps(heads, indent=1), encoding="utf-8")
     print(f"-> {out / 'bench.json'}, headline.json, {', '.join(figs)} (cpu: {os.cpu_count()} cores; "
           f"single-threaded runs; {time.perf_counter() - t_start:.0f} s)")
     return 0

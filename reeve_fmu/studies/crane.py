@@ -1,15 +1,15 @@
-"""Quasi-static crane hoist with axial-torsion coupling: hook-block rotation and cabling (method.md §5.3).
+"""Quasi-static crane hoist with axial-torsion coupling: hook-block rotation and cabling (docs/theory.md §5.3).
 
 Model. The scene's rope runs drum -> lead line(s) -> boom-tip sheaves -> n falls between tip sheaves
 and hook-block sheaves (any axes) -> dead end on the tip or on the block. Every straight span is one
-linear ALE element with the torsion field of method §1.5 (`elements.torsion.torsion_span`): node
+linear ALE element with the torsion field of docs/theory.md §1.5 (`elements.torsion.torsion_span`): node
 positions at the rope-sheave tangent points, material coordinates s at the sheave nodes (W0 wraps:
 in- and out-node share s), a torsion angle phi per sheave node (phi_in = phi_out: the groove
 transports twist), phi fixed at the drum and the dead end (clamped rope ends). The hook block is rigid
 with the unknown position and yaw psi (pose = "yaw") or the full pose (yaw, pitch, roll; pose = "full")
 and carries the hook load W at its centre of gravity. Sheaves are frictionless and massless.
 
-Tangent points are exact (method §4.2): every evaluation of the equations places them on the
+Tangent points are exact (docs/theory.md §4.2): every evaluation of the equations places them on the
 current common tangents of the route circles (Newton on the contact angles, warm-started), so
 tangent points slide around the sheaves as the block moves and turns. The forces on the block are
 the rope forces at those points (for a frictionless sheave that is exact: the rope path is stationary
@@ -206,7 +206,7 @@ def _lu_solve(A, b, x):
 @njit(cache=True)
 def _contact(cA, uA, wA, RA, cB, uB, wB, RB, a0, b0):
     """Contact angles of the common tangent from circle A to circle B (radius 0: a point), Newton
-    from (a0, b0): (P_B - P_A).rho_X = 0 for each circle (method §4.2)."""
+    from (a0, b0): (P_B - P_A).rho_X = 0 for each circle (docs/theory.md §4.2)."""
     aA = a0
     aB = b0
     extra = 0
@@ -504,23 +504,9 @@ class CraneModel:
         return next(r for r in self.scene.ropes if r.name == self.spec.rope).route
 
 
-def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
-    """Compile the crane statics from a validated scene and its [crane] section."""
-    spec = parse_crane(scene) if spec is None else spec
-    r = _Reader(scene.source)
-    rope = next(rp for rp in scene.ropes if rp.name == spec.rope)
-    rpath = f"ropes[{[rp.name for rp in scene.ropes].index(rope.name)}]"
-    sheaves = {s.name: s for s in scene.sheaves}
-    bodies = {b.name: b for b in scene.bodies}
-    stops = rope.route
-    if stops[0].sheave is None or sheaves[stops[0].sheave].kind != "drum":
-        r.fail(f"{rpath}.route[0]", "a crane rope must start at a drum (kind = 'drum'): the hoist "
-                                    "winds the rope there")
-    if stops[-1].sheave is not None:
-        r.fail(f"{rpath}.route[{len(stops) - 1}]", "a crane rope must end at an anchor (the dead end)")
-    block = bodies[spec.block]
-    p0 = np.asarray(block.position, float)
-
+def _route_geometry(stops, sheaves, spec: CraneSpec, p0, r, rpath) -> list:
+    """Per route stop (world centre, radius, axis, wrap sense, on the block); a sheave or dead end
+    off the ground and off the hook block fails with the key's path."""
     geo = []   # (world centre, R, axis, sigma, on block)
     for k, st in enumerate(stops):
         if st.sheave is not None:
@@ -538,6 +524,56 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
             on = st.anchor == spec.block
             c = np.asarray(st.at, float) + (p0 if on else 0.0)
             geo.append((c, 0.0, None, 1.0, on))
+    return geo
+
+
+def _critical_height_estimate(T, falls, sp_i, p0, spec: CraneSpec):
+    """Effective spacing and the torque-factor estimate of the critical height
+    (docs/reference-sets.md §5.3): sum over falls of the moment (W/n)(p_b(psi) x p_t)_z / h
+    = -(W/(n h)) (P sin psi - Q cos psi)."""
+    nf = len(falls)
+    P = Q = 0.0
+    for k in falls:
+        top, bot = (T[k][0], T[k][1]) if sp_i[k] == 1 else (T[k][1], T[k][0])
+        pt, pb = top[:2] - p0[:2], bot[:2] - p0[:2]
+        P += pt @ pb
+        Q += pb[0] * pt[1] - pb[1] * pt[0]
+    S_eff = 2.0 * math.sqrt(max(P, 0.0) / nf)
+    H_est = math.hypot(P, Q) / (nf * abs(spec.k0) * spec.diameter) if spec.k0 != 0 else math.nan
+    return S_eff, H_est
+
+
+def _span_names(sp_i, falls) -> list:
+    """fall1 ... fallN for the falls (route order), lead, lead2, ... for the other spans."""
+    names = []
+    lead = 0
+    for k in range(len(sp_i)):
+        if sp_i[k] != 0:
+            names.append(f"fall{falls.index(k) + 1}")
+        else:
+            lead += 1
+            names.append("lead" if lead == 1 else f"lead{lead}")
+    return names
+
+
+def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
+    """Compile the crane statics from a validated scene and its [crane] section."""
+    spec = parse_crane(scene) if spec is None else spec
+    r = _Reader(scene.source)
+    rope = next(rp for rp in scene.ropes if rp.name == spec.rope)
+    rpath = f"ropes[{[rp.name for rp in scene.ropes].index(rope.name)}]"
+    sheaves = {s.name: s for s in scene.sheaves}
+    bodies = {b.name: b for b in scene.bodies}
+    stops = rope.route
+    if stops[0].sheave is None or sheaves[stops[0].sheave].kind != "drum":
+        r.fail(f"{rpath}.route[0]", "a crane rope must start at a drum (kind = 'drum'): the hoist "
+                                    "winds the rope there")
+    if stops[-1].sheave is not None:
+        r.fail(f"{rpath}.route[{len(stops) - 1}]", "a crane rope must end at an anchor (the dead end)")
+    block = bodies[spec.block]
+    p0 = np.asarray(block.position, float)
+
+    geo = _route_geometry(stops, sheaves, spec, p0, r, rpath)
     nst = len(stops)
     nsp = nst - 1
     T = []
@@ -634,24 +670,8 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
         if st_i[k, 2] >= 0:
             rscale[st_i[k, 2]] = Sref * spec.diameter
     rscale[drum_idx] = 1.0
-    # effective spacing and the torque-factor estimate of the critical height (domain.md §4.3):
-    # sum over falls of the moment (W/n)(p_b(psi) x p_t)_z / h  =  -(W/(n h)) (P sin psi - Q cos psi)
-    P = Q = 0.0
-    for k in falls:
-        top, bot = (T[k][0], T[k][1]) if sp_i[k] == 1 else (T[k][1], T[k][0])
-        pt, pb = top[:2] - p0[:2], bot[:2] - p0[:2]
-        P += pt @ pb
-        Q += pb[0] * pt[1] - pb[1] * pt[0]
-    S_eff = 2.0 * math.sqrt(max(P, 0.0) / nf)
-    H_est = math.hypot(P, Q) / (nf * abs(spec.k0) * spec.diameter) if spec.k0 != 0 else math.nan
-    names = []
-    lead = 0
-    for k in range(nsp):
-        if sp_i[k] != 0:
-            names.append(f"fall{falls.index(k) + 1}")
-        else:
-            lead += 1
-            names.append("lead" if lead == 1 else f"lead{lead}")
+    S_eff, H_est = _critical_height_estimate(T, falls, sp_i, p0, spec)
+    names = _span_names(sp_i, falls)
     return CraneModel(scene=scene, spec=spec, npose=npose, nx=n, drum_idx=drum_idx, ip=ip, fp=fp,
                       st_i=st_i, st_f=st_f, sp_i=sp_i, sp_f=sp_f, rscale=rscale, falls=tuple(falls),
                       span_names=tuple(names), h_ref=h_ref, p_ref=p0, s_ref=s_ref, phi_ref=phi_ref,
@@ -902,7 +922,7 @@ def load_crane(path, overrides: dict | None = None) -> CraneModel:
             import tomllib
         except ModuleNotFoundError:  # Python 3.10
             import tomli as tomllib
-        data = tomllib.loads(Path(path).read_text())
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
         data.setdefault("crane", {}).update(overrides)
         return build_crane(parse_scene(data, str(path)))
     return build_crane(load_scene(path))
@@ -966,7 +986,7 @@ def plot_rotation(path, res: SweepResult):
 def write_rotation_csv(path, cols: dict):
     names = list(cols)
     data = np.column_stack([np.asarray(cols[n], float) for n in names])
-    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g", encoding="utf-8")
     return Path(path)
 
 
@@ -984,7 +1004,7 @@ def cli_crane(args) -> int:
     write_rotation_csv(out / "rotation.csv", res.columns)
     plot_rotation(out / "rotation.png", res)
     summ = summary(res)
-    (out / "summary.json").write_text(json.dumps(summ, indent=2) + "\n")
+    (out / "summary.json").write_text(json.dumps(summ, indent=2) + "\n", encoding="utf-8")
     ch = res.critical_height
     yaw = res.columns["block.yaw"]
     last = np.flatnonzero(np.isfinite(yaw))

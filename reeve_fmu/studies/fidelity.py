@@ -380,7 +380,7 @@ class Report:
         from pathlib import Path
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.as_dict(), indent=1, default=float) + "\n")
+        path.write_text(json.dumps(self.as_dict(), indent=1, default=float) + "\n", encoding="utf-8")
         return path
 
     def text(self) -> str:
@@ -415,169 +415,214 @@ def select(scene: Scene, acc: Accuracy, t_end: float | None = None, out_dt: floa
            step: float | None = None, log=None) -> Report:
     """Run the probe ladder and choose. `step` fixes the step (the ladder then varies the rest);
     t_end/out_dt are the full run's (default: the scene's). Raises SceneError (bad [accuracy]) or
-    FidelityError (the reference configuration cannot run)."""
-    from ..core.model import build_model
+    FidelityError (the reference configuration cannot run).
+
+    The steps (docs/fidelity.md, "How the choice is made"), each a method of `_Selection`: check the
+    outputs against the scene; build the ladder; run the reference and set the allowed error per
+    output; run the finest candidate and the axis runs and give every candidate its estimate; take
+    the candidates in cost order until one passes (and passes the full-run check); label the rest."""
     t_end = scene.t_end if t_end is None else t_end
     out_dt = scene.output_step if out_dt is None else out_dt
-    src = scene.source
     if scene.solver.method != "gen-alpha":
-        raise SceneError(f"{src}: [solver.method] fidelity selection chooses the generalized-alpha step; the "
-                         f"scene uses {scene.solver.method!r} (set 'gen-alpha' or run with --no-fidelity)")
-    models = candidate_models(scene, acc)
-    notes = []
+        raise SceneError(f"{scene.source}: [solver.method] fidelity selection chooses the generalized-alpha "
+                         f"step; the scene uses {scene.solver.method!r} (set 'gen-alpha' or run with --no-fidelity)")
+    sel = _Selection(scene, acc, t_end, out_dt, log)
+    sel.check_outputs()
+    sel.build_ladder(step)
+    sel.wall0 = time.perf_counter()
+    sel.run_reference()
+    sel.prepare_candidates()
+    sel.estimate()
+    chosen, why = sel.choose()
+    sel.label_the_rest(chosen)
+    if not sel.reliable:
+        sel.notes.append("the estimate is unreliable: refine the ladder (accuracy.elements/steps) or loosen tol")
+    return Report(scene=scene.name, outputs=sel.outs, probe=sel.t_probe, probe_why=sel.why_probe, out_dt=out_dt,
+                  t_end=t_end, margin=acc.margin, search=acc.search, models=sel.models, reference=sel.ref,
+                  finest=sel.finest, reliable=sel.reliable, reliability=sel.reliability, candidates=sel.cands,
+                  chosen=chosen, why=why, wall_total=time.perf_counter() - sel.wall0, notes=sel.notes,
+                  chosen_result=sel.full_runs.get(chosen.config, (None,))[0])
 
-    # output names, checked against the scene as written
-    try:
-        base_names = build_model(scene).output_names
-    except SceneError:
-        base_names = ()
-    for i, o in enumerate(acc.outputs):
-        if base_names and resolve_output(o.name, base_names) is None:
-            raise SceneError(f"{src}: [accuracy.outputs[{i}]] unknown output {o.name!r}; this scene has: "
-                             f"{', '.join(base_names)}")
 
-    # the ladder
-    if step is not None:
-        steps = (float(step),)
-    elif acc.steps is not None:
-        steps = acc.steps
-    else:
-        steps = tuple(out_dt / k for k in DEFAULT_STEP_DIVISORS)
-    too_big = [h for h in steps if h > out_dt * (1 + 1e-9)]
-    if too_big:
-        raise SceneError(f"{src}: [accuracy.steps] {', '.join(f'{h:g}' for h in too_big)} s exceed the output "
-                         f"interval {out_dt:g} s: outputs are sampled at step ends, so the run would shorten "
-                         f"them (raise the output interval, e.g. --dt {max(too_big):g})")
-    wraps = acc.wraps if has_wraps(scene) else (scene.ropes[0].wrap_model,)
-    if not has_wraps(scene):
-        notes.append("no sheave wraps in this scene: the wrap model does not matter")
-    elems = acc.elements
-    ladder = [Config(m, n, w, h) for m, n, w, h in itertools.product(models, elems, wraps, steps)]
-    ref_cfg = Config(models[-1], 2 * max(elems), "W1", min(steps) / 2)
-    fin_cfg = Config(models[-1], max(elems), "W1" if "W1" in wraps else wraps[-1], min(steps))
+class _Selection:
+    """State shared by the steps of `select`."""
 
-    t_probe, why_probe = probe_window(scene, t_end, acc.probe)
-    n_out = max(1, int(round(t_probe / out_dt)))
-    t_probe = n_out * out_dt
+    def __init__(self, scene: Scene, acc: Accuracy, t_end: float, out_dt: float, log):
+        self.scene, self.acc, self.t_end, self.out_dt, self.log = scene, acc, t_end, out_dt, log
+        self.src = scene.source
+        self.models = candidate_models(scene, acc)
+        self.notes = []
+        self.runs = {}        # config -> output columns of its probe run (None: failed)
+        self.full_runs = {}   # config -> (Result, columns) of its full run, or (None, error text)
 
-    def say(msg):
-        if log is not None:
-            log(msg)
+    def say(self, msg):
+        if self.log is not None:
+            self.log(msg)
 
-    wall0 = time.perf_counter()
-    ref = Candidate(ref_cfg)
-    ref_model = _prepare(scene, ref, n_out, out_dt)
-    say(f"fidelity: reference {ref_cfg.label()} over 0-{t_probe:g} s ...")
-    res = _run(ref_model, ref, t_probe, out_dt) if ref_model is not None else None
-    if res is None:
-        raise FidelityError(f"{src}: fidelity reference {ref_cfg.label()} failed ({ref.reason}); restrict "
-                            f"[accuracy] models/elements/steps")
-    ref.status, ref.reason = "reference", "one refinement beyond the finest candidate in every axis"
-    ref_cols = _columns(res, acc.outputs)
-    outs, allowed = [], {}
-    for o in acc.outputs:
-        peak = float(np.max(np.abs(ref_cols[o.name])))
-        allowed[o.name] = o.tol if o.mode == "abs" else o.tol * peak
-        if allowed[o.name] <= 0.0:
-            allowed[o.name] = math.ulp(1.0)
-            notes.append(f"{o.name} is zero throughout the probe: its relative tolerance is void")
-        outs.append(dict(name=o.name, mode=o.mode, tol=o.tol, peak=peak, allowed=allowed[o.name],
-                         unit_note="SI" if o.mode == "abs" else "fraction of peak |value|"))
+    def check_outputs(self):
+        """Output names, checked against the scene as written."""
+        from ..core.model import build_model
+        try:
+            base_names = build_model(self.scene).output_names
+        except SceneError:
+            base_names = ()
+        for i, o in enumerate(self.acc.outputs):
+            if base_names and resolve_output(o.name, base_names) is None:
+                raise SceneError(f"{self.src}: [accuracy.outputs[{i}]] unknown output {o.name!r}; this scene "
+                                 f"has: {', '.join(base_names)}")
 
-    cands = [Candidate(c) for c in ladder]
-    by_cfg = {c.config: c for c in cands}
-    prepared = {c.config: _prepare(scene, c, n_out, out_dt) for c in cands}
-    rank_w = {w: i for i, w in enumerate(("W1", "W0"))}
-    runs = {}   # config -> output columns of its probe run (None: failed)
+    def build_ladder(self, step):
+        """Every combination of model, elements, wrap and step; the reference (one refinement beyond
+        the finest on every axis), the finest candidate, and the probe window."""
+        scene, acc, out_dt, src = self.scene, self.acc, self.out_dt, self.src
+        if step is not None:
+            steps = (float(step),)
+        elif acc.steps is not None:
+            steps = acc.steps
+        else:
+            steps = tuple(out_dt / k for k in DEFAULT_STEP_DIVISORS)
+        too_big = [h for h in steps if h > out_dt * (1 + 1e-9)]
+        if too_big:
+            raise SceneError(f"{src}: [accuracy.steps] {', '.join(f'{h:g}' for h in too_big)} s exceed the output "
+                             f"interval {out_dt:g} s: outputs are sampled at step ends, so the run would shorten "
+                             f"them (raise the output interval, e.g. --dt {max(too_big):g})")
+        wraps = acc.wraps if has_wraps(scene) else (scene.ropes[0].wrap_model,)
+        if not has_wraps(scene):
+            self.notes.append("no sheave wraps in this scene: the wrap model does not matter")
+        elems = acc.elements
+        models = self.models
+        self.ladder = [Config(m, n, w, h) for m, n, w, h in itertools.product(models, elems, wraps, steps)]
+        self.ref_cfg = Config(models[-1], 2 * max(elems), "W1", min(steps) / 2)
+        self.fin_cfg = Config(models[-1], max(elems), "W1" if "W1" in wraps else wraps[-1], min(steps))
+        self.axes = {"model": models, "elements": elems, "wrap": wraps, "step": steps}
+        t_probe, self.why_probe = probe_window(scene, self.t_end, acc.probe)
+        self.n_out = max(1, int(round(t_probe / out_dt)))
+        self.t_probe = self.n_out * out_dt
 
-    def order(c: Candidate):
+    def run_reference(self):
+        """The reference probe run; the allowed error per output (absolute, or relative to the peak
+        in the reference run)."""
+        ref_cfg, t_probe, out_dt = self.ref_cfg, self.t_probe, self.out_dt
+        ref = Candidate(ref_cfg)
+        ref_model = _prepare(self.scene, ref, self.n_out, out_dt)
+        self.say(f"fidelity: reference {ref_cfg.label()} over 0-{t_probe:g} s ...")
+        res = _run(ref_model, ref, t_probe, out_dt) if ref_model is not None else None
+        if res is None:
+            raise FidelityError(f"{self.src}: fidelity reference {ref_cfg.label()} failed ({ref.reason}); restrict "
+                                f"[accuracy] models/elements/steps")
+        ref.status, ref.reason = "reference", "one refinement beyond the finest candidate in every axis"
+        self.ref = ref
+        self.ref_cols = ref_cols = _columns(res, self.acc.outputs)
+        outs, allowed = [], {}
+        for o in self.acc.outputs:
+            peak = float(np.max(np.abs(ref_cols[o.name])))
+            allowed[o.name] = o.tol if o.mode == "abs" else o.tol * peak
+            if allowed[o.name] <= 0.0:
+                allowed[o.name] = math.ulp(1.0)
+                self.notes.append(f"{o.name} is zero throughout the probe: its relative tolerance is void")
+            outs.append(dict(name=o.name, mode=o.mode, tol=o.tol, peak=peak, allowed=allowed[o.name],
+                             unit_note="SI" if o.mode == "abs" else "fraction of peak |value|"))
+        self.outs, self.allowed = outs, allowed
+
+    def prepare_candidates(self):
+        """Build every candidate's model (its cost needs the dof count) and sort by cost."""
+        self.cands = cands = [Candidate(c) for c in self.ladder]
+        self.by_cfg = {c.config: c for c in cands}
+        self.prepared = {c.config: _prepare(self.scene, c, self.n_out, self.out_dt) for c in cands}
+        cands.sort(key=self.order)
+
+    _RANK_W = {w: i for i, w in enumerate(("W1", "W0"))}
+
+    def order(self, c: Candidate):
         return (c.cost if c.cost is not None else math.inf, MODEL_RANK[c.config.model], -c.config.step,
-                c.config.elements, rank_w[c.config.wrap])
-    cands.sort(key=order)
+                c.config.elements, self._RANK_W[c.config.wrap])
 
-    def probe(cfg: Config):
+    def probe(self, cfg: Config):
+        """The probe run of a configuration (cached), its error against the reference recorded."""
+        runs = self.runs
         if cfg not in runs:
-            c = by_cfg[cfg]
+            c = self.by_cfg[cfg]
             runs[cfg] = None
-            if prepared[cfg] is not None:
-                say(f"fidelity: probe {cfg.label()} ...")
-                r = _run(prepared[cfg], c, t_probe, out_dt)
+            if self.prepared[cfg] is not None:
+                self.say(f"fidelity: probe {cfg.label()} ...")
+                r = _run(self.prepared[cfg], c, self.t_probe, self.out_dt)
                 if r is not None:
-                    runs[cfg] = _columns(r, acc.outputs)
-                    c.errors = _diff(runs[cfg], ref_cols)
+                    runs[cfg] = _columns(r, self.acc.outputs)
+                    c.errors = _diff(runs[cfg], self.ref_cols)
         return runs[cfg]
 
-    # The finest candidate, and the axis runs: the finest with one axis set to each of its rungs
-    finest = by_cfg[fin_cfg]
-    fin_cols = probe(fin_cfg)
-    if fin_cols is None:
-        raise FidelityError(f"{src}: the finest candidate {fin_cfg.label()} failed ({finest.reason}); "
-                            f"restrict [accuracy] models/elements/steps")
-    worst_name = max(acc.outputs, key=lambda o: finest.errors[o.name] / allowed[o.name]).name
-    fin_ratio = finest.errors[worst_name] / allowed[worst_name]
-    reliable = fin_ratio <= RELIABLE
-    reliability = (f"finest candidate vs reference: {fin_ratio:.3g} tol on {worst_name} "
-                   f"({'<=' if reliable else '>'} {RELIABLE:g} tol: "
-                   + ("the reference is converged enough)" if reliable else
-                      "ESTIMATE UNRELIABLE, the reference is not converged)"))
-    axes = {"model": models, "elements": elems, "wrap": wraps, "step": steps}
-    axis_dev = {}   # (axis, value) -> {output: max |axis run - finest|} or None (run failed)
-    for ax, values in axes.items():
-        for v in values:
-            cols = probe(replace(fin_cfg, **{ax: v}))
-            axis_dev[ax, v] = None if cols is None else _diff(cols, fin_cols)
+    def estimate(self):
+        """The finest candidate and the axis runs (the finest with one axis set to each of its rungs);
+        then per candidate the axis bound and the estimate."""
+        acc, allowed, fin_cfg = self.acc, self.allowed, self.fin_cfg
+        finest = self.by_cfg[fin_cfg]
+        fin_cols = self.probe(fin_cfg)
+        if fin_cols is None:
+            raise FidelityError(f"{self.src}: the finest candidate {fin_cfg.label()} failed ({finest.reason}); "
+                                f"restrict [accuracy] models/elements/steps")
+        worst_name = max(acc.outputs, key=lambda o: finest.errors[o.name] / allowed[o.name]).name
+        fin_ratio = finest.errors[worst_name] / allowed[worst_name]
+        self.finest = finest
+        self.reliable = reliable = fin_ratio <= RELIABLE
+        self.reliability = (f"finest candidate vs reference: {fin_ratio:.3g} tol on {worst_name} "
+                            f"({'<=' if reliable else '>'} {RELIABLE:g} tol: "
+                            + ("the reference is converged enough)" if reliable else
+                               "ESTIMATE UNRELIABLE, the reference is not converged)"))
+        axis_dev = {}   # (axis, value) -> {output: max |axis run - finest|} or None (run failed)
+        for ax, values in self.axes.items():
+            for v in values:
+                cols = self.probe(replace(fin_cfg, **{ax: v}))
+                axis_dev[ax, v] = None if cols is None else _diff(cols, fin_cols)
 
-    # Estimate = max(direct error, axis bound). The bound |finest - ref| + sum over axes of
-    # |finest with this candidate's rung - finest| does not credit a cancellation of space and time
-    # errors that holds at one rope length and not at another (docs/fidelity.md).
-    for c in cands:
-        devs = [axis_dev[ax, getattr(c.config, ax)] for ax in axes]
-        if c.status == "failed" or any(d is None for d in devs):
-            c.status = "failed"
-            c.reason = c.reason or "an axis run with one of its rungs failed: no estimate"
-            continue
-        c.bounds = {o.name: finest.errors[o.name] + sum(d[o.name] for d in devs) for o in acc.outputs}
-        c.ratios = {n: max(b, c.errors.get(n, 0.0)) / allowed[n] for n, b in c.bounds.items()}
+        # Estimate = max(direct error, axis bound). The bound |finest - ref| + sum over axes of
+        # |finest with this candidate's rung - finest| does not credit a cancellation of space and time
+        # errors that holds at one rope length and not at another (docs/fidelity.md).
+        for c in self.cands:
+            devs = [axis_dev[ax, getattr(c.config, ax)] for ax in self.axes]
+            if c.status == "failed" or any(d is None for d in devs):
+                c.status = "failed"
+                c.reason = c.reason or "an axis run with one of its rungs failed: no estimate"
+                continue
+            c.bounds = {o.name: finest.errors[o.name] + sum(d[o.name] for d in devs) for o in acc.outputs}
+            c.ratios = {n: max(b, c.errors.get(n, 0.0)) / allowed[n] for n, b in c.bounds.items()}
 
-    def evaluate(c: Candidate):
+    def evaluate(self, c: Candidate):
+        """Pass or reject one candidate: by its bound alone if that fails, else after its probe run."""
+        margin = self.acc.margin
         if c.status == "failed" or c.status in ("passed", "rejected"):
             return
-        if c.worst > acc.margin:        # the bound alone rejects it: no run needed
-            c.status, c.reason = "rejected", _rejection(c, acc.margin)
+        if c.worst > margin:        # the bound alone rejects it: no run needed
+            c.status, c.reason = "rejected", _rejection(c, margin)
             return
-        if probe(c.config) is None:
+        if self.probe(c.config) is None:
             c.status = "failed"
             return
-        c.ratios = {n: max(b, c.errors[n]) / allowed[n] for n, b in c.bounds.items()}
-        if c.worst <= acc.margin:
+        c.ratios = {n: max(b, c.errors[n]) / self.allowed[n] for n, b in c.bounds.items()}
+        if c.worst <= margin:
             c.status, c.reason = "passed", ""
         else:
-            c.status, c.reason = "rejected", _rejection(c, acc.margin)
+            c.status, c.reason = "rejected", _rejection(c, margin)
 
-    # cost order, one cost level at a time; a passing candidate must then pass the full-run check
-    levels = [list(g) for _, g in itertools.groupby(cands, key=lambda c: c.cost)]
-    if acc.search == "all":
-        for c in cands:
-            evaluate(c)
-    n_full = max(1, int(round(t_end / out_dt)))
-    full_runs = {}
-
-    def full(cfg: Config):
+    def full(self, cfg: Config):
+        """The full run of a configuration (cached)."""
+        full_runs = self.full_runs
         if cfg not in full_runs:
             from ..core.solver import Simulator, SolverError
             from ..core.model import build_model
-            say(f"fidelity: full-run check {cfg.label()} over 0-{n_full * out_dt:g} s ...")
+            self.say(f"fidelity: full-run check {cfg.label()} over 0-{self.n_full * self.out_dt:g} s ...")
             try:
-                res = Simulator(build_model(configure(scene, cfg)), method="gen-alpha",
-                                step=cfg.step).run(n_full * out_dt, out_dt)
-                full_runs[cfg] = (res, _columns(res, acc.outputs))
+                res = Simulator(build_model(configure(self.scene, cfg)), method="gen-alpha",
+                                step=cfg.step).run(self.n_full * self.out_dt, self.out_dt)
+                full_runs[cfg] = (res, _columns(res, self.acc.outputs))
             except (SceneError, SolverError, ValueError, np.linalg.LinAlgError) as exc:
                 full_runs[cfg] = (None, str(exc))
         return full_runs[cfg]
 
-    def full_check(c: Candidate) -> bool:
+    def full_check(self, c: Candidate) -> bool:
+        """The candidate against its next rung (2 x elements, half the step, W1) over the whole run."""
+        acc, n_full, out_dt = self.acc, self.n_full, self.out_dt
         nxt = Config(c.config.model, 2 * c.config.elements, "W1", c.config.step / 2)
-        (_, a), (_, b) = full(c.config), full(nxt)
+        (_, a), (_, b) = self.full(c.config), self.full(nxt)
         if isinstance(a, str) or isinstance(b, str):
             c.status, c.reason = "rejected", f"full-run check failed to run: {a if isinstance(a, str) else b}"
             return False
@@ -593,44 +638,51 @@ def select(scene: Scene, acc: Accuracy, t_end: float | None = None, out_dt: floa
             return False
         return True
 
-    chosen = None
-    for level in levels:
-        for c in level:
-            evaluate(c)
-        for c in sorted((c for c in level if c.status == "passed"), key=lambda c: (c.worst, order(c))):
-            if not acc.full_check or full_check(c):
-                chosen = c
+    def choose(self):
+        """Cost order, one cost level at a time; a passing candidate must then pass the full-run
+        check. Without any: the reference. Returns (chosen, why)."""
+        acc, cands, ref = self.acc, self.cands, self.ref
+        levels = [list(g) for _, g in itertools.groupby(cands, key=lambda c: c.cost)]
+        if acc.search == "all":
+            for c in cands:
+                self.evaluate(c)
+        self.n_full = max(1, int(round(self.t_end / self.out_dt)))
+        chosen = None
+        for level in levels:
+            for c in level:
+                self.evaluate(c)
+            for c in sorted((c for c in level if c.status == "passed"), key=lambda c: (c.worst, self.order(c))):
+                if not acc.full_check or self.full_check(c):
+                    chosen = c
+                    break
+            if chosen is not None:
                 break
-        if chosen is not None:
-            break
-    if chosen is None:
-        chosen = ref
-        ref.status = "chosen"
-        why = (f"no candidate met {acc.margin:g} tol on every output; running the reference configuration "
-               f"(its own error is not estimated beyond the reliability check)")
-    else:
-        cheaper = [c for c in cands if c.cost is not None and c.cost < chosen.cost]
-        why = (f"cheapest candidate (cost {chosen.cost:.3g} = {chosen.nq} dof x {chosen.n_steps} steps) whose "
-               f"estimate meets {acc.margin:g} tol on every output (worst {chosen.worst:.3g} tol); "
-               f"{len(cheaper)} cheaper candidate(s) rejected or failed"
-               + (f"; full-run check vs {chosen.full_next}: {max(chosen.full_check.values()):.3g} tol"
-                  if chosen.full_check else ""))
-    for c in cands:
-        if c is chosen:
-            c.status, c.reason = "chosen", ""
-        elif c.status == "passed" and c.cost <= chosen.cost and chosen is not ref:
-            c.reason = ("meets the tolerance, costlier than the chosen" if c.cost > chosen.cost else
-                        f"meets the tolerance at the same cost, larger estimate ({c.worst:.3g} tol)")
-        elif c.status not in ("rejected", "failed"):
-            if c.worst > acc.margin:
-                c.status, c.reason = "rejected", _rejection(c, acc.margin)
-            else:
-                c.status = "costlier"
-                c.reason = "costlier than the chosen" + ("" if c.errors else " (not run; axis bound passes)")
-    if not reliable:
-        notes.append("the estimate is unreliable: refine the ladder (accuracy.elements/steps) or loosen tol")
-    return Report(scene=scene.name, outputs=outs, probe=t_probe, probe_why=why_probe, out_dt=out_dt, t_end=t_end,
-                  margin=acc.margin, search=acc.search, models=models, reference=ref, finest=finest,
-                  reliable=reliable, reliability=reliability, candidates=cands, chosen=chosen, why=why,
-                  wall_total=time.perf_counter() - wall0, notes=notes,
-                  chosen_result=full_runs.get(chosen.config, (None,))[0])
+        if chosen is None:
+            chosen = ref
+            ref.status = "chosen"
+            why = (f"no candidate met {acc.margin:g} tol on every output; running the reference configuration "
+                   f"(its own error is not estimated beyond the reliability check)")
+        else:
+            cheaper = [c for c in cands if c.cost is not None and c.cost < chosen.cost]
+            why = (f"cheapest candidate (cost {chosen.cost:.3g} = {chosen.nq} dof x {chosen.n_steps} steps) whose "
+                   f"estimate meets {acc.margin:g} tol on every output (worst {chosen.worst:.3g} tol); "
+                   f"{len(cheaper)} cheaper candidate(s) rejected or failed"
+                   + (f"; full-run check vs {chosen.full_next}: {max(chosen.full_check.values()):.3g} tol"
+                      if chosen.full_check else ""))
+        return chosen, why
+
+    def label_the_rest(self, chosen: Candidate):
+        """Status and reason of every candidate for the report."""
+        margin, ref = self.acc.margin, self.ref
+        for c in self.cands:
+            if c is chosen:
+                c.status, c.reason = "chosen", ""
+            elif c.status == "passed" and c.cost <= chosen.cost and chosen is not ref:
+                c.reason = ("meets the tolerance, costlier than the chosen" if c.cost > chosen.cost else
+                            f"meets the tolerance at the same cost, larger estimate ({c.worst:.3g} tol)")
+            elif c.status not in ("rejected", "failed"):
+                if c.worst > margin:
+                    c.status, c.reason = "rejected", _rejection(c, margin)
+                else:
+                    c.status = "costlier"
+                    c.reason = "costlier than the chosen" + ("" if c.errors else " (not run; axis bound passes)")

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-# R1 traction sheave (domain.md §1.3): U-undercut groove beta = 95 deg, gamma = 30 deg, single wrap
+# R1 traction sheave (docs/reference-sets.md §1): U-undercut groove beta = 95 deg, gamma = 30 deg, single wrap
 GROOVE_BETA_DEG = 95.0
 GROOVE_GAMMA_DEG = 30.0
 WRAP_DEG = 180.0

@@ -238,11 +238,11 @@ def stale(snap_dir, work_dir, fmu, scene_text):
                                             resources={"scene.toml": scene_text.encode()})
     res["resource_changed"] = fmu_is_stale(fmu, resources={"scene.toml": b"other = 2\n"})
     toy2 = os.path.join(work_dir, "reeve_toy_slave.py")
-    with open(TOY) as fh, open(toy2, "w") as out:
+    with open(TOY, encoding="utf-8") as fh, open(toy2, "w", encoding="utf-8") as out:
         out.write(fh.read() + "\n# edited\n")
     res["entry_changed"] = fmu_is_stale(fmu, entry_script=toy2)
     res["missing"] = fmu_is_stale(os.path.join(work_dir, "nope.fmu"))
-    with open(os.path.join(snap2, "reeve_fmu", "fmu", "jitcheck.py"), "a") as fh:
+    with open(os.path.join(snap2, "reeve_fmu", "fmu", "jitcheck.py"), "a", encoding="utf-8") as fh:
         fh.write("\n# edited\n")
     res["package_changed"] = fmu_is_stale(fmu)
     os.unlink(os.path.join(snap2, "reeve_fmu", "fmu", "jitcheck.py"))
@@ -283,7 +283,7 @@ def host_imported(snap_dir, work_dir, fmu):
 def host_imported_other(snap_dir, work_dir, fmu):
     snap3 = os.path.join(work_dir, "snap3")
     shutil.copytree(snap_dir, snap3, ignore=shutil.ignore_patterns("__pycache__"))
-    with open(os.path.join(snap3, "reeve_fmu", "zz_local_edit.py"), "w") as fh:
+    with open(os.path.join(snap3, "reeve_fmu", "zz_local_edit.py"), "w", encoding="utf-8") as fh:
         fh.write("# a local edit that the FMU does not carry\n")
     reeve_fmu = _import_snapshot(snap3)
     r = _runner()

@@ -1,4 +1,4 @@
-"""Cubic ALE-ANCF rope element (Hong & Ren type) in 2D and 3D (method.md §1.3, §2, §3.1, §3.3).
+"""Cubic ALE-ANCF rope element (Hong & Ren type) in 2D and 3D (docs/theory.md §1.3, §2, §3.1, §3.3).
 
 Local coordinates (Westin order) qe = [r1 (nd), d1 (nd), s1, r2 (nd), d2 (nd), s2], ne = 4 nd + 2:
 node positions r, material gradients d = dr/ds (|d| = 1 + eps at the node), material coordinates s.
@@ -8,26 +8,26 @@ With xi = (s - s1)/l, l = s2 - s1 (material length),
     h1 = 1 - 3xi^2 + 2xi^3,  h2 = xi - 2xi^2 + xi^3,  h3 = 3xi^2 - 2xi^3,  h4 = -xi^2 + xi^3.
 
 Everything follows from the element's energies written in xi, including their dependence on l
-(Lagrange form; the boundary/flux terms are then automatic, method §2.3, §6.5):
+(Lagrange form; the boundary/flux terms are then automatic, docs/theory.md §2.3, §6 item 5):
 
-    T = 1/2 rhoA l int_0^1 |rdot|^2 dxi,  rdot = N(xi, q) qdot  (material velocity, method §2.1)
+    T = 1/2 rhoA l int_0^1 |rdot|^2 dxi,  rdot = N(xi, q) qdot  (material velocity, docs/theory.md §2.1)
         N = [h1 I, l h2 I, -(1-xi) r_s - P, h3 I, l h4 I, -xi r_s + P],  P = dr/dl = h2 d1 + h4 d2
-    mass         M = rhoA l int N^T N dxi in closed form (method §2.2; `cubic_mass_gauss` is the
+    mass         M = rhoA l int N^T N dxi in closed form (docs/theory.md §2.2; `cubic_mass_gauss` is the
                  4-point Gauss check, exact for the degree-6 integrand)
     Q_v          dT/dq - (dM/dt) qdot, by 4-point Gauss (exact): with the fixed-xi rates
                  dT/dq_i = 1/2 rhoA (dl/dq_i) int |rdot|^2 + rhoA l int rdot.(dN/dq_i qdot),
                  dM/dt qdot = (ldot/l) M qdot + rhoA l int (Ndot^T rdot + N^T Ndot qdot)
-    gravity      potential form V_g = -rhoA g.[l (r1 + r2)/2 + l^2 (d1 - d2)/12] (method §2.4)
+    gravity      potential form V_g = -rhoA g.[l (r1 + r2)/2 + l^2 (d1 - d2)/12] (docs/theory.md §2.4)
     elastic      U = l int w dxi, w = 1/2 EA eps^2 + 1/2 EI kappa^2 (5-point Gauss, the forces are
                  the exact gradient of that quadrature), with
                    eps = |r_s| - 1 (engineering strain, tension N = EA eps), and the material
                    curvature (rotation of the tangent per unstretched length)
                    kappa = |r_s x r_s s| / |r_s|^2,  kappa^2 = (|a|^2 |b|^2 - (a.b)^2)/|a|^4,
                    a = r_s, b = r_ss (the same formula in 2D and 3D, smooth at kappa = 0);
-                 s rows: dU/ds2 = -dU/ds1 = dU/dl at fixed xi (method §3.1)
+                 s rows: dU/ds2 = -dU/ds1 = dU/dl at fixed xi (docs/theory.md §3.1)
     damping      Kelvin-Voigt on the axial strain, Rayleigh function D = 1/2 l int EA nu epsdot^2 dxi
                  with the material strain rate epsdot = t.(d r_s/dt|_xi - w r_ss),
-                 w = (1-xi) s1dot + xi s2dot; Q_d = -dD/dqdot (no boundary terms, method §3.3)
+                 w = (1-xi) s1dot + xi s2dot; Q_d = -dD/dqdot (no boundary terms, docs/theory.md §3.3)
     tension-only optional: w_axial = 0 where eps <= 0 (pointwise)
 
 With s1dot = s2dot = 0 and s fixed the element is the standard gradient-deficient ANCF cable: the
@@ -71,7 +71,7 @@ def _shape(xi):
 
 @njit(cache=True)
 def cubic_mass(nd, rhoA, qe, Me):
-    """Closed-form mass matrix (method §2.2) into Me (ne x ne)."""
+    """Closed-form mass matrix (docs/theory.md §2.2) into Me (ne x ne)."""
     s1 = 2 * nd
     o2 = 2 * nd + 1
     s2 = 4 * nd + 1

@@ -1,10 +1,10 @@
-"""Linear two-node ALE rope element in 1D, 2D and 3D (method.md §1.2, §2.2-2.4, §3.1, §3.3).
+"""Linear two-node ALE rope element in 1D, 2D and 3D (docs/theory.md §1.2, §2.2-2.4, §3.1, §3.3).
 
 Local coordinates qe = [r1 (nd), r2 (nd), s1, s2]: node positions and material coordinates. In 1D the
 position is the scalar coordinate along the span's fixed line. Everything is derived from the element's
 kinetic and potential energy written in xi = (s - s1)/l including the l-dependence (Lagrange form),
 so the boundary (momentum/energy flux) terms are kept and energy is conserved across kinks and
-zero-length wraps (method §2.3, §6.5).
+zero-length wraps (docs/theory.md §2.3, §6 item 5).
 
     mass            closed form, exact material mass rhoA*l
     Q_v             dT/dq - dM/dt qdot, material part + boundary part B_e

@@ -1,4 +1,4 @@
-"""ALE torsion field of a straight rope span and the axial-torsion coupling laws (method.md §1.5, §3.2).
+"""ALE torsion field of a straight rope span and the axial-torsion coupling laws (docs/theory.md §1.5, §3.2).
 
 Kinematics (§1.5). Every rope node i carries a torsion angle phi_i, measured from a reference frame
 attached to the node's support: a unit vector v_i fixed to the support body (a sheave's or drum's axis
@@ -27,7 +27,7 @@ S = dw/deps and rope torque M = dw/dkappa for the energy laws:
                    S = EA eps + EA d (k0 kappa + 1/2 k1 d kappa^2)
                    M = EA eps d (k0 + k1 d kappa) + GJ0 kappa   (= S d k(kappa) + ..., k = k0 + k1 d kappa)
                    (k1 = 0 is COSTELLO)
-    LAW_TORQUE_FACTOR  (not an energy; the engineering check of domain.md §4.3)
+    LAW_TORQUE_FACTOR  (not an energy; the engineering check of docs/reference-sets.md §5.3)
                    S = EA eps,   M = d S (k0 + k1 d kappa) + GJ0 kappa
 
 The span's internal virtual work is  delta W = S delta|D| + M delta(phi_B + Delta - phi_A) + E delta l
@@ -127,7 +127,7 @@ def twist(phiA, phiB, delta, l):
 
 @njit(cache=True)
 def torsion_span(law, EA, rhoA, d, k0, k1, GJ0, g, rA, rB, sA, sB, phiA, phiB, vA, vB, dref, grad, wk):
-    """Potential-energy gradient of one straight span: a linear ALE element (method §1.2, statics:
+    """Potential-energy gradient of one straight span: a linear ALE element (docs/theory.md §1.2, statics:
     elastic + potential-form gravity) with the torsion field of §1.5.
 
     grad (16) is filled with dU/d[rA(3), rB(3), sA, sB, phiA, phiB, vA(3), vB(3)] (for the

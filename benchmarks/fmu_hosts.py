@@ -1,0 +1,255 @@
+"""What one 1 ms co-simulation step of the plant and drive FMUs costs, against the floor of two trivial
+pythonfmu slaves measured in the same run, in fmpy (Python host) and in the native C host.
+
+Per step both masters make the calls of reeve_fmu.fmu.cosim's Gauss-Seidel master: drive setReal(2) +
+doStep + getReal(2), plant setReal(2) + doStep + getReal(2) (only the exchanged values, so the real
+FMUs and the trivial ones move the same data). Reported (best of --repeat runs of --steps steps over
+the start of the R1 trip: pre-torque, brake lift, acceleration):
+
+* fmpy: us/step of the two trivial slaves (floor), of the two FMUs, of the same Plant/ElectricDrive
+  objects stepped in-process without FMI (bare models), and a per-call breakdown of the FMUs' steps;
+* C host (tests/fmu_host/fmu_host.c, no LD_PRELOAD): us/step of the trivial slaves and of the FMUs;
+* the ratios FMUs / floor and C host / fmpy, and the load average.
+
+Times are the CPU time of the stepping thread (`*_us`: robust when other processes share the cores,
+as on the project's 2-core VM) and wall time (`*_wall_us`); each the best of --repeat runs.
+
+    python benchmarks/fmu_hosts.py [--steps 3000] [--repeat 3] [--json out.json]
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+SLAVE = '''
+from pythonfmu import Fmi2Slave, Fmi2Causality, Real
+
+
+class TrivialHostSlave(Fmi2Slave):
+    author = "reeve_fmu"
+    description = "trivial slave: y = u"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.u1 = self.u2 = self.y1 = self.y2 = 0.0
+        for name, c in (("u1", Fmi2Causality.input), ("u2", Fmi2Causality.input),
+                        ("y1", Fmi2Causality.output), ("y2", Fmi2Causality.output)):
+            self.register_variable(Real(name, causality=c))
+
+    def do_step(self, current_time, step_size):
+        self.y1, self.y2 = self.u1, self.u2
+        return True
+'''
+R1_DRIVE = {"pretorque[1]": 522.5, "pretorque[2]": 331.5}
+
+
+def build_trivial(tmp: Path) -> Path:
+    """The trivial slave built by pythonfmu, with the native loader installed (so the C host runs it)."""
+    from reeve_fmu.fmu import native
+
+    src = tmp / "trivial_host_slave.py"
+    src.write_text(SLAVE, encoding="utf-8")
+    subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", str(src), "-d", str(tmp)], check=True,
+                   capture_output=True)
+    fmu = tmp / "TrivialHostSlave.fmu"
+    native.install_loader(fmu, "TrivialHostSlave")
+    return fmu
+
+
+class Pair:
+    """Two FMU2Slave instances wired like the co-simulation (a: drive, b: plant)."""
+
+    def __init__(self, fmus, names, vr_in, vr_out, tmp, start=None):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.s = []
+        for fmu, name, values in zip(fmus, names, start or ({}, {})):
+            md = read_model_description(str(fmu))
+            vr = {v.name: v.valueReference for v in md.modelVariables}
+            s = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu), str(tmp / f"x_{name}")),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+            s.instantiate()
+            s.setupExperiment(startTime=0.0)
+            s.enterInitializationMode()
+            if values:
+                s.setReal([vr[k] for k in values], list(values.values()))
+            s.exitInitializationMode()
+            self.s.append(s)
+        self.vin = [(ctypes.c_uint * 2)(*v) for v in vr_in]
+        self.vout = [(ctypes.c_uint * 2)(*v) for v in vr_out]
+        self.buf = [(ctypes.c_double * 2)(), (ctypes.c_double * 2)()]
+
+    def run(self, n, t0=0.0, h=1e-3, breakdown=None):
+        a, b = self.s
+        ca, cb = a.component, b.component
+        sa, da, ga = a.dll.fmi2SetReal, a.dll.fmi2DoStep, a.dll.fmi2GetReal
+        sb, db, gb = b.dll.fmi2SetReal, b.dll.fmi2DoStep, b.dll.fmi2GetReal
+        ia, ib = self.vin
+        oa, ob = self.vout
+        ba, bb = self.buf
+        ns = 1e6
+        k0 = int(round(t0 / h))
+        if breakdown is None:
+            c0, w0 = time.thread_time(), time.perf_counter()
+            for k in range(k0, k0 + n):
+                t = (k * ns) / 1e9
+                sa(ca, ia, 2, bb)
+                da(ca, t, h, 1)
+                ga(ca, oa, 2, ba)
+                sb(cb, ib, 2, ba)
+                db(cb, t, h, 1)
+                gb(cb, ob, 2, bb)
+            return (time.thread_time() - c0) / n, (time.perf_counter() - w0) / n
+        perf = time.thread_time_ns
+        acc = [0] * 6
+        for k in range(k0, k0 + n):
+            t = (k * ns) / 1e9
+            c0 = perf()
+            sa(ca, ia, 2, bb)
+            c1 = perf()
+            da(ca, t, h, 1)
+            c2 = perf()
+            ga(ca, oa, 2, ba)
+            c3 = perf()
+            sb(cb, ib, 2, ba)
+            c4 = perf()
+            db(cb, t, h, 1)
+            c5 = perf()
+            gb(cb, ob, 2, bb)
+            c6 = perf()
+            for i, (x, y) in enumerate(((c0, c1), (c1, c2), (c2, c3), (c3, c4), (c4, c5), (c5, c6))):
+                acc[i] += y - x
+        breakdown.update({k: acc[i] / n / 1e3 for i, k in enumerate(
+            ("drive.setReal", "drive.doStep", "drive.getReal", "plant.setReal", "plant.doStep",
+             "plant.getReal"))})
+        return sum(acc) / n / 1e9, None
+
+    def close(self):
+        for s in self.s:
+            s.terminate()
+            s.freeInstance()
+
+
+def bare_models(steps, repeat, h=1e-3):
+    """The FMUs' Plant and ElectricDrive objects, coupled in-process like the master (no FMI)."""
+    from reeve_fmu.fmu.cosim import default_scene_path, make_drive, make_plant
+
+    best, best_wall = float("inf"), float("inf")
+    for _ in range(repeat):
+        plant = make_plant(default_scene_path())
+        drive = make_drive(R1_DRIVE)
+        plant.warm_up()
+        drive.warm_up()
+        iw, ia = plant.output_names.index("motor.speed"), plant.output_names.index("motor.angle")
+        y = plant._y
+        c0, w0 = time.thread_time(), time.perf_counter()
+        for k in range(steps):
+            t = (k * 1e6) / 1e9
+            tau, br = drive.step(t, h, float(y[iw]), float(y[ia]))
+            y = plant.step(h, tau, br)
+        best = min(best, (time.thread_time() - c0) / steps)
+        best_wall = min(best_wall, (time.perf_counter() - w0) / steps)
+    return best, best_wall
+
+
+def c_host(exe, plan, tmp, steps):
+    from fmu_host import chost
+
+    r = chost.run_host(exe, plan, tmp)
+    if r["returncode"] != 0:
+        raise RuntimeError(r["stdout"] + r["stderr"])
+    return r["loop_cpu_s"] / steps, r["loop_s"] / steps
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    from fmpy import read_model_description
+
+    from fmu_host import chost
+    from reeve_fmu.fmu.cosim import build_drive_fmu, build_plant_fmu
+
+    n, R = args.steps, args.repeat
+    out = {"steps": n, "repeat": R}
+    with tempfile.TemporaryDirectory(prefix="reeve_hosts_bench_") as td:
+        tmp = Path(td)
+        triv = build_trivial(tmp)
+        plant, _ = build_plant_fmu(tmp / "fmus")
+        drive, _ = build_drive_fmu(tmp / "fmus")
+        mp, md = read_model_description(str(plant)), read_model_description(str(drive))
+        vp = {v.name: v.valueReference for v in mp.modelVariables}
+        vd = {v.name: v.valueReference for v in md.modelVariables}
+
+        # --- fmpy
+        def best_of(runs):
+            runs = list(runs)
+            return min(r[0] for r in runs) * 1e6, min(r[1] for r in runs) * 1e6
+
+        floor = Pair([triv, triv], ["drive", "plant"], [(0, 1), (0, 1)], [(2, 3), (2, 3)], tmp / "f")
+        floor.run(1000)
+        out["fmpy_floor_us"], out["fmpy_floor_wall_us"] = best_of(floor.run(n) for _ in range(R))
+        floor.close()
+        runs, bd = [], None
+        for r in range(R + 1):
+            pair = Pair([drive, plant], ["drive", "plant"],
+                        [(vd["motor.speed"], vd["motor.angle"]), (vp["motor.torque"], vp["brake.command"])],
+                        [(vd["motor.torque"], vd["brake.command"]), (vp["motor.speed"], vp["motor.angle"])],
+                        tmp / f"r{r}", start=(R1_DRIVE, {}))
+            pair.run(5)                       # first steps: kernels load
+            if r == 0:
+                bd = {}
+                pair.run(n, t0=5e-3, breakdown=bd)
+            else:
+                runs.append(pair.run(n, t0=5e-3))
+            pair.close()
+        out["fmpy_fmus_us"], out["fmpy_fmus_wall_us"] = best_of(runs)
+        out["fmpy_breakdown_us"] = bd
+        bm = bare_models(n, R)
+        out["bare_models_us"], out["bare_models_wall_us"] = bm[0] * 1e6, bm[1] * 1e6
+
+        # --- C host
+        try:
+            exe = chost.compile_host(tmp)
+        except Exception as exc:
+            exe = None
+            out["c_host"] = f"not measured: {exc}"
+        if exe is not None:
+            dirs = {k: chost.extract(f, tmp / f"c_{k}") for k, f in (("triv", triv), ("plant", plant),
+                                                                       ("drive", drive))}
+            tid, tguid, _ = chost.model_info(triv)
+            tplan = (f"fmu drive {dirs['triv']} {tid} {tguid}\nfmu plant {dirs['triv']} {tid} {tguid}\n"
+                     "input drive 0 plant 2\ninput drive 1 plant 3\ninput plant 0 drive 2\n"
+                     f"input plant 1 drive 3\nstep 0.001\nsteps {n}\n")
+            out["c_floor_us"], out["c_floor_wall_us"] = best_of(c_host(exe, tplan, tmp, n) for _ in range(R))
+            plan = chost.cosim_plan(plant, drive, dirs["plant"], dirs["drive"], step=1e-3, steps=n,
+                                    drive_values=R1_DRIVE)
+            out["c_fmus_us"], out["c_fmus_wall_us"] = best_of(c_host(exe, plan, tmp, n) for _ in range(R))
+    out["ratio_fmpy_fmus_over_floor"] = out["fmpy_fmus_us"] / out["fmpy_floor_us"]
+    out["slave_layer_us"] = out["fmpy_fmus_us"] - out["fmpy_floor_us"] - out["bare_models_us"]
+    if "c_fmus_us" in out:
+        out["ratio_c_over_fmpy"] = out["c_fmus_us"] / out["fmpy_fmus_us"]
+        out["ratio_c_fmus_over_c_floor"] = out["c_fmus_us"] / out["c_floor_us"]
+    out["loadavg"] = os.getloadavg()
+    print(json.dumps(out, indent=1))
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

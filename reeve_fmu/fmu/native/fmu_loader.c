@@ -1,0 +1,672 @@
+/* reeve_fmu native loader: makes a pythonfmu 0.7.0 FMU a drop-in component for any FMI 2.0 host.
+ *
+ * Compiled by reeve_fmu.fmu.native when an FMU is built (never committed as a binary). The FMU then has
+ *
+ *   binaries/linux64/<id>.so            this loader (the host dlopens it like any FMU binary)
+ *   binaries/linux64/<id>_pythonfmu.so  pythonfmu's prebuilt binary, renamed
+ *   binaries/linux64/<id>_pyexit.so     this file compiled with -DREEVE_EXIT_HELPER: an empty
+ *                                       finalizePythonInterpreter() and nothing else
+ *
+ * What the loader does, in fmi2Instantiate (once per process for the loading part):
+ *
+ * 1. Python in global scope. pythonfmu's binary links no libpython; its Py* symbols are resolved from
+ *    the process's global symbol scope. If the process has no Python there (a C/C++ host), the loader
+ *    promotes a libpython the process already loaded privately, or dlopens one with RTLD_GLOBAL:
+ *    $REEVE_FMU_LIBPYTHON if set, else the libpython of the interpreter the FMU was built with
+ *    (REEVE_LIBPYTHON, recorded at build time), else the standard sonames libpython3.X.so.1.0. It
+ *    checks the version (>= 3.10) and initializes the interpreter itself with Py_InitializeEx(0) (no
+ *    signal handlers): pythonfmu then never finalizes it, so there is no interpreter shutdown at exit.
+ *    In a Python host (fmpy, libcosimpy, ...) the host's interpreter is used as it is.
+ *
+ * 2. Clean exit. pythonfmu's library destructor calls finalizePythonInterpreter(), which resets a
+ *    static std::shared_ptr that a C++ static destructor has already destroyed at exit (double free:
+ *    "corrupted double-linked list", exit 134). The call goes through the PLT, and a library that was
+ *    loaded into global scope *before* pythonfmu's binary takes precedence over the binary's own
+ *    definition. So the loader dlopens <id>_pyexit.so with RTLD_GLOBAL first (it defines only an empty
+ *    finalizePythonInterpreter), then pythonfmu's binary with RTLD_LOCAL | RTLD_NODELETE (never
+ *    unloaded: unloading would tear down pythonfmu's interpreter bookkeeping).
+ *
+ * 3. One Python thread state per host thread. pythonfmu wraps every call in PyGILState_Ensure/Release;
+ *    on a thread without a Python thread state that creates and destroys one per call (about 10 us on
+ *    Python >= 3.11). Before forwarding a call the loader gives a thread without a thread state a
+ *    persistent one: one PyGILState_Ensure whose count is never released (then PyEval_SaveThread to
+ *    drop the GIL), remembered in thread-local storage. pythonfmu's own Ensure/Release then only take
+ *    and drop the GIL. Python threads (fmpy's) already have a thread state and are left alone.
+ *
+ * 4. Visible errors. Before pythonfmu instantiates the model, the loader runs preflight() of the
+ *    FMU's bootstrap (resources/reeve_fmu.py): it adds the build environment's site-packages
+ *    (resources/reeve_env.json) when the loader started the interpreter, and checks that the model's
+ *    packages import; a failure becomes a logged reason and fmi2Instantiate returns NULL. pythonfmu
+ *    only forwards messages when debug logging is on, so it always gets loggingOn = true and a relay
+ *    logger; the relay passes warnings and errors to the host always and OK messages only when the
+ *    host asked for logging (fmi2Instantiate's loggingOn, fmi2SetDebugLogging with its categories).
+ *    Messages are passed on as printf formats with every '%' escaped.
+ *
+ * Every other fmi2 function is forwarded unchanged to pythonfmu's binary.
+ */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <link.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define EXPORT __attribute__((visibility("default")))
+
+#ifdef REEVE_EXIT_HELPER
+/* Replaces pythonfmu's finalizePythonInterpreter (see 2. above): the interpreter bookkeeping is left
+ * to the C++ static destructors, which already run at exit. */
+EXPORT void finalizePythonInterpreter(void) {}
+#else
+
+#ifndef REEVE_MODEL_IDENTIFIER
+#error "compile with -DREEVE_MODEL_IDENTIFIER=\"<modelIdentifier>\""
+#endif
+#ifndef REEVE_LIBPYTHON
+#define REEVE_LIBPYTHON ""
+#endif
+#ifndef REEVE_PY_VERSION
+#define REEVE_PY_VERSION "3.11"
+#endif
+#define REEVE_MIN_PY_MINOR 10
+
+/* ------------------------------------------------------------------ FMI 2.0 types (fmi2TypesPlatform) */
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef void *fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char *fmi2String;
+typedef char fmi2Byte;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef enum { fmi2DoStepStatus, fmi2PendingStatus, fmi2LastSuccessfulTime, fmi2Terminated } fmi2StatusKind;
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
+                                   fmi2String, ...);
+typedef void *(*fmi2CallbackAllocateMemory)(size_t, size_t);
+typedef void (*fmi2CallbackFreeMemory)(void *);
+typedef void (*fmi2StepFinished)(fmi2ComponentEnvironment, fmi2Status);
+typedef struct {
+    fmi2CallbackLogger logger;
+    fmi2CallbackAllocateMemory allocateMemory;
+    fmi2CallbackFreeMemory freeMemory;
+    fmi2StepFinished stepFinished;
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+/* ------------------------------------------------------------------ the CPython functions used */
+typedef void PyObject;
+typedef void PyThreadState;
+#define PY_FILE_INPUT 257
+static struct {
+    int (*IsInitialized)(void);
+    void (*InitializeEx)(int);
+    const char *(*GetVersion)(void);
+    PyThreadState *(*EvalSaveThread)(void);
+    int (*GILStateEnsure)(void);
+    void (*GILStateRelease)(int);
+    PyThreadState *(*GILStateGetThisThreadState)(void);
+    PyObject *(*DictNew)(void);
+    int (*DictSetItemString)(PyObject *, const char *, PyObject *);
+    PyObject *(*DictGetItemString)(PyObject *, const char *);
+    PyObject *(*EvalGetBuiltins)(void);
+    PyObject *(*UnicodeDecodeFSDefault)(const char *);
+    PyObject *(*BoolFromLong)(long);
+    PyObject *(*CompileString)(const char *, const char *, int);
+    PyObject *(*EvalEvalCode)(PyObject *, PyObject *, PyObject *);
+    void (*ErrFetch)(PyObject **, PyObject **, PyObject **);
+    PyObject *(*ObjectStr)(PyObject *);
+    const char *(*UnicodeAsUTF8AndSize)(PyObject *, ptrdiff_t *);
+    void (*DecRef)(PyObject *);
+} py;
+
+static const char *py_names[] = {
+    "Py_IsInitialized", "Py_InitializeEx", "Py_GetVersion", "PyEval_SaveThread", "PyGILState_Ensure",
+    "PyGILState_Release", "PyGILState_GetThisThreadState", "PyDict_New", "PyDict_SetItemString",
+    "PyDict_GetItemString", "PyEval_GetBuiltins", "PyUnicode_DecodeFSDefault", "PyBool_FromLong",
+    "Py_CompileString", "PyEval_EvalCode", "PyErr_Fetch", "PyObject_Str", "PyUnicode_AsUTF8AndSize",
+    "Py_DecRef",
+};
+
+/* ------------------------------------------------------------------ the fmi2 functions */
+#define FMI2_FORWARDED(X)                                                                            \
+    X(fmi2Status, fmi2SetupExperiment, (fmi2Component c, fmi2Boolean a, fmi2Real b, fmi2Real d,      \
+                                        fmi2Boolean e, fmi2Real f), (W, a, b, d, e, f))                 \
+    X(fmi2Status, fmi2EnterInitializationMode, (fmi2Component c), (W))                                \
+    X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component c), (W))                                 \
+    X(fmi2Status, fmi2Terminate, (fmi2Component c), (W))                                              \
+    X(fmi2Status, fmi2Reset, (fmi2Component c), (W))                                                  \
+    X(fmi2Status, fmi2GetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n, fmi2Real *x), \
+      (W, v, n, x))                                                                                     \
+    X(fmi2Status, fmi2GetInteger, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
+                                   fmi2Integer *x), (W, v, n, x))                                       \
+    X(fmi2Status, fmi2GetBoolean, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
+                                   fmi2Boolean *x), (W, v, n, x))                                       \
+    X(fmi2Status, fmi2GetString, (fmi2Component c, const fmi2ValueReference *v, size_t n,            \
+                                  fmi2String *x), (W, v, n, x))                                         \
+    X(fmi2Status, fmi2SetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n,              \
+                                const fmi2Real *x), (W, v, n, x))                                       \
+    X(fmi2Status, fmi2SetInteger, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
+                                   const fmi2Integer *x), (W, v, n, x))                                 \
+    X(fmi2Status, fmi2SetBoolean, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
+                                   const fmi2Boolean *x), (W, v, n, x))                                 \
+    X(fmi2Status, fmi2SetString, (fmi2Component c, const fmi2ValueReference *v, size_t n,            \
+                                  const fmi2String *x), (W, v, n, x))                                   \
+    X(fmi2Status, fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (W, s))                          \
+    X(fmi2Status, fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (W, s))                           \
+    X(fmi2Status, fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (W, s))                         \
+    X(fmi2Status, fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *n), (W, s, n))  \
+    X(fmi2Status, fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte *b, size_t n),   \
+      (W, s, b, n))                                                                                     \
+    X(fmi2Status, fmi2DeSerializeFMUstate, (fmi2Component c, const fmi2Byte *b, size_t n,            \
+                                            fmi2FMUstate *s), (W, b, n, s))                             \
+    X(fmi2Status, fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference *u,       \
+      size_t nu, const fmi2ValueReference *z, size_t nz, const fmi2Real *du, fmi2Real *dz),          \
+      (W, u, nu, z, nz, du, dz))                                                                        \
+    X(fmi2Status, fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference *v,        \
+      size_t n, const fmi2Integer *o, const fmi2Real *x), (W, v, n, o, x))                              \
+    X(fmi2Status, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference *v,       \
+      size_t n, const fmi2Integer *o, fmi2Real *x), (W, v, n, o, x))                                    \
+    X(fmi2Status, fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean p), (W, t, h, p))   \
+    X(fmi2Status, fmi2CancelStep, (fmi2Component c), (W))                                             \
+    X(fmi2Status, fmi2GetStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Status *v), (W, k, v))   \
+    X(fmi2Status, fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Real *v), (W, k, v)) \
+    X(fmi2Status, fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Integer *v),   \
+      (W, k, v))                                                                                        \
+    X(fmi2Status, fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v),   \
+      (W, k, v))                                                                                        \
+    X(fmi2Status, fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind k, fmi2String *v),     \
+      (W, k, v))
+
+/* the inner (pythonfmu) function pointers */
+#define DECLARE_INNER(ret, name, params, args) static ret(*inner_##name) params;
+FMI2_FORWARDED(DECLARE_INNER)
+static fmi2Component (*inner_fmi2Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                              const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
+static void (*inner_fmi2FreeInstance)(fmi2Component);
+static fmi2Status (*inner_fmi2SetDebugLogging)(fmi2Component, fmi2Boolean, size_t, const fmi2String *);
+
+/* one wrapper per instance: the host sees this, pythonfmu sees `inner` */
+typedef struct {
+    fmi2Component inner;
+    fmi2CallbackFunctions host;   /* the host's callbacks */
+    fmi2CallbackFunctions relay;  /* what pythonfmu gets: relay_logger with this wrapper as environment */
+    int logging_on;
+    size_t ncat;
+    char **categories;
+    char *instance_name;
+} Wrap;
+
+/* ------------------------------------------------------------------ process-wide loading state */
+static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
+static int loaded;                /* 1: Python + pythonfmu ready */
+static int we_initialized;        /* the loader started the interpreter (a non-Python host) */
+static char python_where[2048];   /* where Python came from, for messages */
+static char load_error[8192];     /* sticky reason when loading failed */
+static __thread int thread_ready; /* this host thread has a Python thread state */
+
+/* ------------------------------------------------------------------ logging */
+static const char *status_category(fmi2Status s)
+{
+    switch (s) {
+    case fmi2Warning: return "logStatusWarning";
+    case fmi2Discard: return "logStatusDiscard";
+    case fmi2Error: return "logStatusError";
+    case fmi2Fatal: return "logStatusFatal";
+    case fmi2Pending: return "logStatusPending";
+    default: return "logAll";
+    }
+}
+
+/* The text a printf-conforming host would show for `msg` passed as a format without arguments
+ * ("%%" -> "%", any other '%' kept literally), escaped again so that it is a safe format. */
+static char *safe_format(const char *msg)
+{
+    size_t n = strlen(msg), i, j = 0;
+    char *out = (char *)malloc(2 * n + 1);
+    if (!out) return NULL;
+    for (i = 0; i < n; i++) {
+        if (msg[i] == '%') {
+            if (msg[i + 1] == '%') i++;
+            out[j++] = '%';
+            out[j++] = '%';
+        } else {
+            out[j++] = msg[i];
+        }
+    }
+    out[j] = 0;
+    return out;
+}
+
+static int wants(const Wrap *w, fmi2Status status, const char *category)
+{
+    size_t i;
+    if (status >= fmi2Warning && status != fmi2Pending) return 1; /* problems: always */
+    if (!w->logging_on) return 0;
+    if (w->ncat == 0) return 1;
+    for (i = 0; i < w->ncat; i++)
+        if (category && strcmp(category, w->categories[i]) == 0) return 1;
+    return 0;
+}
+
+static void emit(const Wrap *w, fmi2String instance, fmi2Status status, fmi2String category,
+                 const char *text)
+{
+    char *fmt = safe_format(text ? text : "");
+    if (!fmt) return;
+    if (w && w->host.logger)
+        w->host.logger(w->host.componentEnvironment, instance ? instance : "", status,
+                       category ? category : status_category(status), fmt);
+    else
+        fprintf(stderr, "[%s] %s: %s\n", status_category(status), REEVE_MODEL_IDENTIFIER, text);
+    free(fmt);
+}
+
+static void relay_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                         fmi2String category, fmi2String message, ...)
+{
+    const Wrap *w = (const Wrap *)env;
+    if (w && wants(w, status, category)) emit(w, instance, status, category, message);
+}
+
+static void loader_log(const Wrap *w, fmi2Status status, const char *fmt, ...)
+{
+    char buf[12000];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    if (!w || wants(w, status, NULL))
+        emit(w, w ? w->instance_name : "", status, status_category(status), buf);
+}
+
+/* ------------------------------------------------------------------ paths */
+static void own_dir(char *out, size_t size)
+{
+    Dl_info info;
+    char *slash;
+    out[0] = 0;
+    if (dladdr((void *)&own_dir, &info) && info.dli_fname) {
+        snprintf(out, size, "%s", info.dli_fname);
+        slash = strrchr(out, '/');
+        if (slash) *slash = 0;
+        else snprintf(out, size, ".");
+    }
+}
+
+static int hexval(char c)
+{
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* file:///abs, file:/abs, file://localhost/abs (percent-decoded) or a plain path -> a local path */
+static int uri_to_path(const char *uri, char *out, size_t size)
+{
+    const char *p = uri;
+    size_t j = 0;
+    if (!uri) return -1;
+    if (strncmp(p, "file://localhost/", 17) == 0) p += 16;
+    else if (strncmp(p, "file:///", 8) == 0) p += 7;
+    else if (strncmp(p, "file:/", 6) == 0) p += 5;
+    else if (strncmp(p, "file:", 5) == 0) return -1; /* file://host/...: not local */
+    for (; *p && j + 1 < size; p++) {
+        if (*p == '%' && hexval(p[1]) >= 0 && hexval(p[2]) >= 0) {
+            out[j++] = (char)(hexval(p[1]) * 16 + hexval(p[2]));
+            p += 2;
+        } else {
+            out[j++] = *p;
+        }
+    }
+    out[j] = 0;
+    while (j > 1 && out[j - 1] == '/') out[--j] = 0;
+    return j ? 0 : -1;
+}
+
+/* ------------------------------------------------------------------ Python */
+static int find_loaded_libpython(struct dl_phdr_info *info, size_t size, void *data)
+{
+    (void)size;
+    if (info->dlpi_name && strstr(info->dlpi_name, "/libpython3.")) {
+        snprintf((char *)data, 1024, "%s", info->dlpi_name);
+        return 1;
+    }
+    return 0;
+}
+
+static int resolve_python(char *err, size_t esize)
+{
+    size_t i;
+    void **slots = (void **)&py;
+    for (i = 0; i < sizeof py_names / sizeof py_names[0]; i++) {
+        slots[i] = dlsym(RTLD_DEFAULT, py_names[i]);
+        if (!slots[i]) {
+            snprintf(err, esize, "the Python in this process (%s) lacks the function %s", python_where,
+                     py_names[i]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+static int load_python(char *err, size_t esize)
+{
+    char tried[6000] = "";
+    char cand[1024];
+    const char *env = getenv("REEVE_FMU_LIBPYTHON");
+    int major = 0, minor = 0, m;
+    void *h = NULL;
+
+    if (dlsym(RTLD_DEFAULT, "Py_IsInitialized")) {
+        snprintf(python_where, sizeof python_where, "the host process");
+    } else if (dl_iterate_phdr(find_loaded_libpython, cand) &&
+               (h = dlopen(cand, RTLD_NOW | RTLD_NOLOAD | RTLD_GLOBAL))) {
+        snprintf(python_where, sizeof python_where, "%s (already loaded by the host)", cand);
+    } else if (env && *env) {
+        h = dlopen(env, RTLD_NOW | RTLD_GLOBAL);
+        if (!h) {
+            snprintf(err, esize, "REEVE_FMU_LIBPYTHON=%s cannot be loaded: %s. Point it to the shared "
+                     "library of a Python >= 3.%d (e.g. .../lib/libpython3.%s.so.1.0) or unset it.",
+                     env, dlerror(), REEVE_MIN_PY_MINOR, REEVE_PY_VERSION + 2);
+            return -1;
+        }
+        snprintf(python_where, sizeof python_where, "%s (REEVE_FMU_LIBPYTHON)", env);
+    } else {
+        /* the build's libpython, then the standard sonames: the build's version first, then
+         * 3.17 .. 3.10 (newest first) */
+        char cands[2 + 2 * 8 + 1][1024];
+        int n = 0, mi;
+        if (REEVE_LIBPYTHON[0]) snprintf(cands[n++], sizeof cands[0], "%s", REEVE_LIBPYTHON);
+        snprintf(cands[n++], sizeof cands[0], "libpython%s.so.1.0", REEVE_PY_VERSION);
+        for (mi = 17; mi >= REEVE_MIN_PY_MINOR; mi--) {
+            char v[16];
+            snprintf(v, sizeof v, "3.%d", mi);
+            if (strcmp(v, REEVE_PY_VERSION) == 0) continue;
+            snprintf(cands[n++], sizeof cands[0], "libpython3.%d.so.1.0", mi);
+        }
+        for (m = 0; m < n && !h; m++) {
+            h = dlopen(cands[m], RTLD_NOW | RTLD_GLOBAL);
+            if (h) {
+                snprintf(python_where, sizeof python_where, "%s", cands[m]);
+            } else {
+                size_t used = strlen(tried);
+                snprintf(tried + used, sizeof tried - used, "\n  %s: %s", cands[m], dlerror());
+            }
+        }
+        if (!h) {
+            snprintf(err, esize,
+                     "no Python found. This FMU runs its model in Python (>= 3.%d; built with Python "
+                     "%s) and this process has none. Tried:%s\nInstall Python %s with its shared "
+                     "library (e.g. 'apt install libpython%s', or a python.org / pyenv build with "
+                     "--enable-shared) and the packages in the FMU's resources/requirements.txt, or "
+                     "set REEVE_FMU_LIBPYTHON to the path of a libpython3.X.so.1.0.",
+                     REEVE_MIN_PY_MINOR, REEVE_PY_VERSION, tried, REEVE_PY_VERSION, REEVE_PY_VERSION);
+            return -1;
+        }
+    }
+    if (resolve_python(err, esize) != 0) return -1;
+    if (sscanf(py.GetVersion(), "%d.%d", &major, &minor) != 2 || major != 3 ||
+        minor < REEVE_MIN_PY_MINOR) {
+        char version[32];
+        snprintf(version, sizeof version, "%s", py.GetVersion());
+        version[strcspn(version, " ")] = 0;
+        snprintf(err, esize, "wrong Python version: %s is Python %s, but this FMU needs Python >= "
+                 "3.%d (it was built with %s). Use a newer Python (set REEVE_FMU_LIBPYTHON to its "
+                 "libpython3.X.so.1.0 in a non-Python host).",
+                 python_where, version, REEVE_MIN_PY_MINOR, REEVE_PY_VERSION);
+        return -1;
+    }
+    if (!py.IsInitialized()) {
+        py.InitializeEx(0); /* no signal handlers: the host owns the signals */
+        if (!py.IsInitialized()) {
+            snprintf(err, esize, "Python (%s) failed to initialize", python_where);
+            return -1;
+        }
+        we_initialized = 1;
+        py.EvalSaveThread(); /* drop the GIL; the main thread state stays with this thread */
+    }
+    return 0;
+}
+
+static void ensure_thread_state_slow(void)
+{
+    if (!py.GILStateGetThisThreadState()) {
+        py.GILStateEnsure(); /* never released: the thread state lives as long as the thread */
+        py.EvalSaveThread();
+    }
+    thread_ready = 1;
+}
+
+static inline void ensure_thread_state(void)
+{
+    if (__builtin_expect(!thread_ready, 0)) ensure_thread_state_slow();
+}
+
+static int load_pythonfmu(char *err, size_t esize)
+{
+    char dir[1024], path[1200];
+    void *h;
+    own_dir(dir, sizeof dir);
+    snprintf(path, sizeof path, "%s/%s_pyexit.so", dir, REEVE_MODEL_IDENTIFIER);
+    if (!dlopen(path, RTLD_NOW | RTLD_GLOBAL | RTLD_NODELETE)) {
+        snprintf(err, esize, "cannot load %s: %s", path, dlerror());
+        return -1;
+    }
+    snprintf(path, sizeof path, "%s/%s_pythonfmu.so", dir, REEVE_MODEL_IDENTIFIER);
+    h = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE);
+    if (!h) {
+        snprintf(err, esize, "cannot load pythonfmu's binary %s: %s", path, dlerror());
+        return -1;
+    }
+#define RESOLVE(ret, name, params, args)                                                            \
+    if (!(*(void **)&inner_##name = dlsym(h, #name))) {                                              \
+        snprintf(err, esize, "%s lacks %s", path, #name);                                            \
+        return -1;                                                                                   \
+    }
+    FMI2_FORWARDED(RESOLVE)
+    RESOLVE(, fmi2Instantiate, , )
+    RESOLVE(, fmi2FreeInstance, , )
+    RESOLVE(, fmi2SetDebugLogging, , )
+#undef RESOLVE
+    return 0;
+}
+
+/* Python-side checks (resources/reeve_fmu.py: preflight). Returns 0, or -1 with the reason in err;
+ * warnings are logged. */
+static const char PREFLIGHT[] =
+    "import importlib.util as _u, os as _o\n"
+    "ERROR = WARNING = None\n"
+    "_p = _o.path.join(RESOURCES, 'reeve_fmu.py')\n"
+    "if _o.path.isfile(_p):\n"
+    "    _s = _u.spec_from_file_location('_reeve_fmu_preflight', _p)\n"
+    "    _m = _u.module_from_spec(_s)\n"
+    "    _s.loader.exec_module(_m)\n"
+    "    ERROR, WARNING = _m.preflight(RESOURCES, EMBEDDED, WHERE)\n";
+
+static void copy_str(PyObject *o, char *out, size_t size)
+{
+    ptrdiff_t n = 0;
+    const char *s;
+    PyObject *str = o ? py.ObjectStr(o) : NULL;
+    out[0] = 0;
+    if (!str) return;
+    s = py.UnicodeAsUTF8AndSize(str, &n);
+    if (s) snprintf(out, size, "%s", s);
+    py.DecRef(str);
+}
+
+static int preflight(const Wrap *w, const char *resources, char *err, size_t esize)
+{
+    int rc = 0, gil = py.GILStateEnsure();
+    PyObject *g = py.DictNew(), *code = NULL, *r = NULL, *o;
+    err[0] = 0;
+    if (!g) goto fail;
+    py.DictSetItemString(g, "__builtins__", py.EvalGetBuiltins());
+    o = py.UnicodeDecodeFSDefault(resources);
+    py.DictSetItemString(g, "RESOURCES", o);
+    py.DecRef(o);
+    o = py.BoolFromLong(we_initialized);
+    py.DictSetItemString(g, "EMBEDDED", o);
+    py.DecRef(o);
+    o = py.UnicodeDecodeFSDefault(python_where);
+    py.DictSetItemString(g, "WHERE", o);
+    py.DecRef(o);
+    code = py.CompileString(PREFLIGHT, "<reeve_fmu loader>", PY_FILE_INPUT);
+    if (code) r = py.EvalEvalCode(code, g, g);
+    if (!r) goto fail;
+    o = py.DictGetItemString(g, "WARNING");
+    if (o && o != py.DictGetItemString(py.EvalGetBuiltins(), "None")) {
+        char buf[8192];
+        copy_str(o, buf, sizeof buf);
+        if (buf[0] && strcmp(buf, "None") != 0) loader_log(w, fmi2Warning, "%s", buf);
+    }
+    o = py.DictGetItemString(g, "ERROR");
+    if (o) {
+        copy_str(o, err, esize);
+        if (strcmp(err, "None") == 0) err[0] = 0;
+    }
+    rc = err[0] ? -1 : 0;
+    goto done;
+fail : {
+    PyObject *t = NULL, *v = NULL, *tb = NULL;
+    char buf[4096];
+    py.ErrFetch(&t, &v, &tb);
+    copy_str(v ? v : t, buf, sizeof buf);
+    snprintf(err, esize, "the FMU's Python bootstrap failed: %s", buf[0] ? buf : "unknown error");
+    if (t) py.DecRef(t);
+    if (v) py.DecRef(v);
+    if (tb) py.DecRef(tb);
+    rc = -1;
+}
+done:
+    if (r) py.DecRef(r);
+    if (code) py.DecRef(code);
+    if (g) py.DecRef(g);
+    py.GILStateRelease(gil);
+    return rc;
+}
+
+/* ------------------------------------------------------------------ exported fmi2 functions */
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+
+static void free_wrap(Wrap *w)
+{
+    size_t i;
+    if (!w) return;
+    for (i = 0; i < w->ncat; i++) free(w->categories[i]);
+    free(w->categories);
+    free(w->instance_name);
+    free(w);
+}
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                                     fmi2String fmuResourceLocation,
+                                     const fmi2CallbackFunctions *functions, fmi2Boolean visible,
+                                     fmi2Boolean loggingOn)
+{
+    char resources[4096], uri[8300], err[8192];
+    size_t i, j;
+    Wrap *w = (Wrap *)calloc(1, sizeof(Wrap));
+    if (!w) return NULL;
+    if (functions) w->host = *functions;
+    w->logging_on = loggingOn != 0;
+    w->instance_name = strdup(instanceName ? instanceName : "");
+
+    pthread_mutex_lock(&load_lock);
+    if (!loaded && !load_error[0]) {
+        if (load_python(err, sizeof err) == 0 && load_pythonfmu(err, sizeof err) == 0) loaded = 1;
+        else snprintf(load_error, sizeof load_error, "%s", err);
+    }
+    pthread_mutex_unlock(&load_lock);
+    if (!loaded) {
+        loader_log(w, fmi2Fatal, "%s: cannot instantiate: %s", REEVE_MODEL_IDENTIFIER, load_error);
+        free_wrap(w);
+        return NULL;
+    }
+    ensure_thread_state();
+
+    if (uri_to_path(fmuResourceLocation, resources, sizeof resources) != 0) {
+        loader_log(w, fmi2Error, "%s: fmuResourceLocation '%s' is not a local file URI",
+                   REEVE_MODEL_IDENTIFIER, fmuResourceLocation ? fmuResourceLocation : "(null)");
+        free_wrap(w);
+        return NULL;
+    }
+    if (preflight(w, resources, err, sizeof err) != 0) {
+        loader_log(w, fmi2Error, "%s: cannot instantiate: %s", REEVE_MODEL_IDENTIFIER, err);
+        free_wrap(w);
+        return NULL;
+    }
+    /* pythonfmu strips "file://" and decodes only %20: hand it that form */
+    memcpy(uri, "file://", 7);
+    for (i = 0, j = 7; resources[i] && j + 4 < sizeof uri; i++) {
+        if (resources[i] == ' ') {
+            memcpy(uri + j, "%20", 3);
+            j += 3;
+        } else {
+            uri[j++] = resources[i];
+        }
+    }
+    uri[j] = 0;
+    w->relay = w->host;
+    w->relay.logger = relay_logger;
+    w->relay.componentEnvironment = w;
+    w->inner = inner_fmi2Instantiate(instanceName, fmuType, fmuGUID, uri, &w->relay, visible, 1);
+    if (!w->inner) {
+        loader_log(w, fmi2Error, "%s: pythonfmu could not instantiate the model (reason above)",
+                   REEVE_MODEL_IDENTIFIER);
+        free_wrap(w);
+        return NULL;
+    }
+    return (fmi2Component)w;
+}
+
+EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    Wrap *w = (Wrap *)c;
+    if (!w) return;
+    ensure_thread_state();
+    inner_fmi2FreeInstance(w->inner);
+    free_wrap(w);
+}
+
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+                                      const fmi2String categories[])
+{
+    Wrap *w = (Wrap *)c;
+    size_t i;
+    char **cats = NULL;
+    if (!w) return fmi2Error;
+    if (nCategories && categories) {
+        cats = (char **)calloc(nCategories, sizeof(char *));
+        if (!cats) return fmi2Error;
+        for (i = 0; i < nCategories; i++) cats[i] = strdup(categories[i] ? categories[i] : "");
+    }
+    for (i = 0; i < w->ncat; i++) free(w->categories[i]);
+    free(w->categories);
+    w->categories = cats;
+    w->ncat = cats ? nCategories : 0;
+    w->logging_on = loggingOn != 0;
+    return fmi2OK; /* pythonfmu keeps debug logging on; the relay filters */
+}
+
+#define DEFINE_FORWARD(ret, name, params, args)                                                     \
+    EXPORT ret name params                                                                           \
+    {                                                                                                \
+        Wrap *w = (Wrap *)c;                                                                         \
+        if (!w) return fmi2Error;                                                                    \
+        ensure_thread_state();                                                                       \
+        return inner_##name args;                                                 \
+    }
+#define W w->inner
+FMI2_FORWARDED(DEFINE_FORWARD)
+
+#endif /* REEVE_EXIT_HELPER */
