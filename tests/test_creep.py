@@ -244,3 +244,17 @@ def test_drum_running_empty_is_an_event_naming_the_drum():
     with pytest.raises(SolverError, match=r"drum 'drum'.*stored length"):
         sim.advance(st, 3.0)
     assert 0.9 < st.t < 1.1 and st.q[m.sheave_dof["drum"]] > 0.0
+
+
+def test_creep_arc_exceeding_the_wrap_is_reported():
+    """A no-slip traction sheave whose tension ratio (1.5 statically) exceeds e^(f alpha) (mu = 0.05,
+    180 deg, the default undercut groove: f = 1.89 mu, limit 1.35) gets a warning naming it; with
+    mu = 0.3 (limit 5.9) none."""
+    for mu, warned in ((0.05, True), (0.3, False)):
+        d = one_to_one("creep")
+        d["sheaves"][0]["mu"] = mu
+        d["scene"]["t_end"] = 0.05
+        sim = Simulator(build(d))
+        sim.run(0.05, 0.01)
+        hits = [w for w in sim.warnings if "'traction'" in w and "creep arc" in w]
+        assert bool(hits) == warned

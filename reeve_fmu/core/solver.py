@@ -1054,4 +1054,31 @@ class Simulator:
             if progress is not None:
                 progress(st.t)
         self.final_state = st
-        return Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
+        res = Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
+        self._check_creep_arcs(res)
+        return res
+
+    def _check_creep_arcs(self, res: Result):
+        """Creep on a no-slip traction sheave needs an arc ln(T_t/T_s)/f of the wrap (Euler-Eytelwein):
+        warn, naming the sheave, when the tension ratio exceeds e^(f alpha), where the creep arc would
+        exceed the wrap and the rope would slip (model it with slip = true)."""
+        from .traction import equivalent_friction
+        m = self.model
+        if m.scene.sheave_contact != "creep":
+            return
+        for rope, info in zip(m.scene.ropes, m.ropes):
+            for k, stop in enumerate(rope.route):
+                sh = next((x for x in m.scene.sheaves if x.name == stop.sheave), None)
+                name = f"{stop.sheave}.traction_ratio"
+                if sh is None or sh.kind != "traction" or sh.slip or name not in res.names:
+                    continue
+                alpha = info["wraps"][k][3]
+                limit = math.exp(equivalent_friction(sh.mu, sh.undercut_angle, sh.groove_angle, sh.groove)
+                                 * alpha)
+                ratio = res[name]
+                bad = np.nonzero(ratio > limit)[0]
+                if len(bad):
+                    self.warnings.append(
+                        f"t = {res.time[bad[0]]:g} s: sheave {sh.name!r}: tension ratio "
+                        f"{np.max(ratio):.4f} exceeds e^(f alpha) = {limit:.4f}: the creep arc would exceed "
+                        f"the wrap and the rope would slip (model it with slip = true)")
