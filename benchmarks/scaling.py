@@ -139,10 +139,10 @@ def plot(rows, path):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     for case, mk in (("elevator 2:1 planar cubic", "o"), ("crane 8-fall spatial", "s")):
-        for path, ls in (("banded", "-"), ("dense", "--")):
-            pts = sorted((r["nq"], r["us_per_step"]) for r in rows if r["case"] == case and r["path"] == path)
+        for kind, ls in (("banded", "-"), ("dense", "--")):
+            pts = sorted((r["nq"], r["us_per_step"]) for r in rows if r["case"] == case and r["path"] == kind)
             if pts:
-                ax.loglog(*zip(*pts), ls, marker=mk, label=f"{case}, {path}")
+                ax.loglog(*zip(*pts), ls, marker=mk, label=f"{case}, {kind}")
     ax.set_xlabel("generalized coordinates")
     ax.set_ylabel("wall time per step [µs]")
     ax.grid(True, which="both", alpha=0.3)

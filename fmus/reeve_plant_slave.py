@@ -10,13 +10,16 @@ Parameters (fixed: the model is built in exitInitializationMode) car.load, rope.
 The scene and the output declarations come from the FMU's resources (scene.toml, reeve_plant.json,
 written by reeve_fmu.fmu.cosim.plant_build_inputs). Any communication step is accepted: the plant
 sub-steps internally with the scene's solver step (generalized-alpha, steps <= solver.step).
-A solver failure raises inside step(): ReeveSlave logs the traceback through the FMU logger and
-returns fmi2Discard; further steps are refused until the master restores an FMU state or resets.
+Plausibility warnings of the scene are logged at initialization (physically impossible values fail
+it). A solver failure (an event: vanishing span, no Newton convergence) raises inside step():
+ReeveSlave logs it through the FMU logger (the message names the event and its time) and returns
+fmi2Discard; the outputs keep the values of the last good step; further steps are refused until the
+master restores an FMU state or resets.
 """
 import json
 
 from reeve_fmu.fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
-from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
+from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 
 class ReevingPlantSlave(ReeveSlave):
@@ -67,6 +70,8 @@ class ReevingPlantSlave(ReeveSlave):
         if unknown:
             raise RuntimeError(f"the plant model has outputs {unknown} this FMU does not declare "
                                f"(resources out of date?)")
+        for w in self.plant.warnings:    # plausibility and statics warnings of the scene
+            self.log(w, Fmi2Status.warning)
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
         # per step only what the drive needs is written at once; the other outputs when read

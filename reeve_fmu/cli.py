@@ -6,6 +6,7 @@ is imported only when used, so `reeve-fmu simulate` does not load fmpy or python
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -18,30 +19,80 @@ from .core.scene import default_scene  # noqa: E402,F401  (re-exported)
 
 def cmd_simulate(args) -> int:
     from .core.model import build_model
-    from .core.results import plot_overview, write_csv
     from .core.scene import load_scene
-    from .core.solver import Simulator
+    from .core.solver import Simulator, SolverError
 
     scene = load_scene(args.scene)
+    warnings = plausibility_warnings(scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
+    for opt, v in (("--t-end", args.t_end), ("--dt", args.dt), ("--step", args.step)):
+        if v is not None and not (0 < v < float("inf")):
+            raise ValueError(f"{opt} must be a finite number > 0 [s], got {v:g}")
     out = Path(args.out)
     scene, chosen_step, res = _fidelity(args, scene, t_end, dt, out)
     reused = res is not None
+    stop = None
     t0 = time.perf_counter()
     if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
         step = chosen_step if chosen_step is not None else args.step
-        res = Simulator(build_model(scene), method=args.method, step=step).run(t_end, dt)
+        sim = Simulator(build_model(scene), method=args.method, step=step)
+        try:
+            res = sim.run(t_end, dt)
+        except SolverError as exc:
+            if exc.result is None:      # nothing computed (e.g. the initial statics failed)
+                raise
+            res, stop = exc.result, exc
+        warnings += sim.warnings
     wall = time.perf_counter() - t0
-    out.mkdir(parents=True, exist_ok=True)
     cols = res.as_dict()
     time_ = cols.pop("time")
-    write_csv(out / "results.csv", time_, cols)
-    plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})")
+    _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None)
     how = ("(the run of the fidelity full-run check)" if reused else
-           f"in {wall:.2f} s (incl. statics and JIT load; {t_end / wall:.0f}x real time)")
-    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, results.png")
+           f"in {wall:.2f} s (incl. statics and JIT load; {real_time(time_[-1] - time_[0], wall)})")
+    print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, "
+          f"results.png, summary.json")
+    if stop is not None:
+        print(f"reeve-fmu simulate: run stopped by an event: {stop}; the results up to then are written",
+              file=sys.stderr)
+        return EXIT_EVENT
     return 0
+
+
+def real_time(sim_seconds: float, wall: float) -> str:
+    """'1364x real time', '2.5x real time', '0.11x real time'."""
+    x = sim_seconds / wall if wall > 0 else float("inf")
+    return f"{x:.0f}x real time" if x >= 10 else f"{x:.2g}x real time"
+
+
+def plausibility_warnings(scene) -> list[str]:
+    """Plausibility checks of a parsed scene (core/plausibility.py): raise for impossible values,
+    print the warnings to stderr and return them."""
+    from .core.plausibility import check_or_raise
+    warnings = check_or_raise(scene)
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    return warnings
+
+
+def _write_run(out, scene, time_, cols, warnings, stop, wall):
+    """results.csv, results.png (the event marked) and summary.json of a simulate run."""
+    import json
+    from .core.results import plot_overview, write_csv
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "results.csv", time_, cols)
+    event = None
+    if stop is not None:
+        msg = str(stop)
+        event = {"time": stop.time, "cause": msg.split(": ", 1)[1].split(":")[0] if ": " in msg else msg,
+                 "message": msg}
+    plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})",
+                  event=None if event is None else (event["time"], event["cause"]))
+    summary = {"scene": scene.name, "source": scene.source, "model": scene.model,
+               "samples": int(len(time_)), "t_last": float(time_[-1]),
+               "wall_seconds": wall, "warnings": list(warnings), "event": event,
+               "exit_code": EXIT_EVENT if event else 0}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
 
 
 def _fidelity(args, scene, t_end, dt, out):
@@ -134,7 +185,9 @@ def _cfg_hil(p):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="reeve-fmu", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="reeve-fmu", description=__doc__.splitlines()[0],
+                                 epilog="--debug (anywhere): print the traceback of a failure. Exit codes: 0 done, "
+                                        "1 internal error, 2 bad input, 3 run stopped by an event.")
     sub = ap.add_subparsers(dest="command", required=True)
     _add_simulate(sub)
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
@@ -142,15 +195,58 @@ def main(argv=None) -> int:
     _lazy(sub, "bench", "studies.bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
     _lazy(sub, "crane", "studies.crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
     _lazy(sub, "hil", "hil.run", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("REEVE_FMU_DEBUG", "") not in ("", "0")
+    argv = [a for a in argv if a != "--debug"]
     args = ap.parse_args(argv)
+    return run_command(args, debug)
+
+
+EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_EVENT = 1, 2, 3   # documented in README.md, "Exit codes"
+
+
+def run_command(args, debug: bool = False) -> int:
+    """Run a subcommand: every failure becomes one line on stderr and an exit code (README "Exit
+    codes"); --debug (or REEVE_FMU_DEBUG=1) adds the traceback."""
     from .core.scene import SceneError
     from .core.solver import SolverError
     try:
-        rc = int(args.func(args) or 0)
-    except (SceneError, SolverError, ValueError, FileNotFoundError) as exc:
-        print(f"reeve-fmu {args.command}: error: {exc}", file=sys.stderr)
-        rc = 2
-    return rc
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"reeve-fmu {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the one place that turns exceptions into exit codes
+        if debug:
+            import traceback
+            traceback.print_exc()
+        text = str(exc).strip() or type(exc).__name__
+        if isinstance(exc, SolverError) and exc.time is not None:
+            rc, what = EXIT_EVENT, f"run stopped by an event: {text}"
+        elif isinstance(exc, (SceneError, SolverError, ValueError, OSError)) and not _numpy_internal(exc):
+            rc, what = EXIT_BAD_INPUT, f"error: {text}"
+        else:
+            rc = EXIT_INTERNAL
+            where = _where(exc)
+            what = (f"internal error: {type(exc).__name__}: {text.splitlines()[0]}{where}. The scene may be "
+                    f"physically wrong in a way no check catches (see docs/hard-cases.md, \"Physically "
+                    f"wrong input\")" + ("" if debug else "; run again with --debug for the traceback"))
+        print(f"reeve-fmu {args.command}: {what}", file=sys.stderr)
+        return rc
+
+
+def _numpy_internal(exc) -> bool:
+    """numpy's LinAlgError is a ValueError but says nothing about the input."""
+    return type(exc).__name__ == "LinAlgError"
+
+
+def _where(exc) -> str:
+    """' (in module.function)' of the innermost frame of the package that raised."""
+    import traceback
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if "reeve_fmu" in f.filename]
+    if not frames:
+        return ""
+    f = frames[-1]
+    return f" (in {Path(f.filename).stem}.{f.name})"
 
 
 if __name__ == "__main__":

@@ -177,9 +177,11 @@ def plant_errors(fmu):
         t1 = h.time
         # drive the car into the machine: 1 MN m for 0.3 s in ONE communication step
         mark = len(h.messages)
+        res["before_crash"] = h.get_many(PLANT_OUTS)
         h.set("motor.torque", 1.0e6)
         res["crash_step"] = h.do_step(t1, 0.3)
         res["crash_msgs"] = _msgs(h)[mark:]
+        res["after_crash"] = h.get_many(PLANT_OUTS)     # the last good outputs stay readable
         mark = len(h.messages)
         h.set("motor.torque", 500.0)
         res["dirty_step"] = h.do_step(t1, DT)

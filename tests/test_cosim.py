@@ -74,8 +74,10 @@ def test_demo_writes_results_plots_and_summary(demo):
     up, down = s["trips"]
     assert (up["direction"], up["landing_m"], down["direction"], down["landing_m"]) == ("up", 39.0, "down", 0.0)
     for t in s["trip_time_s"]:
-        assert 26.5 < t < 28.0                                     # 27.175 s S-curve for 39 m
-    assert 0.75 < s["max_acceleration_m_s2"] < 1.0 and s["max_jerk_m_s3"] < 2.5
+        assert abs(t - 27.0) < 0.1                                 # measured 27.01 / 26.98 s (docs/cosim.md)
+    # 10 Hz-filtered: a_max 0.8 m/s^2 plus rope ringing (measured 0.857); jerk 1.0 m/s^3 nominal, the
+    # filtered jerk corners and the rope modes give 1.75 (docs/cosim.md)
+    assert 0.8 < s["max_acceleration_m_s2"] < 0.9 and 1.5 < s["max_jerk_m_s3"] < 2.0
     assert 0.7 < s["a95_acceleration_m_s2"] <= s["max_acceleration_m_s2"]
     assert 0.0 <= s["vibration_pp_max_m_s2"] < 0.1
     assert s["motor_torque_peak_Nm"] < 1000.0                      # below T_max
@@ -92,13 +94,26 @@ def test_demo_writes_results_plots_and_summary(demo):
     assert s["cosim"]["fmu_warnings"] == [] or all("version mismatch" in w for w in s["cosim"]["fmu_warnings"])
 
 
-def test_cosim_error_at_1ms_is_below_half_a_millimetre(demo):
+def test_cosim_error_at_1ms_is_below_a_quarter_millimetre(demo):
     """The demo's co-simulation (1 ms) against the monolithic reference (same models, coupled every
     0.1 ms), car position over the whole round trip."""
     out = demo["out"]
     r = job("reference_error", str(out / "results.csv"), str(out / "summary.json"))
     assert r["travel_m"] > 39.0
-    assert r["max_err_m"] <= 0.5e-3, r
+    assert r["max_err_m"] <= 0.25e-3, r                           # measured 0.196 mm (README: 0.2 mm)
+
+
+def test_cosim_error_at_2_5_10_ms(fmus):
+    """The round trip through the FMUs at 2, 5 and 10 ms against the monolithic 0.1 ms reference
+    (docs/hard-cases.md, large communication steps): ~linear growth up to 5 ms, the speed loop
+    unstable at 10 ms; the drive FMU warns from 5 ms on."""
+    r = job("cosim_accuracy", fmus["plant"], fmus["drive"], [2e-3, 5e-3, 1e-2], R1_DRIVE)
+    assert r["t_end"] > 61.0
+    assert r["0.002"]["max_err_m"] < 0.5e-3                      # measured 0.403 mm
+    assert r["0.005"]["max_err_m"] < 1.5e-3                      # measured 1.13 mm
+    assert r["0.01"]["max_err_m"] > 20e-3                        # measured 77.6 mm: unstable coupling
+    assert r["0.002"]["warnings"] == []
+    assert all(any("communication step" in w for w in r[h]["warnings"]) for h in ("0.005", "0.01"))
 
 
 def test_demo_coupling_monitor_reports_a_stable_run(demo):

@@ -276,9 +276,31 @@ def test_level2_pmsm_tracks_level1():
     assert np.sqrt(np.mean((tau1 - tau2) ** 2)) / peak < 0.02
     assert np.max(np.abs(tau1 - tau2)) / peak < 0.05
     assert abs(o2[-1, 1] - 12.0) <= 0.010
-    # torque = 1.5 p psi i_q (surface PM, i_d held at 0)
-    i_d, i_q = d2.currents
-    assert abs(i_d) < 1.0
+
+
+def test_level2_torque_from_the_power_balance():
+    """At full-car cruise (constant speed and currents) the air-gap torque the Level 2 drive delivers
+    equals the electrical power into the dq windings minus the copper loss over the mechanical speed,
+    1.5 (v_d i_d + v_q i_q - R_s (i_d^2 + i_q^2)) / omega, an energy balance that does not use the
+    torque formula; with i_d held at 0 it is 1.5 p psi i_q, and it carries the load (432 N m)."""
+    p = r1(level=2, pretorque=T_FULL, moves=(1,))
+    d = ElectricDrive(p)
+    dt, t, w, th = 1e-3, 0.0, 0.0, 0.0
+    rows = []
+    while t < 14.0:
+        tau, cmd = d.step(t, dt, w, th)
+        w = w + dt * (tau - T_FULL) / J_FULL if cmd == 1.0 else 0.0
+        th += dt * w
+        t += dt
+        if t > 12.0:                       # cruise at 1.6 m/s (20 rad/s at the motor)
+            rows.append((tau, w, *d.currents, *d.voltages))
+    tau, w, i_d, i_q, vd, vq = np.array(rows).T
+    assert np.all(np.abs(w - 20.0) < 1e-6)
+    T_power = 1.5 * (vd * i_d + vq * i_q - p.Rs * (i_d ** 2 + i_q ** 2)) / w
+    assert np.max(np.abs(T_power / tau - 1)) < 1e-10              # measured 7e-12
+    assert np.max(np.abs(1.5 * p.pole_pairs * p.psi * i_q / tau - 1)) < 1e-12   # measured 2e-16
+    assert np.max(np.abs(i_d)) < 1e-9                               # measured 5e-13 A
+    assert np.max(np.abs(tau / T_FULL - 1)) < 1e-9                  # measured 1e-10
 
 
 def test_level2_voltage_within_inverter_limit_at_rated_speed():

@@ -1,5 +1,7 @@
-"""Hard cases (docs/hard-cases.md): slack and snap, vanishing span, buffer impact, emergency stop, extreme
-parameters. Each must run or stop with a clear event - never NaN or an unexplained failure."""
+"""Hard cases (docs/hard-cases.md): slack and snap, vanishing span, buffer impact, emergency stop,
+extreme parameters, each against an exact result where one exists (Newton's law in free flight, the
+spring-damper impact, the wave solution of the snap load). Each must run or stop with a clear event -
+never NaN or an unexplained failure."""
 from dataclasses import replace
 from pathlib import Path
 import math
@@ -8,8 +10,10 @@ import numpy as np
 import pytest
 
 from reeve_fmu.core.model import build_model
-from reeve_fmu.core.scene import SceneError, load_scene
+from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.core.solver import SolverError, Simulator
+from reeve_fmu.studies.fidelity import configure, parse_accuracy, select
+from reeve_fmu.studies.snapload import Hoist, converged_peak, lumped_chain, single_mode_peak
 
 ROOT = Path(__file__).resolve().parents[1]
 HARD = ROOT / "scenes" / "hard"
@@ -27,17 +31,21 @@ def finite_except_ratios(res):
 
 
 def test_slack_rope_snaps_taut_without_solver_failure():
-    """Empty car going up, traction sheave stopped in 0.1 s: the car flies on, its ropes go slack
-    (tension exactly 0) and snap taut again."""
+    """Empty car going up, traction sheave stopped in 0.1 s: the car flies on, its ropes go slack and
+    snap taut again. A slack tension-only rope keeps only the smoothing residual EA delta / 2 per rope
+    (1.45 N). The car is not in exact free fall here: in the 1D model a slack span stays straight between
+    its ends, so its ~100 kg of rope moves with the 1300 kg car (exact free fall of a body on a slack rope:
+    test_free_fall_onto_a_buffer_against_the_closed_form)."""
     m, res = run(load_scene(HARD / "slack_hard_stop.toml"))
     assert finite_except_ratios(res)
     T = res["car_sheave.tension_in"]
     t = res.time
-    slack = (T <= 0.0) & (t > 8.1)
-    assert slack.sum() * 1e-3 > 0.1                 # visible slack interval(s) after the stop
+    slack = (T <= 6 * 2.9e6 * 1e-6 / 2 * 1.001) & (t > 8.1)
+    assert slack.sum() * 1e-3 > 0.5                          # measured 0.82 s of slack after the stop
     first = np.argmax(slack)
-    assert np.any(T[first:] > 5000.0)               # taut again, with a snap load
-    assert res["car.acceleration"].min() > -11.0    # free flight: no faster than g (plus damping)
+    assert np.any(T[first:] > 20e3)                          # taut again: snap load measured 24.2 kN
+    a = res["car.acceleration"][slack]
+    assert np.max(np.abs(a + 9.81)) < 1.5                    # measured 1.07 m/s^2 (rope mass, above)
 
 
 def test_vanishing_span_stops_with_a_clear_event():
@@ -54,42 +62,138 @@ def test_vanishing_span_stops_with_a_clear_event():
 
 
 def test_buffer_impact_at_115_percent_speed():
+    """Full R1 car on a Kelvin-Voigt pit buffer at 1.84 m/s: the peak buffer force is c v_hit at the
+    contact instant (c^2 > k M: the force only falls after contact); the car comes to rest on it."""
     m, res = run(load_scene(HARD / "buffer_impact.toml"))
     assert finite_except_ratios(res)
     F = res["car_buffer.force"]
     z = res["car.position"]
-    assert F.max() > 2300 * 9.81                      # the buffer stops the full car
-    stroke = -0.2 - z.min()
-    assert 0.05 < stroke < 0.3
-    assert abs(res["car.velocity"][-1]) < 0.02        # at rest at the end
-    # EN 81: average deceleration over the buffer stroke <= 1 g (v^2 / (2 stroke))
-    v_hit = abs(np.interp(-0.2, z[::-1], res["car.velocity"][::-1]))
-    assert v_hit > 1.7
-    assert v_hit ** 2 / (2 * stroke) < 2 * 9.81
+    v = res["car.velocity"]
+    i = np.argmax(z < -0.2)                                  # first sample in contact
+    v_hit = abs(np.interp(-0.2, [z[i], z[i - 1]], [v[i], v[i - 1]]))
+    assert v_hit == pytest.approx(1.84, rel=0.01)            # measured 1.831 m/s (115 % of 1.6)
+    assert F.max() == pytest.approx(3.0e4 * v_hit, rel=5e-4)  # measured -5.5e-5
+    assert abs(v[-1]) < 0.02                                 # at rest at the end (0.017 m/s)
 
 
-def test_emergency_stop_peak_tension():
-    """Drum stops within 1 ms while lowering 1000 kg at 1 m/s: the peak rope force at the mass equals
-    m g + V m sqrt(k/m_eff) (k = EA/L, m_eff = m + rhoA L/3, docs/theory.md §7 item 8) within 1 %; the
-    massless-rope formula m g + V sqrt(k m) overestimates by the rope-mass correction."""
+BUFFER_DROP = """
+[scene]
+name = "buffer_drop"
+model = "axial-1d"
+t_end = 0.9
+output_step = 1e-3
+[solver]
+step = 1e-4
+rho_inf = 1.0
+newton_tol = 1e-9
+[initial]
+statics = "none"
+[[bodies]]
+name = "car"
+mass = 1000.0
+position = [0.0, 0.0, 1.0]
+free = ["z"]
+[[ropes]]
+name = "rope"          # slack throughout (12 m of rope over 9-10 m): only there to hold a body
+EA = 1.0e6
+rhoA = 1e-4
+tension_only = true
+length = 12.0
+route = [ { anchor = "ground", at = [0.0, 0.0, 10.0] }, { anchor = "car", at = [0.0, 0.0, 0.0] } ]
+[[buffers]]
+name = "buffer"
+body = "car"
+position = 0.0
+stiffness = 2.0e5
+damping = 1.5e4
+"""
+
+
+def test_free_fall_onto_a_buffer_against_the_closed_form():
+    """A 1000 kg body falls 1 m from rest onto a linear spring-damper buffer (k = 200 kN/m,
+    c = 15 kN s/m, zeta = 0.53). Free flight: z = 1 - g t^2/2 with a = -g + R/M (R: the slack rope's
+    smoothing residual EA delta/2 = 0.5 N). Contact at v0 = sqrt(2 g): x'' + 2 zeta w x' + w^2 x = g,
+    x(0) = 0, x'(0) = v0, so x = g/w^2 + exp(-zeta w t) (A cos w_d t + B sin w_d t); peak force c v0."""
+    sc = loads_scene(BUFFER_DROP, "buffer_drop.toml")
+    m, res = run(sc)
+    g, M, k, c = 9.81, 1000.0, 2.0e5, 1.5e4
+    t, z, a, F = res.time, res["car.position"], res["car.acceleration"], res["buffer.force"]
+    R = res["rope.tension_end"]
+    free = z > 0.0
+    assert np.all(R < 0.5e6 * 1e-6 * 1.001)                  # slack: R = 0.498 N throughout
+    assert np.max(np.abs(a[free] + g - R[free] / M)) < 1e-9  # measured 3e-13
+    assert np.max(np.abs(z[free] - (1.0 - 0.5 * g * t[free] ** 2))) < 5e-4   # measured 5.1e-5 (R, step)
+    t_hit, v0 = math.sqrt(2.0 / g), math.sqrt(2.0 * g)
+    w = math.sqrt(k / M)
+    zeta = c / (2.0 * math.sqrt(k * M))
+    wd = w * math.sqrt(1.0 - zeta ** 2)
+    A = -g / w ** 2
+    B = (v0 + zeta * w * A) / wd
+
+    def x(s):
+        return g / w ** 2 + np.exp(-zeta * w * s) * (A * np.cos(wd * s) + B * np.sin(wd * s))
+    s = np.linspace(0.0, 0.5, 500001)
+    stroke = x(s).max()
+    assert -z.min() == pytest.approx(stroke, rel=1e-3)       # measured 1.6e-4 (0.190 m)
+    on = (t > t_hit) & (t < t_hit + 0.3)
+    assert np.max(np.abs(-z[on] - x(t[on] - t_hit))) < 5e-4  # measured 5.0e-5 m
+    assert F.max() == pytest.approx(c * v0, rel=1e-2)        # measured 1.0e-3 (contact inside a step)
+
+
+def _estop_hoist(res, t_stop=1.0):
+    """The wave-solution input at the stop: material length and speed from the run."""
+    i = np.searchsorted(res.time, t_stop)
+    L = 50.0 - res["mass.position"][i]                       # stretched: drum tangent point at z = 50
+    L0 = L / (1.0 + (1000.0 * 9.81 + 0.5 * 9.81 * L / 2.0) / 2.0e7)   # mean static strain
+    return Hoist(mass=1000.0, EA=2.0e7, rhoA=0.5, length=L0, speed=-res["mass.velocity"][i], t_stop=5e-3)
+
+
+def test_snap_load_wave_solution_against_a_lumped_chain():
+    """The d'Alembert solution (reeve_fmu/studies/snapload.py) is converged on its grid and a lumped
+    wave chain of the same rope converges to it from 200 to 400 segments."""
+    h = Hoist(mass=1000.0, EA=2.0e7, rhoA=0.5, length=50.56, speed=1.0, t_stop=5e-3)
+    peak, t_peak, err = converged_peak(h, 0.15, 1024)
+    assert err < 1e-4 * peak                                 # measured 0.45 N (1.4e-5)
+    assert t_peak == pytest.approx(0.0770, abs=5e-4)         # first swing, before any slack (0.18 s)
+    errs = []
+    for n in (200, 400):
+        t, T, T_min = lumped_chain(h, 0.15, n)
+        errs.append(T.max() / peak - 1)
+        assert T_min.min() > 0.0                             # the rope stays taut over the first swing
+    assert abs(errs[0]) < 2e-3 and abs(errs[1]) < abs(errs[0])   # measured -9.4e-4, -6.0e-4
+    massless, corrected = single_mode_peak(h)
+    assert peak / massless - 1 > 0.06                        # the one-mode formula is 6.7 % low
+
+
+def test_emergency_stop_peak_tension_against_the_wave_solution():
+    """Drum stops within 5 ms while lowering 1000 kg at 1 m/s on 50.6 m of rope: the peak rope force at
+    the mass in the first swing (before the rope could go slack) against the exact wave solution.
+    The fidelity selection asked for rope.tension_end at 1 % rejects 8/16/32 elements per span and
+    falls back to its 64-element reference, the mesh the shipped scene uses; that peak is within 1 %."""
     sc = load_scene(HARD / "emergency_stop.toml")
-    m = build_model(sc)
-    sim = Simulator(m)
-    res = sim.run(sc.t_end, 1e-4)
-    mass, rhoA, EA, g = 1000.0, 0.5, 2.0e7, 9.81
-    i = np.searchsorted(res.time, 2.0)
-    V = -res["mass.velocity"][i]
-    L = 50.0 - res["mass.position"][i]
-    k = EA / L
-    T_corr = mass * g + V * mass * math.sqrt(k / (mass + rhoA * L / 3))
-    T_massless = mass * g + V * math.sqrt(k * mass)
-    peak = res["rope.tension_end"].max()
-    assert abs(peak / T_corr - 1) < 0.01
-    assert T_massless > T_corr
+    assert sc.ropes[0].elements_per_span == 64
+    t_win = 1.15                                             # the stop at 1.0 s and its first swing
+    acc = parse_accuracy({"outputs": ["rope.tension_end"], "tol": 0.01, "elements": [8, 16, 32],
+                          "steps": [1e-4], "probe": t_win, "full_check": False}, sc.source)
+    rep = select(sc, acc, t_end=t_win, out_dt=1e-4)
+    cfg = rep.chosen.config
+    assert cfg.elements == 64 and cfg.step <= 1e-4
+    res = Simulator(build_model(configure(sc, cfg)), method="gen-alpha", step=cfg.step).run(t_win, 1e-4)
+    h = _estop_hoist(res)
+    peak, _, _ = converged_peak(h, t_win - 1.0, 1024)
+    after = res.time > 1.0
+    got = res["rope.tension_end"][after].max()
+    assert abs(got / peak - 1) < 0.01                        # measured -0.42 % (31.82 kN)
+    # the shipped one-element mesh is the one-mode model: 6.7 % low
+    one = Simulator(build_model(configure(sc, replace(cfg, elements=1, step=1e-4)))).run(t_win, 1e-4)
+    assert one["rope.tension_end"][after].max() / peak - 1 < -0.05
 
 
 @pytest.mark.parametrize("case", ["EA x100", "500 m rope", "very light car", "rope heavier than car"])
-def test_extreme_parameters_run_or_refuse_clearly(case):
+def test_extreme_parameters_run(case):
+    """Documented outcome: every case runs its 3 s with finite outputs, and its initial statics is the
+    hand statics: a 2:1 car sheave carries (M g + rhoA pi R g)/2 per side (the half wrap of rope on it),
+    a hanging rope m g at the mass and m g + rhoA g L at the top."""
     if case == "500 m rope":
         sc = load_scene(ROOT / "scenes" / "hanging_rope.toml")
         sc = replace(sc, ropes=(replace(sc.ropes[0], length=500.0),))
@@ -99,11 +203,21 @@ def test_extreme_parameters_run_or_refuse_clearly(case):
             sc = replace(sc, ropes=tuple(replace(r, EA=r.EA * 100) for r in sc.ropes))
         elif case == "very light car":
             sc = replace(sc, bodies=tuple(replace(b, mass=20.0) if b.name == "car" else b for b in sc.bodies))
-        else:
+        else:   # 60 kg car under 2 x 6 ropes of 0.26 kg/m over ~40 m (~125 kg of rope)
             sc = replace(sc, bodies=tuple(replace(b, mass=60.0) if b.name == "car" else b for b in sc.bodies))
-    try:
-        m, res = run(sc, t_end=3.0)
-    except (SceneError, SolverError) as exc:
-        assert str(exc)       # refused with a message
-        return
+    m, res = run(sc, t_end=3.0)
+    assert res.time[-1] == pytest.approx(3.0)
     assert finite_except_ratios(res)
+    g = 9.81
+    rp = sc.ropes[0]
+    rhoA = rp.rhoA * rp.count
+    mass = {b.name: b.mass for b in sc.bodies}
+    if case == "500 m rope":
+        body = next(iter(mass))
+        assert res["rope.tension_end"][0] == pytest.approx(mass[body] * g, rel=1e-9)   # measured 5e-14
+        assert res["rope.tension_start"][0] == pytest.approx(mass[body] * g + rhoA * g * 500.0, rel=1e-9)
+    else:
+        R = next(sh.radius for sh in sc.sheaves if sh.name == "car_sheave")
+        expect = (mass["car"] * g + rhoA * math.pi * R * g) / 2   # measured 1.5e-12 (2300 kg) to 1.3e-9 (20 kg)
+        for side in ("tension_in", "tension_out"):
+            assert res[f"car_sheave.{side}"][0] == pytest.approx(expect, rel=1e-8)

@@ -238,6 +238,7 @@ def test_plant_errors_are_logged_and_discarded(fmus):
     assert r["crash_step"] == 2                                   # fmi2Discard, not a crash
     assert "Traceback (most recent call last)" in crash and "SolverError" in crash
     assert "minimum material length" in crash or "did not converge" in crash
+    assert r["after_crash"] == r["before_crash"]                  # outputs of the last good step
     assert r["dirty_step"] == 2 and any("previous step raised" in m for _, m in r["dirty_msgs"])
     assert r["after_restore"] == 0
     assert r["bad_dt"] == 2

@@ -3,8 +3,12 @@ scenes. Every mutation must either still build or fail with a SceneError that na
 mutated key - never an unhandled exception from inside the code."""
 from pathlib import Path
 import copy
-import tomllib
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
@@ -114,7 +118,15 @@ def test_every_single_key_mutation_is_handled():
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.name)
 def test_shipped_scenes_solve_statics(path):
-    """Unmutated scenes: the initial statics converges (or the scene documents why not)."""
+    """Unmutated scenes: the initial statics converges to an equilibrium: the bodies and free material
+    coordinates start at rest with (near) zero acceleration. Measured max |acceleration|: <= 3.4e-8 for
+    bilateral ropes, 1.4e-5 (emergency_stop, 64 elements), 1.2e-2 m/s^2 with tension-only ropes (the
+    statics is solved with the bilateral law; the smoothed tension-only law differs by ~EA delta)."""
     from reeve_fmu.core.scene import load_scene
     sc = load_scene(path)
-    Simulator(build_model(sc)).initial_state()
+    m = build_model(sc)
+    st = Simulator(m).initial_state()
+    eq = list(m.statics_equations)
+    assert np.all(st.v == 0.0)
+    tol = 0.1 if any(r.tension_only for r in sc.ropes) else 1.4e-4
+    assert np.max(np.abs(st.qdd[eq])) < tol, (path.name, np.max(np.abs(st.qdd[eq])))

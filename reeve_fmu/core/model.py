@@ -133,6 +133,23 @@ class _Affine:
         return self
 
 
+def _positions_count_message(scene, n_body, n_rope, locked, q_names, q_kind) -> str:
+    """statics = 'positions' solves one rope length per rope and the angle of each driven (held)
+    sheave in place of the body coordinates, so the counts must match; a driven drum (reel) fixes its
+    rope end and adds no unknown."""
+    held = [q_names[j].rsplit(".", 1)[0] for j in sorted(locked) if q_kind[j] == "sheave"]
+    sheaves = [n for n in held if sheaves_kind(scene, n + ".s") not in ("drum", "")]
+    drums = [n for n in held if sheaves_kind(scene, n + ".s") == "drum"]
+    parts = [f"{n_rope} rope length(s)"]
+    if sheaves:
+        parts.append(f"{len(sheaves)} driven sheave angle(s) ({', '.join(sheaves)})")
+    note = (f"; the driven drum(s) {', '.join(drums)} fix their rope end and add none" if drums else "")
+    return (f"{scene.source}: [initial.statics] 'positions' keeps every body where the scene puts it and "
+            f"solves {' + '.join(parts)} = {n_rope + len(sheaves)} unknowns{note}; the scene has "
+            f"{n_body} free body coordinate(s), which must be as many. Use statics = 'rope-length' "
+            f"(give ropes.length) or 'none'.")
+
+
 def build_model(scene: Scene) -> Model:
     """Compile a validated scene."""
     try:
@@ -642,11 +659,7 @@ def _build(scene: Scene) -> Model:
                      if sheaves_kind(scene, q_names[j]) not in ("drum", "") and q_kind[j] == "sheave"]
         unknowns += [("par", i) for i in range(n_par)]
         if len(unknowns) != len(eqs):
-            raise SceneError(
-                f"{scene.source}: [initial.statics] 'positions' keeps every body where the scene puts it "
-                f"and solves the rope lengths: it needs as many body coordinates ({len(body_q)}) as ropes "
-                f"plus driven sheaves ({len(unknowns) - len(eqs) + len(body_q)}). "
-                f"Use statics = 'rope-length' (give ropes.length) or 'none'.")
+            raise SceneError(_positions_count_message(scene, len(body_q), n_par, locked, q_names, q_kind))
     else:
         unknowns = [("q", j) for j in eqs]
 

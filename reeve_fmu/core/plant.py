@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from .model import State, build_model
+from .plausibility import check_or_raise
 from .scene import Body, Rope, Scene, SceneError, load_scene
 from .solver import SolverError, Simulator
 
@@ -61,10 +62,14 @@ class Plant:
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
         self.scene = plant_scene(scene, **params)
+        # physically wrong values (after the parameter overrides) raise here; unusual ones are kept
+        # for the FMU log
+        self.warnings: list[str] = check_or_raise(self.scene)
         self.model = build_model(self.scene)
         self.sim = Simulator(self.model)
         self.output_names = self.model.output_names
         self.state: State = self.sim.initial_state()
+        self.warnings += self.sim.warnings
         self._y = self.sim.outputs(self.state)
 
     @property

@@ -22,8 +22,9 @@ def read_csv(path) -> dict:
     return {n: np.asarray(data[n]) for n in data.dtype.names}
 
 
-def plot_overview(path, time, columns: dict, title: str = ""):
-    """Body motion, sheave tensions and traction ratio, motor torque: one PNG."""
+def plot_overview(path, time, columns: dict, title: str = "", event=None):
+    """Body motion, sheave tensions and traction ratio, motor torque: one PNG. event = (time, cause)
+    of a run stopped early: a red line at that time on every panel."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -46,11 +47,15 @@ def plot_overview(path, time, columns: dict, title: str = ""):
             ax.plot(time, np.where(np.isfinite(y), y, np.nan), lw=0.9, label=n)
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
+        if event is not None:
+            ax.axvline(event[0], color="red", lw=1.2, ls="--")
         if len(names) <= 8:
             ax.legend(fontsize=7, loc="best")
     axes[-1].set_xlabel("time [s]")
+    if event is not None:
+        title = f"{title}\nstopped at t = {event[0]:.4f} s: {event[1]}".strip()
     if title:
-        axes[0].set_title(title)
+        axes[0].set_title(title, fontsize=9 if event is not None else None)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

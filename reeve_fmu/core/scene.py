@@ -473,7 +473,8 @@ def _parse_route(r: _Reader, rp, path, body_names, sheave_names, used_sheaves) -
                 r.fail(sp, "only the first and last route stops may be anchors; give 'sheave = ...'")
             anchor = r.string(st, sp, "anchor", required=True)
             if anchor != "ground" and anchor not in body_names:
-                r.fail(f"{sp}.anchor", f"must be 'ground' or a body name, got {anchor!r}")
+                r.fail(f"{sp}.anchor", f"must be 'ground' or a body name, got {anchor!r}; bodies: "
+                                       f"{', '.join(sorted(body_names)) or 'none'}")
             stops.append(RouteStop(anchor=anchor, at=r.vector(st, sp, "at", required=True),
                                    hitch_stiffness=r.number(st, sp, "hitch_stiffness", 0.0, nonneg=True),
                                    hitch_damping=r.number(st, sp, "hitch_damping", 0.0, nonneg=True)))
@@ -494,7 +495,7 @@ def _parse_drive(r: _Reader, data, sheaves, ropes, used_sheaves) -> Drive:
         if dsheave is None:
             r.fail("drive", f"missing required key 'sheave' (drive kind {kind!r} acts on a sheave)")
         if dsheave not in sheave_names:
-            r.fail("drive.sheave", f"unknown sheave {dsheave!r}")
+            r.fail("drive.sheave", f"unknown sheave {dsheave!r}; sheaves: {', '.join(sorted(sheave_names)) or 'none'}")
         if sheave_names[dsheave].kind == "idler":
             r.fail("drive.sheave", f"sheave {dsheave!r} is an idler; drive a 'traction' sheave or a 'drum'")
         if dsheave not in used_sheaves:
@@ -535,7 +536,7 @@ def _parse_buffers(r: _Reader, data, names, bodies) -> list:
         name = _unique_name(r, bf, path, names)
         body = r.string(bf, path, "body", required=True)
         if body not in bodies_by_name:
-            r.fail(f"{path}.body", f"unknown body {body!r}")
+            r.fail(f"{path}.body", f"unknown body {body!r}; bodies: {', '.join(sorted(bodies_by_name)) or 'none'}")
         axis = r.string(bf, path, "axis", "z", AXES)
         if axis not in bodies_by_name[body].free:
             r.fail(f"{path}.axis", f"axis {axis!r} is not a free axis of body {body!r}")

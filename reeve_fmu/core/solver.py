@@ -31,7 +31,11 @@ from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, bra
 
 
 class SolverError(RuntimeError):
-    """The integration cannot continue; the message says why and when."""
+    """The integration cannot continue; the message says why and when. A run that stops keeps what
+    it computed: `result` holds the outputs up to the last good step (Simulator.advance with out_dt,
+    Simulator.run), `time` that step's time (None for a failure before the first step, e.g. statics)."""
+    result = None
+    time = None
 
 
 STATUS_TEXT = {
@@ -492,6 +496,37 @@ def _entry_point(dispatcher):
     return dispatcher
 
 
+# --------------------------------------------------------------------------------- statics helpers
+RCOND = 1e-12   # singular values below RCOND x the largest are zero (round-off of a ~1e16 condition)
+
+
+def _newton_direction(J, r):
+    """Newton step -J^+ r and the part of the residual outside J's range. Singular values below
+    RCOND x the largest are dropped: interior nodes of a straight, unstretched span have no
+    transverse stiffness until the rope carries tension, so J is singular to round-off there and a
+    plain solve returns a step of ~1e7 m. Dropping those directions leaves them alone (their residual
+    is zero) and loads the rope; the next Jacobian is regular."""
+    U, sv, Vt = np.linalg.svd(J)
+    keep = sv > RCOND * (sv[0] if sv.size else 0.0)
+    step = -(Vt[keep].T @ ((U[:, keep].T @ r) / sv[keep]))
+    outside = float(np.max(np.abs(J @ step + r))) if r.size else 0.0
+    return step, outside
+
+
+def _unbalanced(m, eqs, r) -> str:
+    """'unbalanced force 2.3e+04 N on body 'car' (car.z)' for the largest residual of the statics."""
+    if r is None or not len(r):
+        return "no residual"
+    i = int(np.argmax(np.abs(r)))
+    name = m.q_names[eqs[i]]
+    kind = m.q_kind[eqs[i]]
+    base = name.split(".")[0]
+    what = {"body": f"body {base!r}", "sheave": f"sheave {base!r} (rope coordinate)",
+            "angle": f"sheave {base!r}", "hitch": f"rope {base!r} (hitch)",
+            "interior": f"rope {base!r} (interior node)", "slope": f"rope {base!r} (slope)"}.get(kind, name)
+    return f"unbalanced force {r[i]:.4g} N on {what} ({name})"
+
+
 # --------------------------------------------------------------------------------- front end
 @dataclass
 class Result:
@@ -675,6 +710,8 @@ class Simulator:
 
         x = np.array([q[i] if k == "q" else par[i] for k, i in unknowns], float)
         fscale = max(1.0, float(np.max(np.abs(K.F0))) if nq else 1.0)
+        cap = max(1.0, float(np.max(np.abs(m.c0))) if m.c0.size else 1.0)   # scene size [m]
+        outside = 0.0
         for it in range(100):
             r, qq, pp, c = resid(x)
             if r is None:
@@ -685,28 +722,34 @@ class Simulator:
             try:
                 step = _solve(J, -r)
             except np.linalg.LinAlgError:
-                J = J.toarray() if hasattr(J, "toarray") else J
-                # Exactly singular: e.g. interior nodes of a straight, still unstretched span in the
-                # planar model have no transverse stiffness until the rope carries tension. The
-                # minimum-norm step leaves those directions alone (their residual is zero) and loads
-                # the rope; a residual outside J's range means a body that nothing holds.
-                step = np.linalg.lstsq(J, -r, rcond=None)[0]
-                if np.max(np.abs(J @ step + r)) > 1e-6 * max(rn, 1e-9 * fscale):
-                    raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations "
-                                      f"(a body or sheave is not held by any rope?)") from None
-            lam = 1.0
-            while lam > 1e-4:
+                step = None
+            outside = 0.0
+            if step is None or np.max(np.abs(step), initial=0.0) > cap:
+                # singular, or so near it that the step is longer than the scene (interior nodes of
+                # an unloaded span: no transverse stiffness yet): truncated-SVD direction. A residual
+                # outside J's range is left for the next iteration (the rope weight across an unloaded
+                # span: the loaded rope holds it); if it stays, nothing holds that body
+                step, outside = _newton_direction(J.toarray() if hasattr(J, "toarray") else J, r)
+            # a Newton step longer than the scene is not trusted: it is cut to the scene's size first
+            lam = min(1.0, cap / max(float(np.max(np.abs(step), initial=0.0)), 1e-300))
+            while lam > 1e-6:
                 rt = resid(x + lam * step)[0]
                 if rt is not None and np.max(np.abs(rt)) < max(rn, 1e-300) * (1 - 1e-4 * lam) or rn < 1e-9 * fscale:
                     break
                 lam *= 0.5
+            else:
+                break   # no step reduces the force imbalance: reported below
             x = x + lam * step
             if np.max(np.abs(lam * step)) < 1e-12 * (1 + np.max(np.abs(x))):
                 break
         r, qq, pp, c = resid(x)
         if r is None or np.max(np.abs(r)) > 1e-6 * fscale:
-            raise SolverError(f"{m.scene.source}: initial statics did not converge "
-                              f"(residual {np.max(np.abs(r)) if r is not None else float('nan'):.3g} N)")
+            if r is not None and outside > 0.5 * np.max(np.abs(r)):
+                raise SolverError(f"{m.scene.source}: initial statics: singular equilibrium equations: "
+                                  f"{_unbalanced(m, eqs, r)}, which is not held by any rope")
+            where = _unbalanced(m, eqs, r) if r is not None else "a span is shorter than solver.min_span"
+            raise SolverError(f"{m.scene.source}: initial statics did not converge: {where} "
+                              f"(check the start positions, masses and EA)")
         st.q[:] = qq
         st.c[:] = c
         if KS is not m.KJ:
@@ -855,7 +898,12 @@ class Simulator:
         status, t, done = self._integrate(st, t0, h, n, ybuf, every)
         st.t = t0 + done * h if status == 0 else t
         if status != 0:
-            raise SolverError(self._status_message(status, st))
+            err = SolverError(self._status_message(status, st))
+            err.time = st.t
+            if out_dt is not None:
+                rows = done // every   # output rows the compiled loop wrote before the failure
+                err.result = Result(ybuf[:rows, 0].copy(), ybuf[:rows, 1:].copy(), self.model.output_names)
+            raise err
         st.t = t_end if abs(st.t - t_end) < 1e-9 else st.t
         if out_dt is None:
             return None
@@ -1048,7 +1096,13 @@ class Simulator:
             t_next = min(t_end, st.t + chunk)
             n = max(1, int(round((t_next - st.t) / out_dt)))
             t_next = st.t + n * out_dt
-            res = self.advance(st, t_next, out_dt=out_dt)
+            try:
+                res = self.advance(st, t_next, out_dt=out_dt)
+            except SolverError as exc:
+                self.final_state = st
+                exc.result = self._partial(times, vals, exc.result, st)
+                exc.time = st.t
+                raise
             times.append(res.time)
             vals.append(res.values)
             if progress is not None:
@@ -1082,3 +1136,12 @@ class Simulator:
                         f"t = {res.time[bad[0]]:g} s: sheave {sh.name!r}: tension ratio "
                         f"{np.max(ratio):.4f} exceeds e^(f alpha) = {limit:.4f}: the creep arc would exceed "
                         f"the wrap and the rope would slip (model it with slip = true)")
+
+    def _partial(self, times, vals, chunk, st) -> Result:
+        """Everything a stopped run computed: the samples so far, the stopped chunk's samples and a
+        last sample at the last good step (st is left there)."""
+        if chunk is not None and len(chunk.time):
+            times, vals = times + [chunk.time], vals + [chunk.values]
+        if st.t > times[-1][-1] + 1e-12:
+            times, vals = times + [np.array([st.t])], vals + [self.outputs(st)[None, :]]
+        return Result(np.concatenate(times), np.vstack(vals), self.model.output_names)

@@ -214,9 +214,11 @@ def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = Non
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..core.model import build_model
     from ..core.plant import plant_scene
+    from ..core.plausibility import check_or_raise
     from ..core.scene import load_scene
 
     scene = load_scene(scene_path)
+    check_or_raise(scene)    # a physically impossible scene fails the build, not the FMU's initialization
     if payload is None:
         payload = scene_payload(scene)
     model = build_model(plant_scene(empty_car_scene(scene, payload)))

@@ -6,4 +6,5 @@ bench       work-precision study (ALE against the Lagrangian baseline) and trip 
 fidelity    pick the cheapest model configuration that meets an accuracy target
 crane       quasi-static crane hoist: hook-block rotation, cabling height (continuation)
 lagrangian  Lagrangian finite-element baseline (material mesh, contact, friction) and its kernels
+snapload    exact wave solution of the emergency-stop snap load (rope with an end mass), lumped-chain check
 """

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import json
 import math
 from pathlib import Path
+import sys
 import time
 
 import numpy as np
@@ -851,6 +852,22 @@ def _refine_fold(history):
     return hv, pv
 
 
+def _no_yaw_stiffness(model: CraneModel) -> str:
+    """Why the statics can fail before it starts: nothing resists the block's yaw. Falls spaced
+    apart turn the block back (the block rises as it turns); a rope with torsional stiffness does
+    too. One fall (or falls through one point) with the torque-factor law and GJ0 = k1 = 0 has
+    neither: with k0 = 0 the yaw is undetermined, with k0 != 0 the rope torque turns the block freely."""
+    if model.torsion or (len(model.falls) > 1 and model.S_eff > 1e-9):
+        return ""
+    spec = model.spec
+    return (f": the hook block's yaw has no stiffness — {len(model.falls)} fall(s) at one point and "
+            f"[crane] law = {spec.law!r} with GJ0 = {spec.GJ0:g}, k1 = {spec.k1:g} give no torsional "
+            f"stiffness, so nothing turns the block back (k0 = {spec.k0:g}: "
+            + ("the yaw is undetermined" if spec.k0 == 0 else "the rope torque turns it freely")
+            + "). Give the rope torsional stiffness ([crane] GJ0 > 0, or law = 'costello' or 'feyrer') "
+              "or reeve two or more falls")
+
+
 def sweep(model: CraneModel, heights=None) -> SweepResult:
     """Equilibria over the heights (default: the scene's linspace(height_min, height_max, heights));
     NaN rows beyond the critical height."""
@@ -862,7 +879,7 @@ def sweep(model: CraneModel, heights=None) -> SweepResult:
     sol = CraneSolver(model)
     if not sol.solve(model.h_ref):
         raise CraneError(f"{model.scene.source}: no equilibrium found in the scene's configuration "
-                         f"(height {model.h_ref:.3f} m)")
+                         f"(height {model.h_ref:.3f} m){_no_yaw_stiffness(model)}")
     t_first = time.perf_counter() - t0   # includes the JIT compile (or cache load) of the kernels
     t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
@@ -991,7 +1008,11 @@ def write_rotation_csv(path, cols: dict):
 
 
 def cli_crane(args) -> int:
+    from ..core.plausibility import check_or_raise
     model = load_crane(args.scene)
+    warnings = check_or_raise(model.scene)
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
     spec = model.spec
     heights = None
     if args.heights is not None:
@@ -1004,6 +1025,7 @@ def cli_crane(args) -> int:
     write_rotation_csv(out / "rotation.csv", res.columns)
     plot_rotation(out / "rotation.png", res)
     summ = summary(res)
+    summ["warnings"] = warnings
     (out / "summary.json").write_text(json.dumps(summ, indent=2) + "\n", encoding="utf-8")
     ch = res.critical_height
     yaw = res.columns["block.yaw"]
