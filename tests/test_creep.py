@@ -251,7 +251,7 @@ def test_creep_arc_exceeding_the_wrap_is_reported():
     180 deg, the default undercut groove: f = 1.89 mu, limit 1.35) gets a warning naming it; with
     mu = 0.3 (limit 5.9) none."""
     for mu, warned in ((0.05, True), (0.3, False)):
-        d = one_to_one("creep")
+        d = one_to_one("creep", table=[[0, 0.0], [2, 0.5]])    # a gentle start: no slack
         d["sheaves"][0]["mu"] = mu
         d["scene"]["t_end"] = 0.05
         sim = Simulator(build(d))
