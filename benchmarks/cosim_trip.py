@@ -237,7 +237,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     plant_fmu, drive_fmu = cosim.ensure_fmus(args.fmus)
     scene, payload = cosim.plant_fmu_model(plant_fmu)
-    pre = cosim.holding_torques(scene, (0.0, 39.0), payload, params={"car.load": 1000.0})
+    pre = cosim.holding_torques(scene, (0.0, 39.0), 1000.0)
     dv = {"pretorque[1]": pre[0], "pretorque[2]": pre[1]}
     if args.accuracy:
         res = accuracy(plant_fmu, drive_fmu, dv, args.png)

@@ -88,7 +88,7 @@ def cases():
     out = []
     for p in scenes():
         rel = str(p.relative_to(ROOT))
-        doc = tomllib.loads(p.read_text())
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
         for path, _ in _numeric_leaves(doc):
             for f in FACTORS:
                 out.append(dict(scene=rel, kind="scale", path=list(path), arg=f,
@@ -107,7 +107,7 @@ def cases():
 
 
 def mutated(case):
-    doc = tomllib.loads((ROOT / case["scene"]).read_text())
+    doc = tomllib.loads((ROOT / case["scene"]).read_text(encoding="utf-8"))
     node = doc
     path = case["path"]
     for p in path[:-1]:
@@ -274,7 +274,7 @@ def main(argv=None) -> int:
     print(json.dumps(summ, indent=2))
     if args.json:
         fails = [r for r in results if r["outcome"].startswith("fail")]
-        Path(args.json).write_text(json.dumps({"summary": summ, "failures": fails}, indent=2) + "\n")
+        Path(args.json).write_text(json.dumps({"summary": summ, "failures": fails}, indent=2) + "\n", encoding="utf-8")
     return 1 if summ["failures"] else 0
 
 

@@ -202,7 +202,7 @@ def main(argv=None):
     if a.out:
         out = Path(a.out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "scaling.json").write_text(json.dumps(dict(rows=rows, lu=lu), indent=1))
+        (out / "scaling.json").write_text(json.dumps(dict(rows=rows, lu=lu), indent=1), encoding="utf-8")
         plot(rows, out / "scaling.png")
         print(f"wrote {out / 'scaling.json'} and {out / 'scaling.png'}")
 

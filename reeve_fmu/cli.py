@@ -1,4 +1,4 @@
-"""Command line: reeve-fmu simulate | demo | build | bench | crane | hil.
+"""Command line: reeve-fmu simulate | demo | build | sweep | bench | crane | hil.
 
 Front ends import the layers below them; each subcommand's implementation lives in its own module and
 is imported only when used, so `reeve-fmu simulate` does not load fmpy or python-can.
@@ -22,7 +22,7 @@ def cmd_simulate(args) -> int:
     from .core.scene import load_scene
     from .core.solver import Simulator, SolverError
 
-    scene = load_scene(args.scene)
+    scene = _scene_with_sets(args.scene, getattr(args, "set", None))
     warnings = plausibility_warnings(scene)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     dt = args.dt if args.dt is not None else scene.output_step
@@ -48,6 +48,7 @@ def cmd_simulate(args) -> int:
     cols = res.as_dict()
     time_ = cols.pop("time")
     _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None)
+    _simulate_extras(args, scene, time_, cols, out)
     how = ("(the run of the fidelity full-run check)" if reused else
            f"in {wall:.2f} s (incl. statics and JIT load; {real_time(time_[-1] - time_[0], wall)})")
     print(f"{scene.name}: {len(time_)} samples to t = {time_[-1]:.3f} s {how} -> {out}/results.csv, "
@@ -57,6 +58,42 @@ def cmd_simulate(args) -> int:
               file=sys.stderr)
         return EXIT_EVENT
     return 0
+
+
+def _scene_with_sets(path, items):
+    """The scene file with --set overrides (scene keys, and the load of an elevator scene)."""
+    from .studies.overrides import OverrideError, parse_sets, scene_with, split
+
+    scene_sets, drive_sets, load = split(parse_sets(items))
+    if drive_sets:
+        raise OverrideError(f"--set {next(iter(drive_sets))}: drive parameters apply to demo and sweep; "
+                            f"simulate runs the scene's own [drive]")
+    scene, _ = scene_with(path, scene_sets)
+    if load is not None:
+        from .core.elevator import with_load
+        scene = with_load(scene, load)
+    return scene
+
+
+def _simulate_extras(args, scene, time_, cols, out):
+    """--output-dt / --parquet tables, and the checks of any scene run (slack rope, buffer contact,
+    traction against EN 81-50): console, verdicts added to DIR/summary.json, DIR/report.md."""
+    import json
+    from .studies import report
+    from .studies.verdicts import print_verdicts, scene_verdicts, worst
+
+    if getattr(args, "output_dt", None) is not None or getattr(args, "parquet", False):
+        report.write_tables(out, time_, cols, output_dt=getattr(args, "output_dt", None),
+                            parquet=bool(getattr(args, "parquet", False)))
+    vs = [v.as_dict() for v in scene_verdicts(scene, time_, cols)]
+    p = out / "summary.json"
+    summary = json.loads(p.read_text(encoding="utf-8")) if p.is_file() else {}
+    summary.update({"verdict": worst(vs), "verdicts": vs})
+    report.write_summary(out, summary)
+    report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
+                                                           "t_end_s": float(time_[-1])},
+                        [], vs, ["results.png"], command="reeve-fmu simulate")
+    print_verdicts(vs)
 
 
 def real_time(sim_seconds: float, wall: float) -> str:
@@ -136,6 +173,10 @@ def _add_simulate(sub):
                         "otherwise (overrides [accuracy].tol; docs/fidelity.md)")
     p.add_argument("--no-fidelity", action="store_true",
                    help="ignore [accuracy] and run the scene as written")
+    _add_set(p)
+    p.add_argument("--output-dt", type=float, default=None, help="output interval of results.csv [s] (thins "
+                                                                  "the --dt samples)")
+    p.add_argument("--parquet", action="store_true", help="also write results.parquet")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -150,10 +191,38 @@ def _lazy(sub, name, module, func, help_, configure):
     p.set_defaults(func=run)
 
 
+def _add_set(p):
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key (rope.EA=90e6, bodies.car.mass=1200, drive.v_max=1.0), a drive "
+                        "parameter (torque.max=1500, control.Kp=900, sis.enabled=1) or the load (load=800); "
+                        "repeatable (docs/studies.md)")
+
+
 def _cfg_demo(p):
+    p.add_argument("--scene", default=None, help="elevator scene (default: scenes/elevator_2to1.toml)")
+    p.add_argument("--load", type=float, default=None, help="payload in the car [kg] (default: rated load)")
+    p.add_argument("--landings", default=None, metavar="X1,X2,...",
+                   help="car positions [m] visited in order (default: lowest, highest, lowest landing)")
+    p.add_argument("--dwell", type=float, default=None, help="rest between moves [s] (default 3)")
+    _add_set(p)
+    p.add_argument("--levelling", choices=("both", "encoder"), default="both",
+                   help="both (default): also run the trip with the shaft information system and compare "
+                        "the stopping errors; encoder: motor encoder only")
     p.add_argument("--out", default="results", help="output directory (default: results/)")
     p.add_argument("--step", type=float, default=1e-3, help="communication step [s]")
+    p.add_argument("--output-dt", type=float, default=None, help="output interval of results.csv [s] "
+                                                                  "(default: every step)")
+    p.add_argument("--parquet", action="store_true", help="also write results.parquet")
     p.add_argument("--rebuild", action="store_true", help="rebuild the FMUs even if up to date")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def _cfg_sweep(p):
+    p.add_argument("study", help="study TOML file (docs/studies.md)")
+    p.add_argument("--out", default="results/sweep", help="output directory (default: results/sweep/)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="address of an existing Dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, default=None, help="local cluster size (default: every core)")
     p.add_argument("--no-progress", action="store_true")
 
 
@@ -161,6 +230,7 @@ def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml)")
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
+    _add_set(p)
 
 
 def _cfg_bench(p):
@@ -172,6 +242,7 @@ def _cfg_crane(p):
     p.add_argument("scene", help="crane scene TOML (e.g. scenes/crane_8fall.toml)")
     p.add_argument("--out", default="results/crane", help="output directory")
     p.add_argument("--heights", type=int, default=None, help="number of hoist heights (default: scene)")
+    _add_set(p)
 
 
 def _cfg_hil(p):
@@ -182,6 +253,7 @@ def _cfg_hil(p):
                    help="loss=P | delay=MS | controller-dies-at=T (repeatable)")
     p.add_argument("--out", default="results/hil", help="output directory")
     p.add_argument("--t-end", type=float, default=None, help="stop after T seconds of trip")
+    _add_set(p)
 
 
 def main(argv=None) -> int:
@@ -192,6 +264,8 @@ def main(argv=None) -> int:
     _add_simulate(sub)
     _lazy(sub, "demo", "demo", "cli_demo", "build the FMUs if needed and co-simulate the 2:1 elevator trip", _cfg_demo)
     _lazy(sub, "build", "demo", "cli_build", "build the plant and electric-drive FMUs into fmus/", _cfg_build)
+    _lazy(sub, "sweep", "studies.sweep", "cli_sweep", "parameter/load-case sweep of elevator trips on Dask",
+          _cfg_sweep)
     _lazy(sub, "bench", "studies.bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
     _lazy(sub, "crane", "studies.crane", "cli_crane", "quasi-static hoist sweep of a crane: hook-block rotation", _cfg_crane)
     _lazy(sub, "hil", "hil.run", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)

@@ -1,102 +1,25 @@
 """`reeve-fmu demo` (the main job) and `reeve-fmu build`.
 
-demo: builds fmus/ReevingPlant.fmu and fmus/ElectricDrive.fmu if they are missing or stale, then
-co-simulates the R1 2:1 elevator (scenes/elevator_2to1.toml, rated load 1000 kg) driven by the
-electric drive (Level 1) with the fmpy master of reeve_fmu.fmu.cosim: bottom landing -> top landing,
-dwell, and back. Writes DIR/results.csv, DIR/results.png (car kinematics), DIR/traction.png (rope
-forces at the traction sheave, traction ratio against the EN 81-50 limits e^(f alpha)),
-DIR/motor.png (motor torque and speed) and DIR/summary.json, and prints the summary table.
+demo: builds the plant FMU of an elevator scene (default: fmus/ReevingPlant.fmu of the R1 2:1 elevator,
+scenes/elevator_2to1.toml) and fmus/ElectricDrive.fmu if they are missing or stale, sizes the drive from
+the scene (studies.trip), and co-simulates a trip with the fmpy master of reeve_fmu.fmu.cosim: by
+default the rated load from the lowest landing to the highest, dwell, and back (--scene, --load,
+--landings, --dwell, --set change it). The same trip runs once more in process with the shaft
+information system (car-position feedback for the approach) for the levelling comparison. Writes
+DIR/results.csv (--output-dt thins, --parquet adds results.parquet), results.png, traction.png,
+motor.png, levelling.png, summary.json and report.md, and prints the summary table and the verdicts.
 """
 from __future__ import annotations
 
-import json
-import math
-import os
 import time
 from pathlib import Path
 
-import numpy as np
-
-from .studies.trip import (GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, LANDINGS, RATED_LOAD_KG, RATED_SPEED,  # noqa: F401
-                          ROPING, WRAP_DEG, jerk_of, summarize, traction_limits)
-
-
-
+from .studies.trip import LANDINGS, RATED_LOAD_KG  # noqa: F401  (re-exported)
 from .fmu.cosim import fmu_dir  # noqa: E402,F401  (re-exported)
 
 
-def _plots(out: Path, t, c, limits, title):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    jerk = jerk_of(t, c["car.acceleration"])
-    fig, ax = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
-    ax[0].plot(t, c["car.position"], label="car")
-    ax[0].plot(t, c["car.position_ref"], "--", lw=0.8, label="drive reference")
-    ax[0].set_ylabel("position [m]")
-    ax[0].legend(loc="best")
-    ax[1].plot(t, c["car.velocity"], label="car")
-    ax[1].plot(t, c["car.velocity_ref"], "--", lw=0.8, label="drive reference")
-    ax[1].set_ylabel("speed [m/s]")
-    ax[1].legend(loc="best")
-    ax[2].plot(t, c["car.acceleration"], lw=0.6, label="car (1 ms samples)")
-    ax[2].plot(t, c["car.acceleration_ref"], "--", lw=0.8, label="drive reference")
-    ax[2].set_ylabel("acceleration [m/s²]")
-    ax[2].legend(loc="best")
-    ax[3].plot(t, jerk, lw=0.8)
-    ax[3].set_ylabel("jerk [m/s³]\n(10 Hz low-pass)")
-    ax[3].set_xlabel("time [s]")
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(out / "results.png", dpi=110)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    ax[0].plot(t, c["traction.tension_in"] / 1e3, label="car side (tension_in)")
-    ax[0].plot(t, c["traction.tension_out"] / 1e3, label="counterweight side (tension_out)")
-    ax[0].set_ylabel("rope force at the traction sheave [kN]\n(6 ropes)")
-    ax[0].legend(loc="best")
-    ax[1].plot(t, c["traction.traction_ratio"], label="T1/T2")
-    ax[1].axhline(limits["loading"], color="C3", ls="--",
-                  label=f"e^(fα) loading, μ = {limits['mu_loading']:.3g}: {limits['loading']:.3f}")
-    ax[1].axhline(limits["emergency_braking"], color="C1", ls="--",
-                  label=f"e^(fα) emergency braking, μ = {limits['mu_emergency_braking']:.3g}: "
-                        f"{limits['emergency_braking']:.3f}")
-    ax[1].set_ylabel("traction ratio")
-    ax[1].set_xlabel("time [s]")
-    ax[1].legend(loc="best", fontsize=8)
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.suptitle(f"Traction sheave (U-undercut β = {GROOVE_BETA_DEG:g}°, γ = {GROOVE_GAMMA_DEG:g}°, "
-                 f"α = {WRAP_DEG:g}°)")
-    fig.tight_layout()
-    fig.savefig(out / "traction.png", dpi=110)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    ax[0].plot(t, c["motor.torque"], label="motor (drive output)")
-    ax[0].plot(t, c["brake.torque"], lw=0.8, label="brake (plant)")
-    ax[0].set_ylabel("torque [N·m]")
-    ax[0].legend(loc="best")
-    ax[1].plot(t, c["motor.speed"] * 60 / (2 * math.pi), label="motor")
-    ax[1].plot(t, c["motor.speed_ref"] * 60 / (2 * math.pi), "--", lw=0.8, label="reference")
-    ax[1].set_ylabel("speed [rpm]")
-    ax[1].set_xlabel("time [s]")
-    ax[1].legend(loc="best")
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.suptitle("Machine")
-    fig.tight_layout()
-    fig.savefig(out / "motor.png", dpi=110)
-    plt.close(fig)
-
-
-def print_table(summary: dict) -> None:
-    rows = [("trip time (up / down)", " / ".join(f"{x:.2f}" for x in summary["trip_time_s"]), "s")]
+def _rows(summary: dict) -> list:
+    rows = [("trip time", " / ".join(f"{x:.2f}" for x in summary["trip_time_s"]), "s")]
     rows += [
         ("max acceleration (|a|, 10 Hz)", f"{summary['max_acceleration_m_s2']:.3f}", "m/s²"),
         ("max jerk (10 Hz)", f"{summary['max_jerk_m_s3']:.3f}", "m/s³"),
@@ -109,8 +32,15 @@ def print_table(summary: dict) -> None:
          f" / {summary['traction_limit_loading']:.3f}", ""),
         ("peak motor torque", f"{summary['motor_torque_peak_Nm']:.1f}", "N·m"),
     ]
+    lev = summary.get("levelling")
     for k, v in summary["stopping_error_mm"].items():
-        rows.append((f"stopping error at {k}", f"{v:+.2f}", "mm"))
+        extra = f" (with SIS {lev['with_sis_mm'][k]:+.2f})" if lev and k in lev["with_sis_mm"] else ""
+        rows.append((f"stopping error at {k}", f"{v:+.2f}{extra}", "mm"))
+    return rows
+
+
+def print_table(summary: dict) -> None:
+    rows = _rows(summary)
     w = max(len(r[0]) for r in rows)
     print()
     for name, val, unit in rows:
@@ -118,8 +48,49 @@ def print_table(summary: dict) -> None:
     print()
 
 
+def _sequence(text):
+    if text is None:
+        return None
+    try:
+        return tuple(float(x) for x in str(text).replace(" ", "").split(",") if x)
+    except ValueError:
+        raise ValueError(f"--landings {text!r}: give car positions in m separated by commas, e.g. 0,39,0") from None
+
+
+def demo_case(args):
+    """The trip case of the demo's options (scene, load, landings, dwell, --set)."""
+    from .studies.overrides import parse_sets
+    from .studies.trip import trip_case
+
+    return trip_case(getattr(args, "scene", None), load=getattr(args, "load", None),
+                     sequence=_sequence(getattr(args, "landings", None)),
+                     dwell=float(getattr(args, "dwell", None) if getattr(args, "dwell", None) is not None else 3.0),
+                     sets=parse_sets(getattr(args, "set", None)))
+
+
+def _plant_source(case, out: Path):
+    """(scene file, plant FMU model name) the plant FMU is built from: the shipped default scene as
+    ReevingPlant; another scene, or one changed by --set (written to DIR/scene.toml), under its own name."""
+    from .fmu import cosim
+    from .studies.overrides import dump_toml, load_scene_data, apply_to_data
+
+    path = Path(case.scene_path)
+    if case.scene_sets:
+        out.mkdir(parents=True, exist_ok=True)
+        data = apply_to_data(load_scene_data(path), case.scene_sets)
+        path = out / "scene.toml"
+        path.write_text(f"# {case.scene_path} with --set " + ", ".join(
+            f"{k}={v!r}" for k, v in case.scene_sets.items()) + "\n" + dump_toml(data), encoding="utf-8")
+    if path.resolve() == cosim.default_scene_path().resolve():
+        return path, cosim.PLANT_NAME
+    return path, "Plant_" + cosim._slug(case.scene.name)
+
+
 def cli_demo(args) -> int:
     from .fmu import cosim
+    from .studies import report
+    from .studies.trip import run_case, summarize_case, traction_limits
+    from .studies.verdicts import levelling_verdicts, print_verdicts, worst
 
     out = Path(getattr(args, "out", None) or "results")
     step = float(getattr(args, "step", None) or 1e-3)
@@ -127,21 +98,22 @@ def cli_demo(args) -> int:
         raise ValueError(f"--step {step!r}: the communication step must be in (0, 2 ms]; the ride-quality "
                          f"metrics (ISO 18738 style, Wk weighting) need samples at >= 500 Hz, and beyond "
                          f"2 ms the co-simulation error grows quickly (docs/cosim.md)")
-    dest = fmu_dir()
-    plant_fmu, drive_fmu = cosim.ensure_fmus(dest, rebuild=bool(getattr(args, "rebuild", False)))
-    scene, payload = cosim.plant_fmu_model(plant_fmu)
-    plant_values = {"car.load": RATED_LOAD_KG}
+    output_dt = getattr(args, "output_dt", None)
+    report.thin_index([0.0, step], output_dt)          # validate before the run
     t0 = time.perf_counter()
-    pre = cosim.holding_torques(scene, LANDINGS, payload, params=plant_values)
-    drive_values = {"landing[1]": LANDINGS[0], "landing[2]": LANDINGS[1], "trip.moves": 2,
-                    "pretorque[1]": pre[0], "pretorque[2]": pre[1], "drive.level": 1}
-    t_end = cosim.trip_end_time(drive_values)
-    print(f"R1 2:1 elevator, {RATED_LOAD_KG:g} kg: {LANDINGS[0]:g} m -> {LANDINGS[1]:g} m -> "
-          f"{LANDINGS[0]:g} m, {t_end:.2f} s at a {step * 1e3:g} ms communication step "
-          f"(pre-torque {pre[0]:.1f} / {pre[1]:.1f} N·m from the plant's holding torque)")
+    case = demo_case(args)
+    scene_file, name = _plant_source(case, out)
+    plant_fmu, drive_fmu = cosim.ensure_fmus(fmu_dir(), scene=scene_file, name=name,
+                                             rebuild=bool(getattr(args, "rebuild", False)))
+    drive_values = {k: v for k, v in case.drive_values.items() if k not in cosim.SIS_PARAMETERS}
+    t_end = cosim.trip_end_time(case.drive_values)
+    pre = [case.holding_torques[x] for x in case.landings]
+    print(f"{case.describe()}: {t_end:.2f} s at a {step * 1e3:g} ms communication step (pre-torque "
+          + " / ".join(f"{p:.1f}" for p in pre) + " N·m from the plant's holding torque; drive sized: "
+          f"torque.max {drive_values['torque.max']:.0f} N·m, torque.power_max "
+          f"{drive_values['torque.power_max'] / 1e3:.1f} kW)")
     print("instantiating the FMUs (the first run on a machine compiles their numba kernels: ~1 min)")
-    bar = None
-    progress = None
+    bar = progress = None
     if not getattr(args, "no_progress", False):
         from tqdm import tqdm
 
@@ -152,34 +124,57 @@ def cli_demo(args) -> int:
             bar.n = round(min(t, t_end), 3)
             bar.refresh()
     try:
-        res = cosim.cosimulate(plant_fmu, drive_fmu, step=step, t_end=t_end, plant_values=plant_values,
+        res = cosim.cosimulate(plant_fmu, drive_fmu, step=step, t_end=t_end, plant_values=case.plant_values,
                                drive_values=drive_values, progress=progress)
     finally:
         if bar is not None:
             bar.close()
-    t = res.time
-    c = res.columns
+    t, c = res.time, res.columns
+    summary = summarize_case(case, t, c, res.info)
+    verdicts = list(summary.pop("verdicts"))
+    sis = None
+    lev_rows = None
+    if getattr(args, "levelling", "both") != "encoder":
+        rs = run_case(case, step=step, sis=True)
+        ss = summarize_case(case, rs.time, rs.columns, rs.info)
+        sis = (rs.time, rs.columns)
+        verdicts[2:2] = [v.as_dict() for v in levelling_verdicts(ss["stopping_error_mm"], " (with SIS)")]
+        lev_rows = [(k, summary["stopping_error_mm"][k], ss["stopping_error_mm"].get(k, float("nan")))
+                    for k in summary["stopping_error_mm"]]
+        summary["levelling"] = {
+            "motor_encoder_only_mm": summary["stopping_error_mm"], "with_sis_mm": ss["stopping_error_mm"],
+            "relevelling_needed_encoder": any(abs(e) > 20 for e in summary["stopping_error_mm"].values()),
+            "relevelling_needed_sis": any(abs(e) > 20 for e in ss["stopping_error_mm"].values()),
+            "sis": {"resolution_m": case.drive_values.get("sis.resolution", 0.5e-3),
+                    "delay_s": case.drive_values.get("sis.delay", 2e-3),
+                    "zone_m": case.drive_values.get("sis.zone", 0.0) or "braking distance",
+                    "filter_s": case.drive_values.get("sis.filter", 0.2),
+                    "run": "in process (Plant + ElectricDrive at the same step; the drive FMU has no "
+                           "car-position input)"}}
     out.mkdir(parents=True, exist_ok=True)
-    plant_names = res.info["plant_outputs"]
     order = []
-    for n in plant_names:
+    for n in res.info["plant_outputs"]:
         order.append(n)
         if n == "motor.speed":
             order.append("motor.torque")
     order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order]
-    from .core.results import write_csv
-
-    write_csv(out / "results.csv", t, {n: c[n] for n in order})
-    limits = traction_limits()
-    _plots(out, t, c, limits, f"R1 2:1 elevator, {RATED_LOAD_KG:g} kg, co-simulation "
-                              f"(plant + drive FMUs, {step * 1e3:g} ms)")
-    summary = summarize(t, c, limits)
+    files = report.write_tables(out, t, {n: c[n] for n in order}, output_dt=output_dt,
+                                parquet=bool(getattr(args, "parquet", False)))
+    limits = traction_limits(case.scene)
+    stops = [(r["t_stop_s"], r["landing_m"]) for r in summary["trips"]]
+    pngs = report.plot_trip(out, t, c, limits=limits, title=f"{case.describe()}, co-simulation (plant + "
+                            f"drive FMUs, {step * 1e3:g} ms)", stops=stops, sis=sis)
+    scenario = {"scene": case.scene.name, "scene_file": str(scene_file), "car_load_kg": case.load,
+                "landings_m": list(case.sequence), "dwell_s": case.dwell,
+                "pretorque_Nm": pre, "drive_level": 1, "communication_step_s": step,
+                "drive_sizing": case.sizing, "overrides": {**case.scene_sets, **case.drive_sets},
+                "scheme": res.info["scheme"], "t_end_s": res.info["t_end_s"],
+                "plant_fmu": str(plant_fmu), "drive_fmu": str(drive_fmu)}
     summary = {
-        "scenario": {"scene": scene.name, "car_load_kg": RATED_LOAD_KG, "landings_m": list(LANDINGS),
-                     "pretorque_Nm": pre, "drive_level": 1, "communication_step_s": step,
-                     "scheme": res.info["scheme"], "t_end_s": res.info["t_end_s"],
-                     "plant_fmu": str(plant_fmu), "drive_fmu": str(drive_fmu)},
+        "scenario": scenario,
         **summary,
+        "verdict": worst(verdicts),
+        "verdicts": verdicts,
         "cosim": {"steps": res.info["steps"], "loop_wall_s": res.info["loop_wall_s"],
                   "real_time_factor": res.info["rtf"], "total_wall_s": time.perf_counter() - t0,
                   "first_step_wall_s": res.info["first_step_wall_s"],
@@ -187,28 +182,55 @@ def cli_demo(args) -> int:
                   "fmu_warnings": res.info["fmu_warnings"],
                   **{k: res.info[k] for k in cosim.MONITOR_FIELDS}},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    report.write_summary(out, summary)
+    metrics = [(a, b, u) for a, b, u in _rows(summary)]
+    report.write_report(out, f"Trip study: {case.describe()}", {k: v for k, v in scenario.items()
+                                                                if k not in ("drive_sizing",)},
+                        metrics, verdicts, pngs, lev_rows, command="reeve-fmu demo")
     print_table(summary)
+    print_verdicts(verdicts)
     first = res.info["first_step_wall_s"]
     print(f"co-simulation: {res.info['steps']} steps in {res.info['loop_wall_s']:.2f} s "
           f"({res.info['rtf']:.1f}x real time"
           + (f"; {res.info['rtf_after_first_step']:.1f}x after the first step, which took {first:.1f} s "
              f"to load/compile the kernels)" if first > 0.5 else ")"))
     print(cosim.monitor_line(res.info))
-    print(f"-> {out}/results.csv, results.png, traction.png, motor.png, summary.json")
+    print(f"-> {out}/" + ", ".join(p.name for p in files) + ", " + ", ".join(pngs)
+          + ", summary.json, report.md")
     return 0
 
 
 def cli_build(args) -> int:
+    """Build the plant FMU of a scene (with --set applied) and the drive FMU; for an elevator scene also
+    write DEST/<name>.drive.json, the drive parameters sized from the scene (start values to give the
+    drive FMU, whose built-in defaults are those of the R1 2:1 elevator)."""
+    import json
+
     from .fmu import cosim
+    from .studies.overrides import apply_to_data, dump_toml, load_scene_data, parse_sets, scene_with, split
 
     dest = Path(getattr(args, "dest", None) or "fmus")
     name = getattr(args, "name", None) or cosim.PLANT_NAME
-    scene = getattr(args, "scene", None)
+    scene = Path(getattr(args, "scene", None) or cosim.default_scene_path())
+    scene_sets, drive_sets, load = split(parse_sets(getattr(args, "set", None)))
+    sc, _ = scene_with(scene, scene_sets)
+    if scene_sets:
+        dest.mkdir(parents=True, exist_ok=True)
+        path = dest / f"{name}.scene.toml"
+        path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)), encoding="utf-8")
+        scene = path
     t0 = time.perf_counter()
     plant, _ = cosim.build_plant_fmu(dest, scene, name)
     print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
     drive, _ = cosim.build_drive_fmu(dest)
     print(f"built {drive} ({time.perf_counter() - t0:.1f} s)")
+    if "elevator" in sc.extra:
+        from .studies.trip import trip_case
+
+        case = trip_case(scene, load=load, sets=drive_sets)
+        vals = {k: v for k, v in case.drive_values.items() if k not in cosim.SIS_PARAMETERS}
+        p = dest / f"{name}.drive.json"
+        p.write_text(json.dumps({"plant": {"car.load": case.load}, "drive": vals}, indent=1) + "\n", encoding="utf-8")
+        print(f"drive parameters sized for {sc.name} (start values for {drive.name}) -> {p}")
     return 0

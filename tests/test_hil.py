@@ -547,7 +547,7 @@ def test_reeve_fmu_hil_command(plant_fmu, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("REEVE_FMU_FMUS", str(Path(plant_fmu).parent))
     out = tmp_path / "hil"
     assert main(["hil", "--t-end", "0.8", "--out", str(out)]) == 0
-    s = json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert s["steps"] == 800 and s["mode"] == "lock-step" and s["plant"]["kind"] == "fmu"
     assert s["watchdog_trips"] == 0 and s["frames_rejected"] == 0
     assert s["reference"]["max_abs_diff_car_position"] == 0.0

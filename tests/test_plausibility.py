@@ -15,7 +15,7 @@ from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.core.solver import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
-ELEVATOR = (ROOT / "scenes" / "elevator_2to1.toml").read_text()
+ELEVATOR = (ROOT / "scenes" / "elevator_2to1.toml").read_text(encoding="utf-8")
 SHIPPED = sorted((ROOT / "scenes").rglob("*.toml"))
 
 
@@ -118,7 +118,7 @@ def test_statics_singular_first_step_converges(model):
 
 
 def test_statics_failure_names_the_body_and_the_force():
-    sc = loads_scene((ROOT / "scenes" / "hanging_rope.toml").read_text() + (
+    sc = loads_scene((ROOT / "scenes" / "hanging_rope.toml").read_text(encoding="utf-8") + (
         '\n[[bodies]]\nname = "loose"\nmass = 10.0\nposition = [5.0, 0.0, 0.0]\nfree = ["z"]\n'), "loose.toml")
     with pytest.raises(Exception, match=r"unbalanced force -98.1 N on body 'loose' \(loose.z\)"):
         Simulator(build_model(sc)).initial_state()
@@ -136,7 +136,7 @@ def test_real_time_factor_text():
 
 
 # ------------------------------------------------------------------------------- command line
-STOP_SCENE = (ROOT / "tests" / "scenes" / "drum_hoist.toml").read_text().replace(
+STOP_SCENE = (ROOT / "tests" / "scenes" / "drum_hoist.toml").read_text(encoding="utf-8").replace(
     "position = [2.0, 0.0, 0.0]", "position = [2.0, 0.0, 27.0]")   # 3 m below the head sheave
 
 
@@ -144,12 +144,12 @@ def test_run_stopped_by_an_event_keeps_its_results(tmp_path, capsys):
     """The drum reels in 5 m but the hook hangs 3 m below the head sheave: the span vanishes at
     t ~ 3.6 s. Exit 3, and the CSV, plot and summary hold everything up to the event."""
     scene = tmp_path / "stop.toml"
-    scene.write_text(STOP_SCENE)
+    scene.write_text(STOP_SCENE, encoding="utf-8")
     rc = main(["simulate", str(scene), "--t-end", "8", "--dt", "0.01", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert rc == 3
     assert "run stopped by an event" in err and "vanishing span" in err and "Traceback" not in err
-    summ = json.loads((tmp_path / "out" / "summary.json").read_text())
+    summ = json.loads((tmp_path / "out" / "summary.json").read_text(encoding="utf-8"))
     ev = summ["event"]
     assert 2.0 < ev["time"] < 8.0 and "vanishing span" in ev["cause"] and summ["exit_code"] == 3
     cols = read_csv(tmp_path / "out" / "results.csv")
@@ -161,7 +161,7 @@ def test_run_stopped_by_an_event_keeps_its_results(tmp_path, capsys):
 
 def test_physically_wrong_scene_exits_2_with_one_line(tmp_path, capsys):
     scene = tmp_path / "ea.toml"
-    scene.write_text(ELEVATOR.replace("EA = 2.9e6", "EA = 4.5"))
+    scene.write_text(ELEVATOR.replace("EA = 2.9e6", "EA = 4.5"), encoding="utf-8")
     rc = main(["simulate", str(scene), "--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert rc == 2 and "[ropes[0].EA]" in err and "Traceback" not in err

@@ -67,7 +67,8 @@ def _cache_dir():
     upgrade) of a module whose functions are inlined elsewhere, the dependents' stale machine code
     would be loaded silently. The cache therefore lives in a directory keyed by the hash of the
     sources compiled code depends on (`_compiled_sources`): any change to them starts a fresh cache. Older directories are pruned
-    (the newest 4 are kept). NUMBA_CACHE_DIR set by the user wins."""
+    (beyond the newest 4, a directory goes when unused for a day, or when more than 20 exist: several checkouts
+    or environments on one machine each keep their current cache, and edits do not pile up gigabytes). NUMBA_CACHE_DIR set by the user wins."""
     from pathlib import Path
     import shutil
     base = Path(os.environ.get("REEVE_FMU_CACHE_DIR") or Path.home() / ".cache" / "reeve_fmu") / "numba"
@@ -81,7 +82,11 @@ def _cache_dir():
         return None
     try:
         old = sorted((d for d in base.iterdir() if d.is_dir() and d != target), key=lambda d: d.stat().st_mtime)
-        for d in old[:-3]:
+        import time
+        stale = time.time() - 86400
+        for i, d in enumerate(old[:-3]):
+            if d.stat().st_mtime >= stale and len(old) - i <= 19:
+                continue
             shutil.rmtree(d, ignore_errors=True)
         os.utime(target)
     except OSError:

@@ -9,7 +9,10 @@ is deterministic; a finer communication step only refreshes the measurement more
 Sign convention: positive motor speed, angle and torque move the car UP. Car positions (landings) are
 in metres, increasing upward. The measured car position is inferred from the motor angle,
 x = x_landing + (theta - theta_at_move_start) * R / roping, so the drive controls the sheave, not the car
-(rope stretch is the plant's business).
+(rope stretch is the plant's business). Optionally (`sis = True`) a shaft information system gives the
+absolute car position (quantized to `sis_resolution`, `sis_delay` old); the offset between it and the
+encoder's car position (the rope stretch) is low-passed (`sis_filter`) and blended into the position
+loop over the last `sis_zone` metres of each approach, so the car, not the sheave, is levelled.
 
 Brake command: 1.0 = release (open) the brake, 0.0 = apply (close) it.
 
@@ -49,13 +52,14 @@ _NS = 10
 # parameter vector layout for the kernel
 (_P_HB, _P_NSP, _P_LEVEL, _P_R, _P_ROP, _P_JFF, _P_TMAX, _P_PMAX, _P_TAU, _P_ND, _P_KP, _P_KI,
  _P_KPOS, _P_TPRE, _P_TRAMP, _P_NPP, _P_PSI, _P_RS, _P_LD, _P_LQ, _P_VMAX, _P_KPD, _P_KID, _P_KPQ,
- _P_KIQ) = range(25)
-_NP = 25
+ _P_KIQ, _P_SIS, _P_SISTAU) = range(27)
+_NP = 27
 
 # float state layout (integer state: _I_*); the dead-time buffer follows _X_BUF0
 (_X_TM, _X_TT, _X_INT, _X_TH0, _X_TREF, _X_TR0, _X_TIME, _X_TMEAN, _X_WCMD, _X_EPOS, _X_XREF,
- _X_VREF, _X_AREF, _X_ID, _X_IQ, _X_VDA, _X_VQA, _X_VDN, _X_VQN, _X_ITD, _X_ITQ, _X_IQREF) = range(22)
-_X_BUF0 = 22
+ _X_VREF, _X_AREF, _X_ID, _X_IQ, _X_VDA, _X_VQA, _X_VDN, _X_VQN, _X_ITD, _X_ITQ, _X_IQREF, _X_SOFF,
+ _X_SINIT) = range(24)
+_X_BUF0 = 24
 _I_K, _I_MOVE, _I_PHASE, _I_HEAD = range(4)
 _NI = 4
 
@@ -117,6 +121,13 @@ class DriveParams:
     Ts_current: float = 62.5e-6        # s, current-loop sample time (must divide Ts)
     Kp_current: float | None = None    # V/A; None = technical optimum L/(2*1.5*Ts_current) per axis
     Ti_current: float | None = None    # s;   None = L/Rs per axis
+    # shaft information system (absolute car position) for the approach; needs car_position in step()
+    sis: bool = False
+    sis_resolution: float = 0.5e-3     # m, position quantum
+    sis_delay: float = 2e-3            # s, measurement age
+    sis_zone: float = 0.0              # m before the target over which the loop blends encoder -> SIS;
+                                       # 0: the braking distance v_max²/(2 a_max), at least 0.3 m
+    sis_filter: float = 0.2            # s, time constant of the low-pass on the SIS - encoder offset
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad parameter."""
@@ -139,6 +150,11 @@ class DriveParams:
         for n in ("J_ff", "tau_T", "dead_time", "Kp", "Kpos", "start_delay", "pretorque_time",
                   "brake_lift_delay", "hold_time", "brake_drop_delay", "torque_ramp_time", "dwell_time"):
             nonneg(n)
+        if self.sis:
+            for n in ("sis_resolution", "sis_filter"):
+                pos(n)
+            nonneg("sis_zone")
+            nonneg("sis_delay")
         if self.level not in (1, 2):
             raise ValueError(f"DriveParams.level must be 1 or 2, got {self.level!r}")
         lands = list(self.landings)
@@ -256,8 +272,9 @@ def _propagate(xs, P, tau, w):
 
 
 @njit(cache=True)
-def _speed_tick(xs, xi, P, sched, prof, tk, w, th):
-    """Sequencer + position/speed control at a speed-loop tick; sets xs[_X_TREF]."""
+def _speed_tick(xs, xi, P, sched, prof, tk, w, th, xsis):
+    """Sequencer + position/speed control at a speed-loop tick; sets xs[_X_TREF]. `xsis`: car position
+    of the shaft information system (NaN: none)."""
     phase, move = _phase_at(sched, tk)
     prev_phase = xi[_I_PHASE]
     if move != xi[_I_MOVE]:
@@ -265,6 +282,7 @@ def _speed_tick(xs, xi, P, sched, prof, tk, w, th):
         xi[_I_MOVE] = move
         xs[_X_TH0] = th
         xs[_X_INT] = 0.0
+        xs[_X_SINIT] = 0.0
         prev_phase = PHASE_IDLE
     x_ref, v_ref, a_ref = profile_eval(prof, tk)
     xs[_X_XREF] = x_ref
@@ -275,6 +293,24 @@ def _speed_tick(xs, xi, P, sched, prof, tk, w, th):
     if phase == PHASE_LIFT or phase == PHASE_RUN or phase == PHASE_HOLD or phase == PHASE_DROP:
         th_ref = xs[_X_TH0] + (x_ref - sched[move, _S_X0]) * g
         epos = th_ref - th
+        if P[_P_SIS] > 0.0 and xsis == xsis:
+            # car position = encoder position + rope stretch offset; the offset (SIS - encoder) is
+            # low-passed with sis_filter so that the loop stays collocated on the sheave: feeding the
+            # car position back directly excites the rope's bounce mode (measured: a sustained
+            # +-25 mm, 1.3 Hz oscillation at the bottom of the 200 m high-rise)
+            raw = xsis - (sched[move, _S_X0] + (th - xs[_X_TH0]) / g)
+            if xs[_X_SINIT] == 0.0:
+                xs[_X_SOFF] = raw
+                xs[_X_SINIT] = 1.0
+            else:
+                f = P[_P_HB] * P[_P_NSP] / P[_P_SISTAU]
+                xs[_X_SOFF] += (raw - xs[_X_SOFF]) * (f if f < 1.0 else 1.0)
+            # applied over the last sis_zone metres of the approach (a smooth blend)
+            wgt = 1.0 - abs(sched[move, _S_X1] - x_ref) / P[_P_SIS]
+            if wgt > 0.0:
+                if wgt > 1.0:
+                    wgt = 1.0
+                epos -= wgt * g * xs[_X_SOFF]
         wcmd = g * v_ref + P[_P_KPOS] * epos
         e = wcmd - w
         Tpre = sched[move, _S_PRE]
@@ -342,7 +378,7 @@ def _current_tick(xs, P, w):
 
 
 @njit(cache=True)
-def _advance(xs, xi, P, sched, prof, t0, t1, w, th):
+def _advance(xs, xi, P, sched, prof, t0, t1, w, th, xsis):
     """Run every controller tick in [t0, t1) and the torque path up to t1; returns the torque at t1."""
     hb = P[_P_HB]
     nsp = int(P[_P_NSP])
@@ -361,7 +397,7 @@ def _advance(xs, xi, P, sched, prof, t0, t1, w, th):
             tc = tk
         thk = th + w * (tk - t0)     # angle extrapolated with the held speed
         if k % nsp == 0:
-            _speed_tick(xs, xi, P, sched, prof, tk, w, thk)
+            _speed_tick(xs, xi, P, sched, prof, tk, w, thk, xsis)
             if level == 2:
                 xs[_X_IQREF] = xs[_X_TREF] / (1.5 * P[_P_NPP] * P[_P_PSI])
         if level == 2:
@@ -423,7 +459,11 @@ class ElectricDrive:
         P[_P_NPP], P[_P_PSI], P[_P_RS], P[_P_LD], P[_P_LQ] = p.pole_pairs, p.psi, p.Rs, p.Ld, p.Lq
         P[_P_VMAX] = p.V_dc / math.sqrt(3.0)
         P[_P_KPD], P[_P_KID], P[_P_KPQ], P[_P_KIQ] = kpd, kid, kpq, kiq
+        zone = p.sis_zone if p.sis_zone > 0 else max(0.3, p.v_max ** 2 / (2.0 * p.a_max))
+        P[_P_SIS] = zone if p.sis else 0.0
+        P[_P_SISTAU] = p.sis_filter
         self._P = P
+        self._sis_hist: list = []          # (t, car position) samples not yet older than sis_delay
         self._xs = np.zeros(_X_BUF0 + max(nd, 1))
         self._xi = np.zeros(_NI, dtype=np.int64)
         self.reset()
@@ -471,10 +511,28 @@ class ElectricDrive:
         self._xs[_X_TIME] = t0
         x, v, a = profile_eval(self._prof, t0)
         self._xs[_X_XREF], self._xs[_X_VREF], self._xs[_X_AREF] = x, v, a
+        self._sis_hist = []
+
+    def _sis_reading(self, t: float, car_position: float) -> float:
+        """SIS position at t: the newest sample at least sis_delay old, quantized; NaN before one exists."""
+        p = self.params
+        if not p.sis or not math.isfinite(car_position):
+            return math.nan
+        h = self._sis_hist
+        h.append((t, float(car_position)))
+        cutoff = t - p.sis_delay + 1e-12
+        while len(h) > 1 and h[1][0] <= cutoff:     # keep the newest sample that is old enough
+            h.pop(0)
+        if h[0][0] > cutoff:
+            return math.nan
+        x = h[0][1]
+        return round(x / p.sis_resolution) * p.sis_resolution
 
     # -- stepping -------------------------------------------------------------------------------------
-    def step(self, t: float, dt: float, motor_speed: float, motor_angle: float) -> tuple[float, float]:
-        """Advance from t to t + dt with the measured motor speed (rad/s) and angle (rad) held from t.
+    def step(self, t: float, dt: float, motor_speed: float, motor_angle: float,
+             car_position: float = math.nan) -> tuple[float, float]:
+        """Advance from t to t + dt with the measured motor speed (rad/s) and angle (rad) held from t;
+        `car_position` (m) feeds the shaft information system when params.sis (sampled every step).
 
         Returns (torque N m at t + dt, brake_command: 1.0 release / 0.0 apply). t must continue from the
         drive's time (previous t + dt, reset or set_state time) within 1 µs."""
@@ -487,20 +545,22 @@ class ElectricDrive:
             raise ValueError(f"step: t = {t!r} s does not continue from the drive time {t_int!r} s "
                              "(use reset(t0) or set_state to move the drive in time)")
         tau = _advance(self._xs, self._xi, self._P, self._sched, self._prof, t_int, float(t) + float(dt),
-                       float(motor_speed), float(motor_angle))
+                       float(motor_speed), float(motor_angle), self._sis_reading(float(t), car_position))
         return float(tau), self.brake_command
 
     def warm_up(self) -> None:
         """Load (or compile) the step kernel now with a throw-away step on copies of the state, so that
         an FMU's first doStep costs what every other one costs (a cold numba cache takes seconds)."""
         t = float(self._xs[_X_TIME])
-        _advance(self._xs.copy(), self._xi.copy(), self._P, self._sched, self._prof, t, t + 1e-3, 0.0, 0.0)
+        _advance(self._xs.copy(), self._xi.copy(), self._P, self._sched, self._prof, t, t + 1e-3, 0.0, 0.0,
+                 math.nan)
 
     # -- FMU state ------------------------------------------------------------------------------------
     def get_state(self) -> dict:
         """All hidden state as builtin Python types (JSON/pickle-safe)."""
         return {"format": _STATE_FORMAT, "level": int(self.params.level),
-                "xs": [float(v) for v in self._xs], "xi": [int(v) for v in self._xi]}
+                "xs": [float(v) for v in self._xs], "xi": [int(v) for v in self._xi],
+                "sis": [list(v) for v in self._sis_hist]}
 
     def set_state(self, state: dict) -> None:
         """Restore a state from get_state() of a drive with the same parameters."""
@@ -513,6 +573,7 @@ class ElectricDrive:
             raise ValueError("set_state: state does not match this drive (format, level or dead-time buffer size)")
         self._xs[:] = np.asarray(xs, dtype=float)
         self._xi[:] = np.asarray(xi, dtype=np.int64)
+        self._sis_hist = [tuple(v) for v in state.get("sis", [])]
 
     # -- outputs ---------------------------------------------------------------------------------------
     @property

@@ -7,11 +7,13 @@ import numpy as np
 
 
 def write_csv(path, time, columns: dict):
-    """CSV with a `time` column first, then the named columns (SI units, '%.10g')."""
+    """CSV with a `time` column first, then the named columns (SI units, '%.10g'); values with
+    |x| < 1e-300 (denormals, solver round-off of a zero) are written as 0."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = list(columns)
     data = np.column_stack([np.asarray(time, float)] + [np.asarray(columns[n], float) for n in names])
+    data[np.abs(data) < 1e-300] = 0.0
     header = ",".join(["time"] + names)
     np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.10g", encoding="utf-8")
     return path
@@ -45,12 +47,14 @@ def plot_overview(path, time, columns: dict, title: str = "", event=None):
         for n in names:
             y = np.asarray(columns[n], float)
             ax.plot(time, np.where(np.isfinite(y), y, np.nan), lw=0.9, label=n)
+        if lab.startswith("traction ratio"):
+            lab += _clip_ratio_axis(ax, [columns[n] for n in names])
         ax.set_ylabel(lab)
         ax.grid(True, alpha=0.3)
         if event is not None:
             ax.axvline(event[0], color="red", lw=1.2, ls="--")
-        if len(names) <= 8:
-            ax.legend(fontsize=7, loc="best")
+        if len(names) <= 12:
+            ax.legend(fontsize=7, loc="best", ncol=2 if len(names) > 4 else 1)
     axes[-1].set_xlabel("time [s]")
     if event is not None:
         title = f"{title}\nstopped at t = {event[0]:.4f} s: {event[1]}".strip()
@@ -60,3 +64,17 @@ def plot_overview(path, time, columns: dict, title: str = "", event=None):
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def _clip_ratio_axis(ax, arrays) -> str:
+    """A slack rope sends T1/T2 towards 1e5; limit the axis to the 99.5th percentile (and at least 1..2)
+    so the operating range stays readable. Returns a label suffix when clipped."""
+    y = np.concatenate([np.asarray(a, float) for a in arrays])
+    y = y[np.isfinite(y)]
+    if not y.size:
+        return ""
+    hi = max(float(np.percentile(y, 99.5)), 2.0)
+    if float(np.max(y)) <= 1.1 * hi:
+        return ""
+    ax.set_ylim(min(1.0, float(np.min(y))) - 0.05, 1.1 * hi)
+    return f"\n(clipped; max {float(np.max(y)):.3g})"

@@ -17,10 +17,11 @@ The plant and drive FMU entries (fmus/reeve_plant_slave.py, fmus/reeve_drive_sla
 models with `make_plant`/`make_drive` from this module, so the FMUs and the in-process reference are
 the same code with the same parameter mapping.
 
-Car load convention: the shipped elevator scenes model the car *with its rated load* (scene comments;
-`SCENE_PAYLOAD`). The plant FMU's parameter `car.load` is the payload on top of the *empty* car, so
-the plant is built from the scene with the car body's mass reduced by the scene payload and
-`car.load` added back: the default `car.load` (= the rated load) reproduces the scene exactly.
+Car load: an elevator scene declares in its [elevator] table the rated load and `car_load`, the payload
+its car body's mass includes (reeve_fmu.core.elevator). The plant FMU's parameter `car.load` is the
+payload on top of the *empty* car (mass - car_load); its default is the rated load. A scene without an
+[elevator] table is taken as written: `car.load` (default 0) adds to its car body's mass. Every helper
+here takes the payload explicitly; nothing depends on the scene's name.
 
 This module imports only numpy (plus reeve_fmu) at import time: it is vendored into the FMUs.
 """
@@ -45,12 +46,9 @@ PLANT_CONFIG = "reeve_plant.json"     # resource of the plant FMU (see plant_con
 PLANT_SCENE = "scene.toml"            # resource of the plant FMU: the scene it was built from
 DEFAULT_SCENE = "elevator_2to1.toml"
 
-#: payload (kg) the shipped scenes include in the car body's mass (their rated load)
-SCENE_PAYLOAD = {"elevator_2to1": 1000.0, "elevator_1to1_highrise": 1600.0}
-
 #: plant FMU parameter -> (Plant keyword, unit, description); all fixed (they change the model)
 PLANT_PARAMETERS = {
-    "car.load": ("car_load", "kg", "payload in the car (on top of the empty car); default: the rated load"),
+    "car.load": ("car_load", "kg", "payload in the car (on top of the empty car); default: the rated load of [elevator]"),
     "rope.EA": ("rope_EA", "N", "axial stiffness per rope; a value different from the default sets "
                                 "every rope of the scene"),
     "rope.damping": ("rope_damping", "s", "Kelvin-Voigt time constant of the ropes (every rope)"),
@@ -64,32 +62,37 @@ PLANT_PARAMETERS = {
 # ------------------------------------------------------------------------------------------------
 
 
-def scene_payload(scene) -> float:
-    """Payload (kg) included in the scene's car mass: SCENE_PAYLOAD for the shipped scenes, else 0."""
-    return float(SCENE_PAYLOAD.get(scene.name, 0.0))
+def _scene(scene):
+    from ..core.scene import Scene, load_scene
+
+    return scene if isinstance(scene, Scene) else load_scene(scene)
 
 
-def empty_car_scene(scene, payload: float, car_body: str = "car"):
-    """The scene with `payload` kg taken out of the car body's mass."""
-    from ..core.scene import SceneError
+def scene_load(scene) -> float:
+    """Payload (kg) the scene's car mass includes: [elevator].car_load; 0 for a scene without [elevator]
+    (taken as written). `scene`: a Scene or a scene file path."""
+    from ..core.elevator import elevator_spec
 
-    if not payload:
-        return scene
-    bodies = list(scene.bodies)
-    idx = [i for i, b in enumerate(bodies) if b.name == car_body]
-    if not idx:
-        raise SceneError(f"{scene.source}: no body named {car_body!r} (needed for car.load)")
-    b = bodies[idx[0]]
-    if not b.mass - payload > 0.0:
-        raise SceneError(f"{scene.source}: car mass {b.mass} kg does not include a payload of {payload} kg")
-    bodies[idx[0]] = replace(b, mass=b.mass - payload)
-    return replace(scene, bodies=tuple(bodies))
+    scene = _scene(scene)
+    return elevator_spec(scene).car_load if "elevator" in scene.extra else 0.0
 
 
-def plant_defaults(scene, payload: float) -> dict:
-    """Default values of the plant FMU parameters for `scene` (FMU name -> value)."""
+def empty_car_scene(scene):
+    """The scene with its declared payload ([elevator].car_load) taken out of the car body's mass."""
+    from ..core.elevator import with_load
+
+    scene = _scene(scene)
+    return with_load(scene, 0.0) if "elevator" in scene.extra else scene
+
+
+def plant_defaults(scene) -> dict:
+    """Default values of the plant FMU parameters for `scene` (FMU name -> value); car.load: the rated
+    load of [elevator] (0 without)."""
+    from ..core.elevator import elevator_spec
+
+    scene = _scene(scene)
     return {
-        "car.load": float(payload),
+        "car.load": elevator_spec(scene).rated_load if "elevator" in scene.extra else 0.0,
         "rope.EA": float(scene.ropes[0].EA),
         "rope.damping": float(scene.ropes[0].damping),
         "brake.static_torque": float(scene.brake.torque),
@@ -97,61 +100,54 @@ def plant_defaults(scene, payload: float) -> dict:
     }
 
 
-def make_plant(scene, payload: float | None = None, params: Optional[Mapping[str, float]] = None):
-    """The `Plant` of the plant FMU: `scene` (Scene or path), payload included in its car mass
-    (None: `scene_payload`), and FMU parameter values {"car.load": ..., "rope.EA": ...} (PLANT_PARAMETERS).
+def make_plant(scene, declared_load: float | None = None, params: Optional[Mapping[str, float]] = None):
+    """The `Plant` of the plant FMU: `scene` (Scene or path) and FMU parameter values
+    {"car.load": kg, "rope.EA": N, ...} (PLANT_PARAMETERS; missing ones take `plant_defaults`).
 
-    Parameters equal to their default leave the scene untouched (so a scene with ropes of different
-    EA keeps them unless rope.EA is changed)."""
+    `declared_load` is only a consistency check for FMUs built by older versions: when given it must
+    equal the scene's [elevator].car_load. Parameters equal to their default leave the scene untouched
+    (a scene with ropes of different EA keeps them unless rope.EA is changed)."""
     from ..core.plant import Plant
-    from ..core.scene import Scene, load_scene
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene)
-    if payload is None:
-        payload = scene_payload(scene)
+    scene = _scene(scene)
+    decl = scene_load(scene)
+    if declared_load is not None and abs(float(declared_load) - decl) > 1e-9:
+        raise ValueError(f"{scene.source}: the FMU configuration says the car mass includes {declared_load} kg "
+                         f"of payload, the scene's [elevator].car_load says {decl} kg")
     params = dict(params or {})
     unknown = set(params) - set(PLANT_PARAMETERS)
     if unknown:
         raise ValueError(f"unknown plant parameters {sorted(unknown)}; known: {sorted(PLANT_PARAMETERS)}")
-    defaults = plant_defaults(scene, payload)
-    kw = {"car_load": float(params.get("car.load", payload))}
+    defaults = plant_defaults(scene)
+    load = float(params.get("car.load", defaults["car.load"]))
+    if "elevator" in scene.extra:
+        from ..core.elevator import check_load, elevator_spec
+
+        check_load(elevator_spec(scene), load, "car.load")
+    kw = {"car_load": load}
     for name, (key, _, _) in PLANT_PARAMETERS.items():
         if name == "car.load":
             continue
         v = params.get(name)
         if v is not None and float(v) != defaults[name]:
             kw[key] = float(v)
-    return Plant(empty_car_scene(scene, payload), **kw)
+    return Plant(empty_car_scene(scene), **kw)
 
 
-def holding_torques(scene, landings: Sequence[float], payload: float | None = None,
-                    params: Optional[Mapping[str, float]] = None, car_body: str = "car",
-                    counterweight_body: str = "counterweight") -> list[float]:
-    """Static motor torque (N m) that holds the car at each landing: the plant's `brake.torque` at rest
-    with the car moved to the landing (the counterweight moved by the same distance the other way).
-    This is what a load-weighing device gives the drive as pre-torque."""
-    from ..core.scene import Scene, load_scene
+def holding_torques(scene, landings: Sequence[float], load: float,
+                    params: Optional[Mapping[str, float]] = None) -> list[float]:
+    """Static motor torque (N m) that holds the car with `load` kg of payload at each landing (m): the
+    plant's `brake.torque` at rest with the car moved to the landing (the counterweight moved by the same
+    distance the other way). This is what a load-weighing device gives the drive as pre-torque.
+    `params`: other plant FMU parameters (rope.EA, ...); a car.load in them must equal `load`."""
+    from ..core.elevator import car_at
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene)
-    car = [b for b in scene.bodies if b.name == car_body]
-    if not car:
-        raise ValueError(f"holding_torques: the scene has no body {car_body!r}")
-    z0 = float(car[0].position[2])
-    out = []
-    for x in landings:
-        d = float(x) - z0
-
-        def moved(b):
-            s = {car_body: d, counterweight_body: -d}.get(b.name)
-            if s is None or s == 0.0:
-                return b
-            p = b.position
-            return replace(b, position=(p[0], p[1], p[2] + s))
-        sc = replace(scene, bodies=tuple(moved(b) for b in scene.bodies))
-        out.append(make_plant(sc, payload, params).output("brake.torque"))
-    return out
+    scene = _scene(scene)
+    params = dict(params or {})
+    if "car.load" in params and float(params["car.load"]) != float(load):
+        raise ValueError(f"holding_torques: load = {load} kg but params['car.load'] = {params['car.load']} kg")
+    params["car.load"] = float(load)
+    return [make_plant(car_at(scene, float(x)), None, params).output("brake.torque") for x in landings]
 
 
 def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str]) -> list[dict]:
@@ -210,7 +206,7 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
     return specs
 
 
-def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = None) -> dict:
+def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..core.model import build_model
     from ..core.plant import plant_scene
@@ -219,17 +215,15 @@ def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = Non
 
     scene = load_scene(scene_path)
     check_or_raise(scene)    # a physically impossible scene fails the build, not the FMU's initialization
-    if payload is None:
-        payload = scene_payload(scene)
-    model = build_model(plant_scene(empty_car_scene(scene, payload)))
+    model = build_model(plant_scene(empty_car_scene(scene)))
     return {
         "format": "reeve_fmu.plant_fmu/1",
         "name": name,
         "scene": PLANT_SCENE,
         "scene_name": scene.name,
         "scene_description": getattr(scene, "description", "") or "",
-        "scene_payload": float(payload),
-        "parameters": plant_defaults(scene, payload),
+        "scene_payload": scene_load(scene),
+        "parameters": plant_defaults(scene),
         "stop_time": max(float(scene.t_end), trip_end_time()),
         "outputs": plant_output_specs(model.output_names, [s.name for s in scene.sheaves]),
     }
@@ -242,25 +236,34 @@ def plant_config(scene_path, name: str = PLANT_NAME, payload: float | None = Non
 #: torque (`holding_torques`, scenes/elevator_2to1.toml, car.load = 1000 kg), rounded to 0.1 N m
 R1_PRETORQUE = (522.5, 331.5)
 
+MAX_LANDINGS = 8    # landing[1..8], pretorque[1..8]
+MAX_MOVES = 16      # trip.target[1..16]
+
 # drive FMU parameters: (FMU name, kind, unit, DriveParams field, description, min, max)
 # kind: "real" | "int"; special fields: "landing", "pretorque" (per landing, 1-based index),
-# "moves" (number of moves alternating between landing[1] and landing[2]), "start_landing" (1-based)
+# "moves" (number of moves alternating between landing[1] and landing[2]), "start_landing" (1-based),
+# "n_landings" (landings in use), "target" (explicit move sequence)
 DRIVE_PARAMETERS = [
     ("drive.level", "int", None, "level", "drive model: 1 = torque lag + dead time, 2 = PMSM dq model", 1, 2),
     ("trip.v_max", "real", "m/s", "v_max", "rated car speed of the S-curve", 1e-6, None),
     ("trip.a_max", "real", "m/s2", "a_max", "car acceleration limit of the S-curve", 1e-6, None),
     ("trip.jerk", "real", "m/s3", "jerk", "car jerk limit of the S-curve", 1e-6, None),
-    ("landing[1]", "real", "m", "landing", "car position at landing 1 (start)", None, None),
-    ("landing[2]", "real", "m", "landing", "car position at landing 2", None, None),
-    ("trip.start_landing", "int", None, "start_landing", "landing (1 or 2) where the car starts", 1, 2),
-    ("trip.moves", "int", None, "moves", "number of moves, alternating to the other landing", 1, 1000),
+    *[(f"landing[{k}]", "real", "m", "landing", f"car position at landing {k}", None, None)
+      for k in range(1, MAX_LANDINGS + 1)],
+    ("trip.landings", "int", None, "n_landings", "number of landings in use (landing[1..n])", 2, MAX_LANDINGS),
+    ("trip.start_landing", "int", None, "start_landing", "landing where the car starts (1-based)", 1,
+     MAX_LANDINGS),
+    ("trip.moves", "int", None, "moves", "number of moves, alternating between landing 1 and 2 (used when "
+                                         "trip.target[1] = 0)", 1, 1000),
+    *[(f"trip.target[{k}]", "int", None, "target", f"landing of move {k} (1-based; 0 ends the sequence; "
+                                                   f"all 0: trip.moves alternating moves)", 0, MAX_LANDINGS)
+      for k in range(1, MAX_MOVES + 1)],
     ("trip.start_delay", "real", "s", "start_delay", "time before the first pre-torque", 0.0, None),
     ("trip.dwell_time", "real", "s", "dwell_time", "rest between moves", 0.0, None),
     ("trip.hold_time", "real", "s", "hold_time", "zero-speed hold after the profile", 0.0, None),
-    ("pretorque[1]", "real", "N.m", "pretorque",
-     "load-weighing pre-torque for a start at landing 1 (set to the holding torque at the load)", None, None),
-    ("pretorque[2]", "real", "N.m", "pretorque",
-     "load-weighing pre-torque for a start at landing 2 (set to the holding torque at the load)", None, None),
+    *[(f"pretorque[{k}]", "real", "N.m", "pretorque", f"load-weighing pre-torque for a start at landing {k} "
+                                                      f"(set to the holding torque at the load)", None, None)
+      for k in range(1, MAX_LANDINGS + 1)],
     ("pretorque.ramp_time", "real", "s", "pretorque_time", "torque ramp to the pre-torque before the "
                                                           "brake lifts", 0.0, None),
     ("torque.ramp_down_time", "real", "s", "torque_ramp_time", "torque ramp to zero after the brake "
@@ -289,6 +292,18 @@ DRIVE_PARAMETERS = [
 ]
 
 
+def _index(name: str) -> int:
+    return int(name[name.index("[") + 1:-1])
+
+
+#: in-process only (no FMU variable: the drive FMU has no car-position input): shaft information system
+SIS_PARAMETERS = {"sis.enabled": ("sis", "1", "1: car-position feedback for the approach"),
+                  "sis.resolution": ("sis_resolution", "m", "SIS position quantum"),
+                  "sis.delay": ("sis_delay", "s", "SIS measurement age"),
+                  "sis.zone": ("sis_zone", "m", "approach length over which the loop blends to the SIS (0: braking distance)"),
+                  "sis.filter": ("sis_filter", "s", "low-pass time constant of the SIS - encoder offset")}
+
+
 def drive_defaults() -> dict:
     """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
     round trip, pre-torque for the rated load (R1_PRETORQUE)."""
@@ -298,13 +313,19 @@ def drive_defaults() -> dict:
     out = {}
     for name, kind, _, field, *_ in DRIVE_PARAMETERS:
         if field == "landing":
-            v = list(p.landings)[int(name[-2]) - 1]
+            k = _index(name) - 1
+            v = list(p.landings)[k] if k < 2 else 0.0
         elif field == "pretorque":
-            v = R1_PRETORQUE[int(name[-2]) - 1]
+            k = _index(name) - 1
+            v = R1_PRETORQUE[k] if k < 2 else 0.0
         elif field == "moves":
             v = len(list(p.moves))
         elif field == "start_landing":
             v = int(p.start_landing) + 1
+        elif field == "n_landings":
+            v = 2
+        elif field == "target":
+            v = 0
         else:
             v = getattr(p, field)
         out[name] = int(v) if kind == "int" else float(v)
@@ -312,28 +333,53 @@ def drive_defaults() -> dict:
 
 
 def drive_params(values: Optional[Mapping[str, float]] = None):
-    """DriveParams from drive FMU parameter values (missing names take `drive_defaults`)."""
+    """DriveParams from drive FMU parameter values (missing names take `drive_defaults`) and, in
+    process, SIS_PARAMETERS."""
     from ..core.drive import DriveParams
 
     vals = drive_defaults()
+    kw = {}
     if values:
+        values = dict(values)
+        for name, (field, _, _) in SIS_PARAMETERS.items():
+            if name in values:
+                v = values.pop(name)
+                kw[field] = bool(v) if field == "sis" else float(v)
         unknown = set(values) - set(vals)
         if unknown:
-            raise ValueError(f"unknown drive parameters {sorted(unknown)}; known: {sorted(vals)}")
+            raise ValueError(f"unknown drive parameters {sorted(unknown)}; known: {sorted(vals)} and "
+                             f"{sorted(SIS_PARAMETERS)}")
         vals.update(values)
-    kw = {}
+    special = ("landing", "pretorque", "moves", "start_landing", "n_landings", "target")
     for name, kind, _, field, *_ in DRIVE_PARAMETERS:
-        if field in ("landing", "pretorque", "moves", "start_landing"):
+        if field in special:
             continue
         kw[field] = int(vals[name]) if kind == "int" else float(vals[name])
+    nl = int(vals["trip.landings"])
+    if not 2 <= nl <= MAX_LANDINGS:
+        raise ValueError(f"trip.landings must be 2..{MAX_LANDINGS}, got {nl!r}")
     start = int(vals["trip.start_landing"]) - 1
-    if start not in (0, 1):
-        raise ValueError(f"trip.start_landing must be 1 or 2, got {vals['trip.start_landing']!r}")
-    n = int(vals["trip.moves"])
-    kw["landings"] = (float(vals["landing[1]"]), float(vals["landing[2]"]))
+    if not 0 <= start < nl:
+        raise ValueError(f"trip.start_landing must be 1..{nl} (trip.landings), got {vals['trip.start_landing']!r}")
+    targets = []
+    for k in range(1, MAX_MOVES + 1):
+        tg = int(vals[f"trip.target[{k}]"])
+        if tg == 0:
+            break
+        if not 1 <= tg <= nl:
+            raise ValueError(f"trip.target[{k}] = {tg}: must name a landing 1..{nl} (trip.landings)")
+        targets.append(tg - 1)
+    kw["landings"] = tuple(float(vals[f"landing[{k}]"]) for k in range(1, nl + 1))
     kw["start_landing"] = start
-    kw["moves"] = tuple((start + 1 + i) % 2 for i in range(n))
-    kw["pretorque"] = (float(vals["pretorque[1]"]), float(vals["pretorque[2]"]))
+    if targets:
+        kw["moves"] = tuple(targets)
+    else:
+        n = int(vals["trip.moves"])
+        if nl != 2 or start > 1:
+            raise ValueError("trip.moves alternates between landings 1 and 2; with more landings give "
+                             "trip.target[1..]")
+        kw["moves"] = tuple((start + 1 + i) % 2 for i in range(n))
+    kw["pretorque"] = tuple(float(vals[f"pretorque[{k}]"]) for k in range(1, nl + 1))
     return DriveParams(**kw)
 
 
@@ -398,7 +444,7 @@ def _check_model_name(name: str) -> None:
 
 
 def plant_fmu_model(plant_fmu) -> tuple:
-    """(Scene, scene payload) a built plant FMU carries (resources/scene.toml, reeve_plant.json)."""
+    """(Scene, declared car_load) a built plant FMU carries (resources/scene.toml, reeve_plant.json)."""
     import zipfile
 
     from ..core.scene import loads_scene
@@ -1050,6 +1096,8 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     idx = [plant.output_names.index(s) for s in names]
     iw = plant.output_names.index("motor.speed")
     ia = plant.output_names.index("motor.angle")
+    # the shaft information system reads the car position (in process only)
+    ic = plant.output_names.index("car.position") if drive.params.sis else None
     nrec = n // m + 1
     Y = np.empty((nrec, len(names)))
     D = np.empty((nrec, 2 + len(DRIVE_RECORD)))
@@ -1072,12 +1120,13 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
         t = tk(k)
         w, th = y[iw], y[ia]
         tau0 = tau
+        xc = y[ic] if ic is not None else math.nan
         if scheme == "gauss-seidel":
-            tau, br = drive.step(t, step, w, th)
+            tau, br = drive.step(t, step, w, th, xc)
             y = plant.step(step, tau, br)
         else:
             y = plant.step(step, tau, br)
-            tau, br = drive.step(t, step, w, th)
+            tau, br = drive.step(t, step, w, th, xc)
         if mon is not None:
             ep = mon.update(tk(k + 1), tau if scheme == "gauss-seidel" else tau0, tau, br, w, th, y[ia])
             if ep is not None:

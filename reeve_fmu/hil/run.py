@@ -146,7 +146,7 @@ def demo_scenario() -> tuple[dict, dict]:
 
         scene = load_scene(cosim.default_scene_path())
         plant_values = {"car.load": float(demo.RATED_LOAD_KG)}
-        pre = cosim.holding_torques(scene, demo.LANDINGS, cosim.scene_payload(scene), params=plant_values)
+        pre = cosim.holding_torques(scene, demo.LANDINGS, plant_values["car.load"])
         drive_values = {"landing[1]": demo.LANDINGS[0], "landing[2]": demo.LANDINGS[1], "trip.moves": 2,
                         "pretorque[1]": pre[0], "pretorque[2]": pre[1], "drive.level": 1}
         _DEMO_SCENARIO = (plant_values, drive_values)
@@ -485,6 +485,14 @@ def _add_trip_figures(summary: dict, cfg: HilConfig, time_, cols: dict):
         dv = cfg.drive_values or {}
         lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
         summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
+        from ..studies.trip import trip_case
+        from ..studies.verdicts import trip_verdicts, worst
+
+        case = trip_case(sequence=lands + lands[:1] if lands else None)
+        case.drive_values.update({k: v for k, v in dv.items() if k in ("torque.max", "torque.power_max")})
+        vs = [v.as_dict() for v in trip_verdicts(case, time_, cols, summary["trip_metrics"],
+                                                 traction_limits(case.scene), {})]
+        summary["verdict"], summary["verdicts"] = worst(vs), vs
     except Exception as exc:  # a record without a complete trip, or an older demo module
         summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
 
@@ -538,12 +546,42 @@ SUMMARY_KEYS = ("mode", "steps", "wall_s", "steps_per_s", "watchdog_trips", "bra
                 "step_time_p50_us", "step_time_p99_us", "sync_jitter_p99_us")
 
 
+def _hil_sets(items) -> dict:
+    """--set for hil: the load, the plant FMU's parameters (rope.EA, ...) and drive parameters on top of
+    the demo's scenario; other scene keys need a plant FMU built with them (reeve-fmu build --set)."""
+    from ..fmu.cosim import PLANT_PARAMETERS
+    from ..studies.overrides import OverrideError, parse_sets, split
+
+    sets = parse_sets(items)
+    plant = {k: float(sets.pop(k)) for k in list(sets) if k in PLANT_PARAMETERS}
+    scene_sets, drive_sets, load = split(sets)
+    if scene_sets:
+        raise OverrideError(f"--set {next(iter(scene_sets))}: hil runs the built plant FMU; its parameters are "
+                            f"{', '.join(PLANT_PARAMETERS)} (other scene keys: reeve-fmu build --set)")
+    pv, dv = demo_scenario()
+    if load is not None:
+        plant["car.load"] = load
+    pv.update(plant)
+    if "car.load" in plant:      # load weighing: the pre-torque follows the load
+        from ..core.scene import load_scene
+        from ..fmu import cosim
+        from ..studies import trip as demo
+
+        pre = cosim.holding_torques(load_scene(cosim.default_scene_path()), demo.LANDINGS, pv["car.load"],
+                                    params={k: v for k, v in pv.items() if k != "car.load"})
+        dv.update({"pretorque[1]": pre[0], "pretorque[2]": pre[1]})
+    dv.update(drive_sets)
+    return {"plant_values": pv, "drive_values": dv}
+
+
 def cli_hil(args) -> int:
     """reeve-fmu hil (arguments from reeve_fmu.cli)."""
     from .bridge import HilError
 
     cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
                     t_end=args.t_end, out=args.out)
+    if getattr(args, "set", None):
+        cfg = replace(cfg, **_hil_sets(args.set))
     print(f"HIL: {'real time' if cfg.realtime else 'lock-step'} over {cfg.bus}, {cfg.controller} controller"
           + (f", faults {' '.join(cfg.inject)}" if cfg.inject else ""))
     try:

@@ -34,6 +34,29 @@ def en81_mu(case: str, rope_speed: float | None = None) -> float:
     raise ValueError(f"case must be 'loading', 'emergency' or 'stalled', got {case!r}")
 
 
+def traction_limits(scene=None, sheave: str | None = None) -> dict:
+    """e^(f alpha) of the traction sheave for the EN 81-50 loading (mu = 0.1), emergency-braking
+    (mu = 0.1 / (1 + v_rope/10) at the rated rope speed) and stalled (mu = 0.2) cases. Without a scene:
+    the R1 groove (U-undercut, beta = 95 deg, gamma = 30 deg, 180 deg wrap, 3.2 m/s rope speed)."""
+    if scene is None:
+        beta, gamma, groove, wrap, v_rope = 95.0, 30.0, "u-undercut", 180.0, 2.0 * 1.6
+    else:
+        name = sheave or scene.drive.sheave
+        sh = next(s for s in scene.sheaves if s.name == name)
+        beta, gamma, groove = sh.undercut_angle, sh.groove_angle, sh.groove
+        wrap = 180.0          # single wrap (the shipped scenes); docs/studies.md
+        v_rope = scene.drive.roping * scene.drive.v_max
+    out = {}
+    for case, key in (("loading", "loading"), ("emergency", "emergency_braking"), ("stalled", "stalled")):
+        mu = en81_mu(case, v_rope)
+        out[key] = math.exp(equivalent_friction(mu, beta, gamma, groove) * math.radians(wrap))
+        out[f"mu_{key}"] = mu
+    out["groove"] = {"kind": groove, "beta_deg": beta, "gamma_deg": gamma, "wrap_deg": wrap,
+                     "rope_speed_m_s": v_rope}
+    return out
+
+
+
 # ---------------------------------------------------------------------------------------------------
 # ISO 8041 frequency weightings
 

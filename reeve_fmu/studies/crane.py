@@ -1008,8 +1008,16 @@ def write_rotation_csv(path, cols: dict):
 
 
 def cli_crane(args) -> int:
+    if getattr(args, "set", None):
+        from .overrides import OverrideError, parse_sets, scene_with, split
+
+        scene_sets, drive_sets, load = split(parse_sets(args.set))
+        if drive_sets or load is not None:
+            raise OverrideError("--set: a crane study takes scene keys only (crane.payload, rope.EA, ...)")
+        model = build_crane(scene_with(args.scene, scene_sets)[0])
+    else:
+        model = load_crane(args.scene)
     from ..core.plausibility import check_or_raise
-    model = load_crane(args.scene)
     warnings = check_or_raise(model.scene)
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)

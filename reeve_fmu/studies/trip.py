@@ -1,12 +1,20 @@
-"""The demo's reference trip (R1 2:1 elevator): scenario constants, EN 81-50 traction limits of its
-traction sheave, and the trip summary computed from co-simulation results (demo, hil)."""
+"""Elevator trips of any elevator scene: the case (scene, payload, landings visited, dwell, drive sized
+from the scene, overrides), its run (in process or as FMUs) and its summary with verdicts.
+
+`trip_case(scene, load=...)` gives the plant and drive FMU parameter values of a trip; `run_case` runs it
+with the in-process monolithic coupling (`fmu.cosim.monolithic`, bit-identical to the FMU
+co-simulation at the same step); `summarize_case` computes the trip metrics and the verdicts
+(studies.verdicts). The demo (R1 2:1 elevator, rated load, 0 m -> 39 m -> 0 m) is the default case.
+"""
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import math
+from pathlib import Path
 
 import numpy as np
 
-# R1 traction sheave (docs/reference-sets.md §1): U-undercut groove beta = 95 deg, gamma = 30 deg, single wrap
+# the demo's reference trip (R1 2:1 elevator, scenes/elevator_2to1.toml)
 GROOVE_BETA_DEG = 95.0
 GROOVE_GAMMA_DEG = 30.0
 WRAP_DEG = 180.0
@@ -15,19 +23,12 @@ RATED_SPEED = 1.6       # m/s car
 ROPING = 2.0
 LANDINGS = (0.0, 39.0)  # m
 
+from .analysis import traction_limits  # noqa: E402,F401  (re-exported)
 
-def traction_limits() -> dict:
-    """e^(f alpha) of the R1 groove for the EN 81-50 loading (mu = 0.1) and emergency-braking cases."""
-    from .analysis import en81_mu, traction_limit
-
-    rope_speed = ROPING * RATED_SPEED
-    mu_b = en81_mu("emergency", rope_speed)
-    return {
-        "loading": traction_limit(en81_mu("loading"), GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, WRAP_DEG),
-        "emergency_braking": traction_limit(mu_b, GROOVE_BETA_DEG, GROOVE_GAMMA_DEG, WRAP_DEG),
-        "mu_loading": en81_mu("loading"),
-        "mu_emergency_braking": mu_b,
-    }
+#: DriveParams field of `core.elevator.size_drive` -> drive FMU parameter
+SIZED = {"sheave_radius": "machine.sheave_radius", "roping": "machine.roping", "J_ff": "control.J_ff",
+         "T_max": "torque.max", "P_max": "torque.power_max", "Kp": "control.Kp", "Ti": "control.Ti",
+         "Kpos": "control.Kpos", "v_max": "trip.v_max", "a_max": "trip.a_max", "jerk": "trip.jerk"}
 
 
 def jerk_of(t, a, cutoff: float = 10.0):
@@ -38,12 +39,141 @@ def jerk_of(t, a, cutoff: float = 10.0):
     return np.gradient(lowpass(a, fs, cutoff), t)
 
 
+# ---------------------------------------------------------------------------------------------- case
+@dataclass
+class TripCase:
+    """A trip of an elevator scene. Positions in m, load in kg, times in s."""
+    scene: object                    # core.scene.Scene (overrides applied)
+    scene_path: Path | None
+    load: float
+    sequence: tuple                  # landing positions visited, starting at the first
+    dwell: float
+    plant_values: dict
+    drive_values: dict
+    sizing: dict                     # sized drive parameters (FMU names) before overrides
+    holding_torques: dict            # landing position -> N m at this load
+    scene_sets: dict = field(default_factory=dict)
+    drive_sets: dict = field(default_factory=dict)
+
+    @property
+    def landings(self) -> tuple:
+        return tuple(sorted(set(self.sequence)))
+
+    def describe(self) -> str:
+        seq = " -> ".join(f"{x:g}" for x in self.sequence)
+        return f"{self.scene.name}, {self.load:g} kg, {seq} m"
+
+
+_SIZING_CACHE: dict = {}
+
+
+def sized_drive(scene) -> dict:
+    """Drive FMU parameter values sized from the scene (core.elevator.size_drive), cached per scene."""
+    from ..core.elevator import elevator_spec, size_drive
+    from ..fmu.cosim import holding_torques
+
+    key = repr(scene)
+    if key not in _SIZING_CACHE:
+        spec = elevator_spec(scene)
+        ends = (min(spec.landings), max(spec.landings))
+        hold = tuple(holding_torques(scene, ends, spec.rated_load))
+        fields = size_drive(scene, hold)
+        _SIZING_CACHE[key] = {SIZED[k]: float(v) for k, v in fields.items() if k in SIZED}
+    return dict(_SIZING_CACHE[key])
+
+
+def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: float = 3.0, sets=None,
+              sis: bool | None = None, level: int = 1) -> TripCase:
+    """The trip of `scene` (path or Scene; default the shipped 2:1 scene) with `load` kg in the car
+    (default the rated load), visiting the landing positions `sequence` (m; default first, last, first
+    landing of [elevator].landings), `dwell` s between moves, drive sized from the scene. `sets`: --set
+    overrides {key: value} (studies.overrides); `sis`: shaft information system for the approach."""
+    from ..core.elevator import check_load, elevator_spec
+    from ..core.scene import Scene
+    from ..fmu.cosim import MAX_LANDINGS, MAX_MOVES, default_scene_path, holding_torques
+    from .overrides import scene_with, split
+
+    scene_sets, drive_sets, set_load = split(dict(sets or {}))
+    path = None
+    if scene is None or not isinstance(scene, Scene):
+        path = Path(scene) if scene is not None else default_scene_path()
+        scene, _ = scene_with(path, scene_sets)
+    elif scene_sets:
+        raise ValueError("scene overrides need the scene file: pass its path")
+    spec = elevator_spec(scene)
+    if set_load is not None:
+        if load is not None and load != set_load:
+            raise ValueError(f"load given twice: {load} and --set load={set_load}")
+        load = set_load
+    load = check_load(spec, spec.rated_load if load is None else load)
+    if sequence is None:
+        sequence = (spec.landings[0], spec.landings[-1], spec.landings[0])
+    sequence = tuple(float(x) for x in sequence)
+    if len(sequence) < 2 or any(not math.isfinite(x) for x in sequence):
+        raise ValueError(f"landings: give at least two finite positions (m) to visit, got {sequence!r}")
+    if any(a == b for a, b in zip(sequence, sequence[1:])):
+        raise ValueError(f"landings {sequence!r}: consecutive landings must differ")
+    lo, hi = min(spec.landings), max(spec.landings)
+    out = [x for x in sequence if not lo - 1e-9 <= x <= hi + 1e-9]
+    if out:
+        raise ValueError(f"landings: {out[0]:g} m is outside the travel of {scene.name}, {lo:g} .. {hi:g} m "
+                         f"([elevator].landings)")
+    car0 = next(b for b in scene.bodies if b.name == spec.car)
+    if abs(car0.position[2] - sequence[0]) > 1e-9:
+        # the trip starts elsewhere than the scene's car: move car and counterweight there (in the scene
+        # file's data too, so that a plant FMU built from it starts there)
+        if path is None:
+            raise ValueError(f"landings start at {sequence[0]:g} m but the scene's car is at "
+                             f"{car0.position[2]:g} m: pass the scene file's path")
+        from ..core.elevator import car_at
+
+        moved = {b.name: b.position for b in car_at(scene, sequence[0]).bodies}
+        for name in (spec.car, spec.counterweight):
+            scene_sets[f"bodies.{name}.position"] = list(moved[name])
+        scene, _ = scene_with(path, scene_sets)
+    lands = sorted(set(sequence))
+    if len(lands) > MAX_LANDINGS or len(sequence) - 1 > MAX_MOVES:
+        raise ValueError(f"landings: at most {MAX_LANDINGS} distinct landings and {MAX_MOVES} moves")
+    if not (isinstance(dwell, (int, float)) and math.isfinite(dwell) and dwell >= 0):
+        raise ValueError(f"dwell = {dwell!r}: must be a time >= 0 s")
+    hold = holding_torques(scene, lands, load)
+    sizing = sized_drive(scene)
+    dv = dict(sizing)
+    dv.update({"drive.level": int(level), "trip.landings": len(lands), "trip.dwell_time": float(dwell),
+               "trip.start_landing": lands.index(sequence[0]) + 1})
+    for k, x in enumerate(lands, 1):
+        dv[f"landing[{k}]"] = x
+        dv[f"pretorque[{k}]"] = hold[k - 1]
+    for k, x in enumerate(sequence[1:], 1):
+        dv[f"trip.target[{k}]"] = lands.index(x) + 1
+    if sis is not None:
+        dv["sis.enabled"] = 1.0 if sis else 0.0
+    dv.update(drive_sets)
+    return TripCase(scene=scene, scene_path=path, load=load, sequence=sequence, dwell=float(dwell),
+                    plant_values={"car.load": load}, drive_values=dv, sizing=sizing,
+                    holding_torques=dict(zip(lands, hold)), scene_sets=scene_sets, drive_sets=drive_sets)
+
+
+def run_case(case: TripCase, *, step: float = 1e-3, sis: bool | None = None, progress=None):
+    """Run the case in process (Plant + ElectricDrive coupled every `step`, Gauss-Seidel, samples every
+    step): a fmu.cosim.CosimResult."""
+    from ..fmu import cosim
+
+    dv = dict(case.drive_values)
+    if sis is not None:
+        dv["sis.enabled"] = 1.0 if sis else 0.0
+    return cosim.monolithic(step=step, record_step=step, scene=case.scene, plant_values=case.plant_values,
+                            drive_values=dv, progress=progress)
+
+
+# ------------------------------------------------------------------------------------------- summary
 def summarize(t, c, limits, landings=LANDINGS) -> dict:
-    """Trip metrics of a demo record (see analysis.trip_summary)."""
+    """Trip metrics of a record with car.*, motor.torque and traction.traction_ratio columns."""
     from .analysis import trip_summary
 
+    ratio_name = next((n for n in c if n.endswith(".traction_ratio")), None)
     s = trip_summary(t, c["car.position"], c["car.velocity"], c["car.acceleration"], landings=landings,
-                     torque=c["motor.torque"], traction_ratio=c["traction.traction_ratio"],
+                     torque=c["motor.torque"], traction_ratio=c[ratio_name] if ratio_name else None,
                      traction_limit=limits["emergency_braking"])
     trips = []
     for r in s["trips"]:
@@ -57,7 +187,7 @@ def summarize(t, c, limits, landings=LANDINGS) -> dict:
             "vibration_pp_a95_m_s2": r["vib_pp_a95_m_s2"],
             "constant_speed_region_s": list(r["cs_region_s"]),
         })
-    ratio = float(np.max(c["traction.traction_ratio"]))
+    ratio = float(np.max(c[ratio_name])) if ratio_name else math.nan
     return {
         "trips": trips,
         "trip_time_s": [r["trip_time_s"] for r in trips],
@@ -72,6 +202,16 @@ def summarize(t, c, limits, landings=LANDINGS) -> dict:
         "traction_utilisation_vs_emergency_braking": ratio / limits["emergency_braking"],
         "traction_utilisation_vs_loading": ratio / limits["loading"],
         "motor_torque_peak_Nm": s["torque_peak_Nm"],
-        "stopping_error_mm": {f"{r['landing_m']:g} m ({r['direction']})": r["stopping_error_mm"]
-                              for r in trips},
+        "stopping_error_mm": {f"{r['landing_m']:g} m ({r['direction']}, {i + 1})": r["stopping_error_mm"]
+                              for i, r in enumerate(trips)},
     }
+
+
+def summarize_case(case: TripCase, t, c, info: dict | None = None) -> dict:
+    """Trip metrics and verdicts of a run of `case` (columns as recorded by the masters)."""
+    from .verdicts import trip_verdicts
+
+    limits = traction_limits(case.scene)
+    s = summarize(t, c, limits, landings=case.landings)
+    s["verdicts"] = [v.as_dict() for v in trip_verdicts(case, t, c, s, limits, info or {})]
+    return s

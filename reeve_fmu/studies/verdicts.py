@@ -1,0 +1,271 @@
+"""Verdicts: every limit a trip is checked against, with the value, the limit, PASS/WARN/FAIL and the
+source of the limit (docs/studies.md, "Verdicts").
+
+Sources: EN 81-20 (stopping accuracy ±10 mm, levelling ±20 mm, overspeed governor at 115 % of the rated
+speed, no buffer contact in normal operation), EN 81-50 (traction: car loading 125 %, emergency braking,
+car stalled), the drive's torque and power limits, the rope model (slack rope), the co-simulation
+coupling monitor; ride quality against typical contract targets (industry practice, not a standard),
+computed in the manner of ISO 18738-1 (which sets no limits).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+import math
+
+import numpy as np
+
+PASS, WARN, FAIL, INFO = "PASS", "WARN", "FAIL", "INFO"
+G = 9.81
+#: EN 81-20 stopping accuracy and levelling band, m
+STOPPING_ACCURACY = 10e-3
+LEVELLING_BAND = 20e-3
+#: EN 81-20 overspeed governor tripping speed / rated speed
+OVERSPEED_TRIP = 1.15
+OVERSPEED_WARN = 1.05
+#: EN 81-50 emergency-braking deceleration (m/s², 0.8 with reduced-stroke buffers)
+BRAKING_DECELERATION = 0.5
+#: time at the torque/power limit: WARN above 0, FAIL above this (s)
+SATURATION_FAIL = 0.5
+#: typical contract targets (practice, not a standard): good mid-rise values
+RIDE_TARGETS = {"max_acceleration_m_s2": (1.0, "m/s²", "max acceleration/deceleration (10 Hz)"),
+                "max_jerk_m_s3": (2.0, "m/s³", "max jerk (10 Hz)"),
+                "vibration_pp_max_m_s2": (0.25, "m/s²", "z vibration max peak-to-peak (Wk, constant speed)")}
+RIDE_SOURCE = "typical contract target (practice, not a standard); metric in the manner of ISO 18738-1"
+
+
+@dataclass
+class Verdict:
+    check: str
+    status: str          # PASS | WARN | FAIL | INFO
+    value: float
+    limit: float
+    unit: str
+    source: str
+    note: str = ""
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def line(self) -> str:
+        v = "n/a" if self.value is None or (isinstance(self.value, float) and math.isnan(self.value)) \
+            else f"{self.value:.4g}"
+        lim = "" if self.limit is None else f" (limit {self.limit:.4g})"
+        note = f" — {self.note}" if self.note else ""
+        return f"[{self.status}] {self.check}: {v} {self.unit}{lim}{note}"
+
+
+def worst(verdicts) -> str:
+    """FAIL if any fails, else WARN if any warns, else PASS."""
+    st = {v["status"] if isinstance(v, dict) else v.status for v in verdicts}
+    return FAIL if FAIL in st else WARN if WARN in st else PASS
+
+
+def _tension_columns(c):
+    return [n for n in c if n.endswith((".tension_in", ".tension_out", ".tension_start", ".tension_end"))]
+
+
+def generic_verdicts(t, c, info: dict | None = None) -> list:
+    """Checks any record can get: slack rope, buffer contact, co-simulation stability."""
+    out = []
+    tens = _tension_columns(c)
+    if tens:
+        mins = {n: float(np.min(c[n])) for n in tens}
+        name = min(mins, key=mins.get)
+        low = mins[name]
+        out.append(Verdict("slack rope (minimum rope force)", FAIL if low <= 0.0 else PASS, low, 0.0, "N",
+                           "rope model: a rope force <= 0 is a slack rope", f"at {name}"))
+    for n in (n for n in c if n.endswith(".force") and not n.startswith("motor")):
+        f = float(np.max(np.abs(c[n])))
+        out.append(Verdict(f"buffer contact ({n})", FAIL if f > 0.0 else PASS, f, 0.0, "N",
+                           "EN 81-20: buffers are not reached in normal operation"))
+    if info and "coupling_stable" in info:
+        ok = bool(info["coupling_stable"])
+        first = info.get("instability") or {}
+        out.append(Verdict("co-simulation coupling", PASS if ok else FAIL, 0.0 if ok else 1.0, 0.0,
+                           "detections", "coupling monitor (docs/hard-cases.md)",
+                           "" if ok else str(first.get("message", ""))))
+    return out
+
+
+def _levelling(errors_mm: dict, label: str) -> list:
+    if not errors_mm:
+        return []
+    key = max(errors_mm, key=lambda k: abs(errors_mm[k]))
+    e = errors_mm[key]
+    out = [Verdict(f"stopping accuracy{label}", PASS if abs(e) <= STOPPING_ACCURACY * 1e3 else FAIL, e,
+                   STOPPING_ACCURACY * 1e3, "mm", "EN 81-20: stopping accuracy ±10 mm", f"worst stop: {key}")]
+    relevel = abs(e) > LEVELLING_BAND * 1e3
+    out.append(Verdict(f"levelling band{label}", WARN if relevel else PASS, e, LEVELLING_BAND * 1e3, "mm",
+                       "EN 81-20: ±20 mm maintained, else re-level to ±10 mm",
+                       "re-levelling needed" if relevel else "no re-levelling needed"))
+    return out
+
+
+def _saturation(case, t, c) -> Verdict:
+    dv = case.drive_values
+    tmax = float(dv["torque.max"])
+    pmax = float(dv["torque.power_max"])
+    tau = np.abs(np.asarray(c["motor.torque"]))
+    w = np.abs(np.asarray(c["motor.speed"]))
+    lim = np.minimum(tmax, pmax / np.maximum(w, 1e-12))
+    at = tau >= 0.995 * lim
+    dt = float(t[1] - t[0])
+    dur = float(np.sum(at)) * dt
+    which = ""
+    if dur > 0:
+        pw = np.sum(at & (pmax / np.maximum(w, 1e-12) < tmax))
+        which = "power limit" if pw > 0.5 * np.sum(at) else "torque limit"
+    st = PASS if dur == 0 else (WARN if dur < SATURATION_FAIL else FAIL)
+    return Verdict("drive at its torque/power limit", st, dur, 0.0, "s",
+                   f"drive sizing (torque.max {tmax:.0f} N·m, torque.power_max {pmax / 1e3:.1f} kW); FAIL above "
+                   f"{SATURATION_FAIL} s", which)
+
+
+def _overspeed(case, c) -> Verdict:
+    v_rated = float(case.drive_values.get("trip.v_max", case.scene.drive.v_max))
+    vmax = float(np.max(np.abs(c["car.velocity"])))
+    r = vmax / v_rated
+    st = PASS if r <= OVERSPEED_WARN else (WARN if r <= OVERSPEED_TRIP else FAIL)
+    return Verdict("car speed / rated speed", st, 100 * r, 100 * OVERSPEED_TRIP, "%",
+                   "EN 81-20: overspeed governor trips at >= 115 % of the rated speed; WARN above 105 %",
+                   f"{vmax:.3f} m/s against {v_rated:g} m/s")
+
+
+def _trip_traction(s, limits) -> Verdict:
+    r = s["traction_ratio_max"]
+    lb, ll = limits["emergency_braking"], limits["loading"]
+    st = PASS if r <= lb else (WARN if r <= ll else FAIL)
+    return Verdict("traction ratio during the trip", st, r, lb, "",
+                   f"EN 81-50 e^(fα): emergency braking {lb:.4f} (μ = {limits['mu_emergency_braking']:.4f}); "
+                   f"WARN up to the loading limit {ll:.4f} (μ = 0.1), FAIL above",
+                   "exceeds the emergency-braking limit" if r > lb else "")
+
+
+_EN81_CACHE: dict = {}
+
+
+def en81_traction_cases(scene) -> dict:
+    """Static-equivalent EN 81-50 traction ratios of the scene (cached per scene): T1/T2 from the plant's
+    statics at the landing (rope weights included), with the car and counterweight inertia terms
+    m a / roping for emergency braking (rope and pulley inertia neglected). Stalled: empty car at the top,
+    counterweight on its buffer, T2 = weight of the hoist rope between the sheave and the counterweight
+    (an estimate from the scene's geometry)."""
+    key = repr(scene)
+    if key in _EN81_CACHE:
+        return _EN81_CACHE[key]
+    from ..core.elevator import car_at, elevator_spec, with_load
+    from ..fmu.cosim import make_plant
+
+    spec = elevator_spec(scene)
+    lo, hi = min(spec.landings), max(spec.landings)
+    sh = scene.drive.sheave
+    masses = {b.name: b.mass for b in with_load(scene, 0.0).bodies}
+    m_car0, m_cw = masses[spec.car], masses[spec.counterweight]
+    r = spec.roping
+
+    def tensions(load, z):
+        p = make_plant(car_at(scene, z), None, {"car.load": load})
+        return p.output(f"{sh}.tension_in"), p.output(f"{sh}.tension_out")
+
+    # which side carries the car: the one the load changes
+    a_in, a_out = tensions(0.0, lo)
+    b_in, b_out = tensions(spec.rated_load, lo)
+    car_in = abs(b_in - a_in) > abs(b_out - a_out)
+
+    def sides(t_in, t_out):
+        return (t_in, t_out) if car_in else (t_out, t_in)
+
+    a = BRAKING_DECELERATION
+    out = {}
+    tc, tw = sides(*tensions(1.25 * spec.rated_load, lo))
+    out["loading"] = max(tc, tw) / min(tc, tw)
+    # empty car at the top going up, braking: car side loses m a / r, counterweight side gains it
+    tc, tw = sides(*tensions(0.0, hi))
+    tc_d, tw_d = tc - m_car0 * a / r, tw + m_cw * a / r
+    em1 = max(tc_d, tw_d) / min(tc_d, tw_d)
+    # rated load at the bottom going down, braking: car side gains, counterweight side loses
+    tc2, tw2 = sides(b_in, b_out)
+    m_car = m_car0 + spec.rated_load
+    tc2, tw2 = tc2 + m_car * a / r, tw2 - m_cw * a / r
+    em2 = max(tc2, tw2) / min(tc2, tw2)
+    out["emergency_braking"] = max(em1, em2)
+    out["emergency_braking_case"] = "empty car at the top going up" if em1 >= em2 else \
+        "rated load at the bottom going down"
+    # stalled: empty car at the top, counterweight resting; T2 = hoist rope between sheave and counterweight
+    hoist = next(rp for rp in scene.ropes if any(st.sheave == sh for st in rp.route))
+    z_sheave = next(s.center[2] for s in scene.sheaves if s.name == sh)
+    cw = next(b for b in car_at(scene, hi).bodies if b.name == spec.counterweight)
+    t2 = hoist.count * hoist.rhoA * G * max(z_sheave - cw.position[2], 0.0)
+    out["stalled"] = tc / t2 if t2 > 0 else math.inf
+    _EN81_CACHE[key] = out
+    return out
+
+
+def en81_verdicts(scene, limits) -> list:
+    cases = en81_traction_cases(scene)
+    ll, lb, ls = limits["loading"], limits["emergency_braking"], limits["stalled"]
+    src = "EN 81-50 traction, static-equivalent (rope weights from the plant statics; pulley inertia neglected)"
+    return [
+        Verdict("EN 81-50 car loading (125 % at the lowest landing)", PASS if cases["loading"] <= ll else FAIL,
+                cases["loading"], ll, "", src + "; T1/T2 <= e^(fα), μ = 0.1"),
+        Verdict(f"EN 81-50 emergency braking ({BRAKING_DECELERATION} m/s²)",
+                PASS if cases["emergency_braking"] <= lb else FAIL, cases["emergency_braking"], lb, "",
+                src + f"; T1/T2 <= e^(fα), μ = {limits['mu_emergency_braking']:.4f}",
+                cases["emergency_braking_case"]),
+        Verdict("EN 81-50 car stalled (counterweight on its buffer)", PASS if cases["stalled"] >= ls else FAIL,
+                cases["stalled"], ls, "", "EN 81-50: the ropes must slip, T1/T2 >= e^(fα), μ = 0.2 (T2 "
+                "estimated as the hoist-rope weight on the counterweight side)"),
+    ]
+
+
+def ride_verdicts(s) -> list:
+    out = []
+    for key, (target, unit, what) in RIDE_TARGETS.items():
+        v = s.get(key)
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            continue
+        out.append(Verdict(f"ride quality: {what}", PASS if v <= target else WARN, v, target, unit, RIDE_SOURCE))
+    return out
+
+
+def trip_verdicts(case, t, c, s, limits, info: dict) -> list:
+    """All verdicts of an elevator trip (studies.trip.TripCase and its record)."""
+    out = _levelling(s["stopping_error_mm"], "")
+    out.append(_trip_traction(s, limits))
+    out += en81_verdicts(case.scene, limits)
+    out.append(_saturation(case, t, c))
+    out.append(_overspeed(case, c))
+    out += generic_verdicts(t, c, info)
+    out += ride_verdicts(s)
+    return out
+
+
+def levelling_verdicts(errors_mm: dict, label: str) -> list:
+    """Stopping accuracy and levelling band of a set of stops (label e.g. ' (SIS)')."""
+    return _levelling(errors_mm, label)
+
+
+def print_verdicts(verdicts, file=None) -> None:
+    import sys
+
+    f = file or sys.stdout
+    for v in verdicts:
+        v = v if isinstance(v, Verdict) else Verdict(**v)
+        print("  " + v.line(), file=f)
+    print(f"  overall: {worst(verdicts)}", file=f)
+
+
+def scene_verdicts(scene, t, c) -> list:
+    """Verdicts of a `reeve-fmu simulate` run of any scene: slack rope, buffer contact and, for a traction
+    sheave, the traction ratio against the EN 81-50 limits of its groove."""
+    out = generic_verdicts(t, c)
+    for sh in scene.sheaves:
+        name = f"{sh.name}.traction_ratio"
+        if sh.kind != "traction" or name not in c or scene.drive.sheave != sh.name:
+            continue
+        from .analysis import traction_limits
+
+        lim = traction_limits(scene, sh.name)
+        r = float(np.nanmax(c[name]))
+        out.append(_trip_traction({"traction_ratio_max": r}, lim))
+    return out
