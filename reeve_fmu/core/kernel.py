@@ -29,6 +29,7 @@ Kernel = namedtuple("Kernel", [
     "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
+    "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
 ])
 
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
@@ -104,6 +105,14 @@ if JIT:
         ("trac_el_out", types.int64),
         ("el_type", types.int64),
         ("el_EI", types.float64[::1]),
+        ("crp_s", types.int64[::1]),
+        ("crp_el_in", types.int64[::1]),
+        ("crp_el_out", types.int64[::1]),
+        ("crp_R", types.float64[::1]),
+        ("crp_J", types.float64[::1]),
+        ("crp_kind", types.int64[::1]),
+        ("mot_crp", types.int64),
+        ("crp_vreg", types.float64),
     ])
 
     @structref.register
@@ -182,7 +191,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -237,6 +246,14 @@ if JIT:
         k.trac_el_out = trac_el_out
         k.el_type = el_type
         k.el_EI = el_EI
+        k.crp_s = crp_s
+        k.crp_el_in = crp_el_in
+        k.crp_el_out = crp_el_out
+        k.crp_R = crp_R
+        k.crp_J = crp_J
+        k.crp_kind = crp_kind
+        k.mot_crp = mot_crp
+        k.crp_vreg = crp_vreg
         return k
 
 
@@ -249,7 +266,7 @@ def compiled_kernel(K: Kernel):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
         elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out",
-                      "el_type"):
+                      "el_type", "mot_crp"):
             value = int(value)
         else:
             value = float(value)

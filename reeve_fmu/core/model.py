@@ -38,9 +38,11 @@ from .kernel import Kernel, compiled_kernel, new_state_arrays
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
 (OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
- OUT_FRICTION) = range(11)
+ OUT_FRICTION, OUT_CANGLE, OUT_CSPEED) = range(13)
+CREEP_VREG = 1e-3   # m/s: material speed over which the arriving side changes at a reversal (tanh blend)
 INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
-#                element of a vanishing span, traction friction deflection z, -]
+#                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
+#                per creep sheave (sheave_contact = "creep": the angle is integrated, not a function of s)
 
 
 @dataclass
@@ -536,6 +538,9 @@ def _build(scene: Scene) -> Model:
             torque_table = np.array(dv.torque, float).T.copy()
     free = [j for j in range(nq) if j not in presc]
 
+    crp = _creep_table(scene, sheave_dof, tension_taps, slip_info)
+    crp_index = {name: k for k, name in enumerate(crp["name"])}
+
     # ------------------------------------------------------------------ outputs
     out_names, ok, oi, oj, osc = [], [], [], [], []
 
@@ -561,6 +566,9 @@ def _build(scene: Scene) -> Model:
             out(f"{sh.name}.slip_speed", OUT_SLIP, j, jt, sh.radius)   # rope speed - rim speed
             out(f"{sh.name}.slip", OUT_SLIP, j, jt, -sh.radius)        # cumulative slip [m]
             out(f"{sh.name}.friction", OUT_FRICTION, j, jt, sh.radius)  # force on the rope [N]
+        elif sh.name in crp_index:   # the angle is integrated: R dtheta = -(1 + eps_arriving) ds
+            out(f"{sh.name}.angle", OUT_CANGLE, crp_index[sh.name])
+            out(f"{sh.name}.speed", OUT_CSPEED, crp_index[sh.name])
         else:
             out(f"{sh.name}.angle", OUT_QREL, j, 0, -1.0 / sh.radius)
             out(f"{sh.name}.speed", OUT_V, j, 0, -1.0 / sh.radius)
@@ -575,7 +583,14 @@ def _build(scene: Scene) -> Model:
     for name, e_first, e_last in rope_end_taps:
         out(f"{name}.tension_start", OUT_TENSION, e_first, 0)
         out(f"{name}.tension_end", OUT_TENSION, e_last, 1)
-    if dv.kind != "none":
+    mot_crp = crp_index.get(dv.sheave, -1) if dv.kind != "none" else -1
+    if mot_crp >= 0 and crp["kind"][mot_crp] != 0:
+        mot_crp = -1     # a slipping sheave has its own angle coordinate
+    if dv.kind != "none" and mot_crp >= 0:
+        out("motor.angle", OUT_CANGLE, mot_crp)
+        out("motor.speed", OUT_CSPEED, mot_crp)
+        out("motor.torque", OUT_TORQUE, mot_dof, 0, 1.0 / mot_gain)
+    elif dv.kind != "none":
         out("motor.angle", OUT_QREL, mot_dof, 0, mot_gain)
         out("motor.speed", OUT_V, mot_dof, 0, mot_gain)
         out("motor.torque", OUT_TORQUE, mot_dof, 0, 1.0 / mot_gain)
@@ -623,6 +638,10 @@ def _build(scene: Scene) -> Model:
         trac_el_out=int(tension_taps[slip_info["sheave"].name]["out"][0]) if slip_info else -1,
         el_type=1 if cubic else 0,
         el_EI=np.array([r.EI * r.count for r in rope_of_el], float),
+        crp_s=np.array(crp["s"], np.int64), crp_el_in=np.array(crp["el_in"], np.int64),
+        crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
+        crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
+        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
     )
 
     # ------------------------------------------------------------------ statics sets
@@ -652,7 +671,30 @@ def _build(scene: Scene) -> Model:
                  statics_equations=tuple(eqs), drive_dof=mot_dof, drive_R=float(mot_R),
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
                  info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R,
-                           wrap_el_idx=wrap_idx))
+                           wrap_el_idx=wrap_idx, creep_sheaves=tuple(crp["name"])))
+
+
+def _creep_table(scene, sheave_dof, tension_taps, slip_info):
+    """Sheaves whose rope rides the rim at the arriving strain (sheave_contact = "creep"): sigma dof,
+    the elements that meet the sheave (-1 for the missing side of a drum), radius, rim inertia (with
+    the motor's) and kind (0: angle integrated from sigma, 1: slipping sheave with its own angle).
+    Empty for the rigid rim."""
+    t = dict(name=[], s=[], el_in=[], el_out=[], R=[], J=[], kind=[])
+    if scene.sheave_contact != "creep":
+        return t
+    for sh in scene.sheaves:
+        if sh.name not in sheave_dof:
+            continue
+        taps = tension_taps.get(sh.name, {})
+        J = sh.inertia + (scene.drive.motor_inertia if scene.drive.sheave == sh.name else 0.0)
+        t["name"].append(sh.name)
+        t["s"].append(sheave_dof[sh.name])
+        t["el_in"].append(taps["in"][0] if "in" in taps else -1)
+        t["el_out"].append(taps["out"][0] if "out" in taps else -1)
+        t["R"].append(sh.radius)
+        t["J"].append(J)
+        t["kind"].append(1 if (slip_info and slip_info["sheave"].name == sh.name) else 0)
+    return t
 
 
 def _fold_wraps(nd, scene, wrap_elements, wrap_idx, B, c, q0, g, M0, F0):
@@ -729,7 +771,7 @@ def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     par = model.par0 if par is None else np.asarray(par, float)
     c = model.c0 + model.Bpar @ par
     nf = len(model.K.free)
-    info = np.zeros(INFO_SIZE)
+    info = np.zeros(INFO_SIZE + model.K.crp_s.shape[0])
     brake = model.scene.brake
     info[5] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
     u = np.zeros(2)

@@ -149,13 +149,14 @@ class Scene:
     source: str = "<scene>"
     description: str = ""
     extra: dict = field(default_factory=dict)   # sections owned by other layers (e.g. [accuracy])
+    sheave_contact: str = "creep"    # creep: the rope rides the rim at its arriving strain; rigid: unstrained
 
     def with_overrides(self, **kw) -> "Scene":
         return replace(self, **kw)
 
 
 SCHEMA_KEYS = {
-    "scene": {"name", "description", "model", "gravity", "t_end", "output_step"},
+    "scene": {"name", "description", "model", "gravity", "t_end", "output_step", "sheave_contact"},
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
     "bodies": {"name", "mass", "position", "free", "damping"},
@@ -320,7 +321,8 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     return Scene(name=r.string(sc, "scene", "name", Path(source).stem), model=model, gravity=gravity,
                  bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
                  solver=solver, brake=brake, buffers=tuple(buffers), statics=statics, t_end=t_end, output_step=output_step, source=source,
-                 description=r.string(sc, "scene", "description", ""), extra=extra)
+                 description=r.string(sc, "scene", "description", ""), extra=extra,
+                 sheave_contact=r.string(sc, "scene", "sheave_contact", "creep", ("creep", "rigid")))
 
 
 def _parse_solver(r: _Reader, data) -> Solver:

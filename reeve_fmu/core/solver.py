@@ -25,8 +25,9 @@ from ._jit import njit
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
-from .system import (assemble, assemble_ws, brake_deflection, energy, outputs, outputs_ws,
-                     set_prescribed, traction_deflection, workspace)
+from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
+                     creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
+                     traction_deflection, traction_slip, workspace)
 
 
 class SolverError(RuntimeError):
@@ -41,6 +42,7 @@ STATUS_TEXT = {
     1: "Newton iteration did not converge",
     2: "a rope span reached the minimum material length (vanishing span)",
     3: "non-finite value in the state (NaN/Inf)",
+    4: "a drum has no stored rope left",
 }
 
 
@@ -161,7 +163,10 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
-    set_prescribed(K, q_ref, t1, q, v, qdd)
+    if K.mot_crp >= 0:
+        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
         a[K.presc[k]] = qdd[K.presc[k]]
     for attempt in range(4):
@@ -225,7 +230,10 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
     perm = SP.perm
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
-    set_prescribed(K, q_ref, t1, q, v, qdd)
+    if K.mot_crp >= 0:
+        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
         a[K.presc[k]] = qdd[K.presc[k]]
     for attempt in range(4):
@@ -341,11 +349,14 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     y = np.empty(K.out_kind.shape[0])
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
-    ue = np.empty(7)
+    ncrp = K.crp_s.shape[0]
+    ue = np.empty(UE_CREEP + UE_STRIDE * ncrp)
+    th1 = np.empty(ncrp)      # creep sheave angles at the step start (retry)
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
     t = t0
     row = 0
+    wfresh = False     # W holds the element arrays of the current (q, v) (creep_inputs)
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
         # start of the step (kept for a retry with substeps)
@@ -356,6 +367,9 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         e1 = info[5]
         z1 = info[6]
         zt1 = info[8]
+        sl1 = info[9]
+        for k in range(ncrp):
+            th1[k] = info[INFO_CREEP + k]
         status = 1
         for level in range(4):
             nsub = 1 if level == 0 else 4 ** level
@@ -369,6 +383,9 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 info[5] = e1
                 info[6] = z1
                 info[8] = zt1
+                info[9] = sl1
+                for k in range(ncrp):
+                    info[INFO_CREEP + k] = th1[k]
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 info[5] = target + (info[5] - target) * decay
@@ -379,6 +396,9 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     ue[5] = q[K.trac_s]
                     ue[6] = q[K.trac_th]
+                    ue[7] = info[9]
+                if ncrp > 0:
+                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, wfresh)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -390,6 +410,11 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     status = _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs,
                                                  ue, jac, piv, info, r, r0, rb, am, af, beta, gamma, tol,
                                                  maxit)
+                wfresh = status == 0
+                for k in range(K.drum_dof.shape[0]):
+                    if status == 0 and q[K.drum_dof[k]] <= 0.0:
+                        status = 4     # stored rope (s in [0, sigma]) used up: an event, not a retry
+                        info[7] = k
                 if status != 0:
                     q[:] = qo   # _newton_step leaves its last iterate
                     v[:] = vo
@@ -400,6 +425,10 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     info[6] = brake_deflection(K, q, ue)
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
+                    info[9] = traction_slip(K, q, ue)
+                for k in range(ncrp):   # W holds the converged iterate's element arrays
+                    if K.crp_kind[k] == 0:
+                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, creep_terms(K, W.QE, W.VE, v, k)[0])
             if status != 1:
                 break   # converged (0) or a vanishing span (2): substeps do not help
         if status != 0:
@@ -410,6 +439,9 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
             info[5] = e1
             info[6] = z1
             info[8] = zt1
+            info[9] = sl1
+            for k in range(ncrp):
+                info[INFO_CREEP + k] = th1[k]
             if status == 1:
                 for i in range(nq):
                     if not (q[i] == q[i]) or not (qdd[i] == qdd[i]):
@@ -600,7 +632,8 @@ class Simulator:
             M = np.empty((m.nq, m.nq))
             Q = np.empty(m.nq)
             assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
-            tau_hold = -Q[K.mot_dof] / K.mot_gain      # brake torque needed (Q = tau * gain)
+            kap = self._kernel_inputs_at(st)[UE_CREEP + UE_STRIDE * K.mot_crp] if K.mot_crp >= 0 else 1.0
+            tau_hold = -Q[K.mot_dof] / (K.mot_gain * kap)   # brake torque needed (Q = tau * gain)
             k = st.info[5] * K.brake_T / K.brake_wreg
             st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
         self._consistent_acceleration(st)
@@ -622,7 +655,11 @@ class Simulator:
         name = m.q_names[K.trac_s].rsplit(".", 1)[0]
         T_in, T_out = y[f"{name}.tension_in"], y[f"{name}.tension_out"]
         cap = max(min(T_in, T_out), 0.0) * K.trac_efa
-        f_needed = Q[K.trac_s]            # Q_sigma - f = 0
+        kap = 1.0                         # the rope's strain factor at the groove (creep)
+        for k in range(K.crp_s.shape[0]):
+            if K.crp_kind[k] == 1:
+                kap = ue[UE_CREEP + UE_STRIDE * k]
+        f_needed = Q[K.trac_s] / kap      # Q_sigma - kappa f = 0
         k = cap / K.trac_zmax
         if abs(f_needed) > 0.9 * cap:
             # friction cannot hold the static tensions: the run starts with the rope sliding at the
@@ -818,8 +855,12 @@ class Simulator:
         K = m.K
         M = np.empty((m.nq, m.nq))
         Q = np.empty(m.nq)
-        set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
-        assemble(m.KJ, st.c, st.q, st.v, st.t, self._kernel_inputs_at(st), M, Q)
+        ue = self._kernel_inputs_at(st)
+        if K.mot_crp >= 0:
+            set_prescribed_creep(m.KJ, ue, st.t, st.t, st.q, st.v, st.qdd)   # keeps sigma
+        else:
+            set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
+        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
         f, p = K.free, K.presc
         rhs = Q[f] - M[np.ix_(f, p)] @ st.qdd[p]
         st.qdd[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)
@@ -910,6 +951,9 @@ class Simulator:
 
     def _status_message(self, status: int, st: State) -> str:
         msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"
+        if status == 4:
+            j = int(self.model.K.drum_dof[int(st.info[7])])
+            msg += f": drum {self.model.q_names[j].rsplit('.', 1)[0]!r} (its stored length reached 0 m)"
         if status == 2:
             ie = int(st.info[7])
             ir, k = self.model.element_span[ie]
@@ -923,32 +967,52 @@ class Simulator:
         return msg
 
     def _rhs_factory(self, st: State):
+        """ODE right-hand side for the scipy methods. With creep sheaves y also holds their angles and
+        (speed drive) the driven sheave's sigma: d theta/dt = -kappa sigma_dot / R and
+        d sigma/dt = gain x_dot / kappa, kappa evaluated at the current state (not lagged)."""
         m = self.model
         K = m.K
         f, p = K.free, K.presc
-        nq = m.nq
+        nq, nf, nc = m.nq, len(K.free), K.crp_s.shape[0]
         M = np.empty((nq, nq))
         Q = np.empty(nq)
+        base = self._kernel_inputs_at(st)
+        info = st.info.copy()
+        QE, VE = self._element_buffers()
 
         def rhs(t, y):
             q = st.q.copy()
             v = st.v.copy()
             qdd = np.zeros(nq)
-            q[f] = y[:len(f)]
-            v[f] = y[len(f):]
-            set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
-            if assemble(m.KJ, st.c, q, v, t, self.kernel_inputs(st), M, Q) < 0:
+            q[f] = y[:nf]
+            v[f] = y[nf:2 * nf]
+            ue = base
+            if nc:
+                ue = base.copy()
+                info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
+                if K.mot_crp >= 0 and len(p):
+                    q[p[0]] = y[-1]
+                creep_inputs(m.KJ, st.c, q, v, info, ue, 0.0, QE, VE, False)
+            if K.mot_crp >= 0:
+                set_prescribed_creep(m.KJ, ue, t, t, q, v, qdd)
+            else:
+                set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
+            if assemble(m.KJ, st.c, q, v, t, ue, M, Q) < 0:
                 raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
             acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
-            return np.concatenate([v[f], acc])
+            dth = [-ue[UE_CREEP + UE_STRIDE * k] * v[K.crp_s[k]] / K.crp_R[k] for k in range(nc)]
+            dsig = [v[p[0]]] if (K.mot_crp >= 0 and len(p)) else []
+            return np.concatenate([v[f], acc, dth, dsig])
         return rhs
 
     def _advance_scipy(self, st: State, t_end: float, out_dt):
         from scipy.integrate import solve_ivp
         m = self.model
-        f = m.K.free
+        K = m.K
+        f, nc = K.free, K.crp_s.shape[0]
         rhs = self._rhs_factory(st)
-        y0 = np.concatenate([st.q[f], st.v[f]])
+        y0 = np.concatenate([st.q[f], st.v[f], st.info[INFO_CREEP:INFO_CREEP + nc],
+                             [st.q[K.presc[0]]] if (K.mot_crp >= 0 and len(K.presc)) else []])
         t_eval = None
         if out_dt is not None:
             n_out = int(round((t_end - st.t) / out_dt))
@@ -970,18 +1034,32 @@ class Simulator:
 
     def _set_from_y(self, st, t, y):
         m = self.model
-        f = m.K.free
+        K = m.K
+        f, nf, nc = K.free, len(K.free), K.crp_s.shape[0]
         st.t = float(t)
-        st.q[f] = y[:len(f)]
-        st.v[f] = y[len(f):]
+        st.q[f] = y[:nf]
+        st.v[f] = y[nf:2 * nf]
+        st.info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
+        if K.mot_crp >= 0 and len(K.presc):
+            st.q[K.presc[0]] = y[-1]
         self._consistent_acceleration(st)
 
     # ------------------------------------------------------------------ queries
-    @staticmethod
-    def kernel_inputs(st: State) -> np.ndarray:
+    def kernel_inputs(self, st: State) -> np.ndarray:
         """[motor torque, brake engagement, brake deflection, motor coordinate at step start,
-        traction deflection, rope s and sheave angle of the slipping sheave at step start]."""
-        return np.array([st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0])
+        traction deflection, rope s and sheave angle of the slipping sheave at step start], then per
+        creep sheave (kappa, angle, sigma) at the state."""
+        K = self.model.K
+        ue = np.zeros(UE_CREEP + UE_STRIDE * K.crp_s.shape[0])
+        ue[:UE_CREEP] = (st.u[0], st.info[5], st.info[6], 0.0, st.info[8], 0.0, 0.0, st.info[9])
+        if K.crp_s.shape[0]:
+            creep_inputs(self.model.KJ, st.c, st.q, st.v, st.info, ue, 0.0,
+                         *self._element_buffers(), False)
+        return ue
+
+    def _element_buffers(self):
+        n_el, ne = self.model.K.el_idx.shape
+        return np.empty((n_el, ne)), np.empty((n_el, ne))
 
     def _kernel_inputs_at(self, st: State) -> np.ndarray:
         ue = self.kernel_inputs(st)
@@ -999,8 +1077,9 @@ class Simulator:
         return y
 
     def energy(self, st: State):
-        """(kinetic, gravity, strain) energy [J]."""
-        return energy(self.model.KJ, st.c, st.q, st.v)
+        """(kinetic, gravity, strain) energy [J]; a creep sheave's rim moves at kappa times the
+        material rate."""
+        return energy_u(self.model.KJ, st.c, st.q, st.v, self._kernel_inputs_at(st))
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,
             progress=None) -> Result:
@@ -1029,7 +1108,34 @@ class Simulator:
             if progress is not None:
                 progress(st.t)
         self.final_state = st
-        return Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
+        res = Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
+        self._check_creep_arcs(res)
+        return res
+
+    def _check_creep_arcs(self, res: Result):
+        """Creep on a no-slip traction sheave needs an arc ln(T_t/T_s)/f of the wrap (Euler-Eytelwein):
+        warn, naming the sheave, when the tension ratio exceeds e^(f alpha), where the creep arc would
+        exceed the wrap and the rope would slip (model it with slip = true)."""
+        from .traction import equivalent_friction
+        m = self.model
+        if m.scene.sheave_contact != "creep":
+            return
+        for rope, info in zip(m.scene.ropes, m.ropes):
+            for k, stop in enumerate(rope.route):
+                sh = next((x for x in m.scene.sheaves if x.name == stop.sheave), None)
+                name = f"{stop.sheave}.traction_ratio"
+                if sh is None or sh.kind != "traction" or sh.slip or name not in res.names:
+                    continue
+                alpha = info["wraps"][k][3]
+                limit = math.exp(equivalent_friction(sh.mu, sh.undercut_angle, sh.groove_angle, sh.groove)
+                                 * alpha)
+                ratio = res[name]
+                bad = np.nonzero(ratio > limit)[0]
+                if len(bad):
+                    self.warnings.append(
+                        f"t = {res.time[bad[0]]:g} s: sheave {sh.name!r}: tension ratio "
+                        f"{np.max(ratio):.4f} exceeds e^(f alpha) = {limit:.4f}: the creep arc would exceed "
+                        f"the wrap and the rope would slip (model it with slip = true)")
 
     def _partial(self, times, vals, chunk, st) -> Result:
         """Everything a stopped run computed: the samples so far, the stopped chunk's samples and a

@@ -18,6 +18,9 @@ from .kernel import new_work
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
+INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
+UE_CREEP = 8      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
+UE_STRIDE = 5
 
 
 @njit(cache=True, inline="always")
@@ -48,13 +51,155 @@ def _elastoplastic(z, zmax):
     return sat if z > 0.0 else -sat
 
 
+# ------------------------------------------------------------------ rope creep on the rim
+# sheave_contact = "creep" (docs/numerics.md "Rope creep on the rim"): the rope arrives on the groove
+# at its strain eps_a and rides the rim in adhesion, so the rim speed is the *strained* rope speed:
+# R dtheta = -(1 + eps_a) dsigma, kappa = 1 + eps_a a function of the state (element strains). The
+# angle is not a coordinate: it is integrated per step with the trapezoidal mean of kappa (creep_inputs
+# keeps the step start's values). The strain change to the leaving span happens by creep, whose
+# dissipation enters as a force (creep_terms).
+
+@njit(cache=True, inline="always")
+def end_strain(K, X, ie, end):
+    """Axial strain at an end (0: start, 1: end) of element ie from its coordinates X[ie]: linear
+    elements |r2 - r1| / (s2 - s1) - 1, cubic elements |d| - 1 at the node."""
+    nd = K.nd
+    acc = 0.0
+    if K.el_type == 1:
+        o = nd if end == 0 else 3 * nd + 1      # [r1, d1, s1, r2, d2, s2]
+        for k in range(nd):
+            acc += X[ie, o + k] * X[ie, o + k]
+        return math.sqrt(acc) - 1.0
+    for k in range(nd):
+        dk = X[ie, nd + k] - X[ie, k]
+        acc += dk * dk
+    return math.sqrt(acc) / (X[ie, 2 * nd + 1] - X[ie, 2 * nd]) - 1.0
+
+
+@njit(cache=True, inline="always")
+def end_strain_rate(K, X, XD, ie, end):
+    """Time derivative of end_strain at coordinates X[ie] moving at XD[ie]."""
+    nd = K.nd
+    n2 = 0.0
+    dd = 0.0
+    if K.el_type == 1:
+        o = nd if end == 0 else 3 * nd + 1
+        for k in range(nd):
+            n2 += X[ie, o + k] * X[ie, o + k]
+            dd += X[ie, o + k] * XD[ie, o + k]
+        return dd / math.sqrt(n2)
+    for k in range(nd):
+        dk = X[ie, nd + k] - X[ie, k]
+        n2 += dk * dk
+        dd += dk * (XD[ie, nd + k] - XD[ie, k])
+    d = math.sqrt(n2)
+    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
+    return dd / (d * l) - d * (XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]) / (l * l)
+
+
+@njit(cache=True, inline="always")
+def creep_terms(K, QE, VE, v, k):
+    """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly;
+    kappa = 1 + the arriving strain. The arriving side is the in-span while material runs along the
+    route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg makes a reversal
+    smooth (at rest kappa is the mean of both sides). A drum's only span arrives either way (its
+    stored rope is taken at that span's strain).
+    The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
+    -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
+    arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
+    ei = K.crp_el_in[k]
+    eo = K.crp_el_out[k]
+    if ei < 0:
+        return 1.0 + end_strain(K, QE, eo, 0), end_strain_rate(K, QE, VE, eo, 0), 0.0
+    if eo < 0:
+        return 1.0 + end_strain(K, QE, ei, 1), end_strain_rate(K, QE, VE, ei, 1), 0.0
+    x = v[K.crp_s[k]] / K.crp_vreg
+    th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
+    w = 0.5 * (1.0 - th)
+    e_in = end_strain(K, QE, ei, 1)
+    e_out = end_strain(K, QE, eo, 0)
+    rate = 0.0
+    if w > 0.0:
+        rate += w * end_strain_rate(K, QE, VE, ei, 1)
+    if w < 1.0:
+        rate += (1.0 - w) * end_strain_rate(K, QE, VE, eo, 0)
+    d = e_in - e_out
+    return 1.0 + w * e_in + (1.0 - w) * e_out, rate, -th * 0.5 * K.el_EA[ei] * d * d
+
+
+@njit(cache=True)
+def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
+    """Kernel inputs of the creep sheaves at the start of a step of size h:
+    ue[UE_CREEP + UE_STRIDE k ...] = (kappa, angle, sigma, kappa rate, kappa over the step predicted
+    to its middle, for a speed-driven sigma). QE, VE: element work arrays; with fresh = True they hold
+    (q, v) already (the last residual of the step that ended here: its kappa closed that step's angle),
+    else they are gathered."""
+    for k in range(K.crp_s.shape[0]):
+        if not fresh:
+            if K.crp_el_in[k] >= 0:
+                gather(K, c, q, v, K.crp_el_in[k], QE, VE)
+            if K.crp_el_out[k] >= 0:
+                gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+        kap, rate, _ = creep_terms(K, QE, VE, v, k)
+        i = UE_CREEP + UE_STRIDE * k
+        ue[i] = kap
+        ue[i + 1] = info[INFO_CREEP + k]
+        ue[i + 2] = q[K.crp_s[k]]
+        ue[i + 3] = rate
+        ue[i + 4] = kap + 0.5 * h * rate
+
+
+@njit(cache=True, inline="always")
+def creep_kappa(K, u, k):
+    """kappa of creep sheave k at the step start (1 when k < 0 or the inputs carry no creep part)."""
+    i = UE_CREEP + UE_STRIDE * k
+    if k < 0 or u.shape[0] <= i:
+        return 1.0
+    return u[i]
+
+
+@njit(cache=True, inline="always")
+def creep_angle(K, q, u, k, kap):
+    """Sheave angle of creep sheave k at the current sigma, kap = its kappa there: the step start's
+    angle - kappa_mean (sigma - sigma_start) / R with the trapezoidal mean of kappa (the mean of the
+    forces the generalized-alpha step applies, so the drive's work is torque x angle), or the
+    predicted kappa of a speed-driven sheave (its angle is the profile's)."""
+    i = UE_CREEP + UE_STRIDE * k
+    kb = 0.5 * (u[i] + kap)
+    if k == K.mot_crp and K.presc.shape[0] > 0:
+        kb = u[i + 4]
+    return u[i + 1] - kb * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
+
+
+@njit(cache=True)
+def creep_power(K, c, q, v):
+    """Creep dissipation [W] of all sheaves at (q, v) (>= 0)."""
+    n_el, ne = K.el_idx.shape[0], K.el_idx.shape[1]
+    QE, VE = np.empty((n_el, ne)), np.empty((n_el, ne))
+    P = 0.0
+    for k in range(K.crp_s.shape[0]):
+        if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
+            gather(K, c, q, v, K.crp_el_in[k], QE, VE)
+            gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+            P -= creep_terms(K, QE, VE, v, k)[2] * v[K.crp_s[k]]
+    return P
+
+
+@njit(cache=True, inline="always")
+def _trac_kappa(K, u):
+    for k in range(K.crp_s.shape[0]):
+        if K.crp_kind[k] == 1:
+            return creep_kappa(K, u, k)
+    return 1.0
+
+
 @njit(cache=True, inline="always")
 def brake_deflection(K, q, u):
     """Elasto-plastic brake: effective spring deflection z (rad of the motor angle) after turning from
     the step's start. Kernel inputs u = [motor torque, brake engagement e, brake z at step start,
     motor coordinate at step start, traction z at step start, rope s at the slipping sheave and its
     angle at step start]."""
-    z = u[2] + K.mot_gain * (q[K.mot_dof] - u[3])
+    z = u[2] + K.mot_gain * creep_kappa(K, u, K.mot_crp) * (q[K.mot_dof] - u[3])
     return _elastoplastic(z, K.brake_wreg)
 
 
@@ -90,8 +235,16 @@ def _static_end_tension(K, QE, QEs, ie, end):
 def traction_deflection(K, q, u):
     """Rope-groove friction deflection z [m]: relative displacement of the rope along the route
     against the rim since the step's start, elasto-plastic with band zmax = creep."""
-    z = u[4] - (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+    # the rope's displacement along the route at the strain it arrives with (creep sheave)
+    z = u[4] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
     return _elastoplastic(z, K.trac_zmax)
+
+
+@njit(cache=True, inline="always")
+def traction_slip(K, q, u):
+    """Cumulative slip [m] of the rope against the rim (rope minus rim along the route): u[7] at the
+    step start plus the step's relative displacement, the rope's at the strain it arrives with."""
+    return u[7] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
 
 
 @njit(cache=True, inline="always")
@@ -213,15 +366,28 @@ def q_terms(K, W, q, v, t, u):
         j = K.drum_dof[k]
         Md[j] += K.drum_rhoA[k] * q[j]
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
+    gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
+    for k in range(K.crp_s.shape[0]):
+        j = K.crp_s[k]
+        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k)
+        Q[j] += fc
+        if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
+            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
+            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
+            iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
+            Md[j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
+            Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
+            if k == K.mot_crp:
+                gain *= kap
     if K.mot_dof >= 0 and K.drive_kind >= 2:
-        Q[K.mot_dof] += drive_torque(K, t, u) * K.mot_gain
+        Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
-        Q[K.mot_dof] += brake_torque(K, q, v, u) * K.mot_gain
+        Q[K.mot_dof] += brake_torque(K, q, v, u) * gain
     if K.trac_s >= 0:
-        # friction f on the rope along the route: virtual work f * (-d sigma) on the rope and
+        # friction f on the rope along the route: virtual work f * (-kappa d sigma) on the rope and
         # -f * R d theta on the sheave
         f = traction_force(K, q, u, W.QE, W.QEs)
-        Q[K.trac_s] -= f
+        Q[K.trac_s] -= f * _trac_kappa(K, u)
         Q[K.trac_th] -= f * K.trac_R
 
 
@@ -315,6 +481,9 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
     MEs = W.MEs
     QEs = W.QEs
     n = K.out_kind.shape[0]
+    kaps = np.empty(K.crp_s.shape[0])
+    for k in range(K.crp_s.shape[0]):
+        kaps[k] = creep_terms(K, QE, VE, v, k)[0]
     for k in range(n):
         kind = K.out_kind[k]
         i = K.out_i[k]
@@ -362,7 +531,10 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
                 r = -Q[j]
                 for m in range(M.shape[1]):   # no columns on the sparse path: there Q = -(M qdd - Q)
                     r += M[j, m] * qdd[m]
-                y[k] = K.out_scale[k] * r   # generalized drive force / (d angle / d coordinate)
+                # generalized drive force / (d angle / d coordinate)
+                if K.mot_crp >= 0:
+                    r /= kaps[K.mot_crp]
+                y[k] = K.out_scale[k] * r
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
@@ -372,23 +544,35 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
         elif kind == 9:   # slip speed (scale R > 0) or cumulative slip (scale -R)
             i = K.out_i[k]
             j = K.out_j[k]
+            kap = _trac_kappa(K, u)   # the rope's speed at the strain it arrives with
             if K.out_scale[k] > 0.0:
-                y[k] = -v[i] - K.out_scale[k] * v[j]
+                y[k] = -kap * v[i] - K.out_scale[k] * v[j]
             else:
-                y[k] = -(q[i] - q_ref[i]) + K.out_scale[k] * (q[j] - q_ref[j])
+                y[k] = traction_slip(K, q, u)
         elif kind == 10:
             y[k] = traction_force(K, q, u, QE, QEs)
+        elif kind == 11:
+            i = K.out_i[k]
+            y[k] = creep_angle(K, q, u, i, kaps[i])
+        elif kind == 12:
+            i = K.out_i[k]
+            y[k] = -kaps[i] * v[K.crp_s[i]] / K.crp_R[i]
 
 
 @njit(cache=True)
 def energy(K, c, q, v):
-    """(kinetic, gravity potential, strain energy) of the whole system."""
+    """(kinetic, gravity potential, strain energy) of the whole system (rigid-rim kinetic energy)."""
+    return energy_u(K, c, q, v, np.zeros(UE_CREEP))   # no creep part: rigid-rim inertia
+
+
+@njit(cache=True)
+def energy_u(K, c, q, v, u):
+    """energy() with the kernel inputs u (a creep sheave's rim kinetic energy uses its kappa)."""
     nq = K.nq
     nd = K.nd
     ne = K.el_idx.shape[1]
     M = np.empty((nq, nq))
     Q = np.empty(nq)
-    u = np.zeros(1)
     assemble(K, c, q, v, 0.0, u, M, Q)
     T = 0.0
     for i in range(nq):
@@ -433,5 +617,22 @@ def set_prescribed(K, q_ref, t, q, v, qdd):
         j = K.presc[k]
         gsc = K.presc_gain[k]
         q[j] = q_ref[j] + gsc * (x - x0)
+        v[j] = gsc * xd
+        qdd[j] = gsc * xdd
+
+
+@njit(cache=True, inline="always")
+def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
+    """set_prescribed for a speed-driven creep sheave over the step t0 -> t1 (q holds the step start):
+    the profile prescribes the rim, so sigma follows it at the arriving strain,
+    d sigma = gain dx / kappa."""
+    x, xd, xdd = profile_eval(K.profile, t1)
+    x0 = profile_eval(K.profile, t0)[0]
+    m = K.mot_crp
+    kap = u[UE_CREEP + UE_STRIDE * m + 4]
+    for k in range(K.presc.shape[0]):
+        j = K.presc[k]
+        gsc = K.presc_gain[k] / kap
+        q[j] = u[UE_CREEP + UE_STRIDE * m + 2] + gsc * (x - x0)
         v[j] = gsc * xd
         qdd[j] = gsc * xdd
