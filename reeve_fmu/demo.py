@@ -196,6 +196,7 @@ def cli_demo(args) -> int:
                 "landings_m": list(case.sequence), "dwell_s": case.dwell,
                 "pretorque_Nm": pre, "drive_level": 1, "communication_step_s": step,
                 "drive_sizing": case.sizing, "overrides": {**case.scene_sets, **case.drive_sets},
+                "drive_values": dict(drive_values), "plant_values": dict(case.plant_values),
                 "scheme": res.info["scheme"], "t_end_s": res.info["t_end_s"],
                 "plant_fmu": str(plant_fmu), "drive_fmu": str(drive_fmu)}
     summary = {

@@ -421,11 +421,9 @@ def reference_error(results_csv, summary_json, ref_step=1e-4):
     with open(summary_json, encoding="utf-8") as fh:
         sc = json.load(fh)["scenario"]
     d = np.genfromtxt(results_csv, delimiter=",", names=True, deletechars="")
-    drive_values = {"pretorque[1]": sc["pretorque_Nm"][0], "pretorque[2]": sc["pretorque_Nm"][1],
-                    "landing[1]": sc["landings_m"][0], "landing[2]": sc["landings_m"][1]}
+    # the exact parameter values the demo gave its FMUs (drive sized from the scene, pre-torques, landings)
     ref = monolithic(step=ref_step, t_end=sc["t_end_s"], record_step=sc["communication_step_s"],
-                     plant_fmu=sc["plant_fmu"], plant_values={"car.load": sc["car_load_kg"]},
-                     drive_values=drive_values)
+                     plant_fmu=sc["plant_fmu"], plant_values=sc["plant_values"], drive_values=sc["drive_values"])
     n = min(len(ref.time), len(d["time"]))
     assert np.allclose(ref.time[:n], d["time"][:n], rtol=0, atol=1e-9)
     err = np.abs(d["car.position"][:n] - ref["car.position"][:n])

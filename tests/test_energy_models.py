@@ -1,6 +1,7 @@
 """Energy balance of the planar and spatial linear-element models with inclined spans and a moving
-sheave: no damping, no drive, generalized-alpha at rho_inf = 1, so T + Vg + U is constant up to the
-second-order integration error (halving the step divides the drift by ~4). A missing ALE boundary or
+sheave: no damping, no drive, the rigid-rim contact (no creep loss), generalized-alpha at rho_inf = 1,
+so T + Vg + U is constant up to the second-order integration error (halving the step divides the drift
+by ~4). A missing ALE boundary or
 convective term, a wrong tangent-point kinematics on the moving sheave or a wrong 3D tangent would
 leave a drift that does not shrink with the step."""
 import numpy as np
@@ -19,6 +20,7 @@ def _scene(model: str) -> str:
 [scene]
 name = "energy_block"
 model = "{model}"
+sheave_contact = "rigid"   # conservative: the creep contact dissipates (its balance: tests/test_creep.py)
 [solver]
 step = 1e-3
 rho_inf = 1.0
