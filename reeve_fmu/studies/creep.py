@@ -80,7 +80,7 @@ def main(argv=None):
     s = summary(out)
     print(json.dumps(s, indent=2))
     if a.json:
-        Path(a.json).write_text(json.dumps(s, indent=2))
+        Path(a.json).write_text(json.dumps(s, indent=2), encoding="utf-8")
     if a.plot:
         plot(out, a.plot)
 
