@@ -34,11 +34,13 @@ from .traction import equivalent_friction
 from .profiles import Profile, scurve, speed_table
 from .scene import AXES, Scene, SceneError
 from .kernel import Kernel, compiled_kernel, new_state_arrays
+from .bodies import NonlinearRows, empty_fields, rigid_fields
 
 
 DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
+ROTATION_VECTOR = ("rx", "ry", "rz")   # coordinates of a spatial rigid body's rotation vector [rad]
 (OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
- OUT_FRICTION, OUT_CANGLE, OUT_CSPEED) = range(13)
+ OUT_FRICTION, OUT_CANGLE, OUT_CSPEED, OUT_JOINT) = range(14)
 CREEP_VREG = 1e-3   # m/s: material speed over which the arriving side changes at a reversal (tanh blend)
 INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
 #                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
@@ -179,7 +181,11 @@ def _build(scene: Scene) -> Model:
         if scene.model == "planar" and "y" in b.free:
             raise SceneError(f"{scene.source}: [bodies.{b.name}.free] the planar model moves in x-z; "
                              f"'y' cannot be free")
-        body_dofs[b.name] = {ax: new_q(f"{b.name}.{ax}", "body", b.position[AXES.index(ax)]) for ax in b.free}
+        coords = [c for ax in b.free for c in (ROTATION_VECTOR if ax == "rotation" else (ax,))]
+        body_dofs[b.name] = {ax: new_q(f"{b.name}.{ax}", "body",
+                                       b.position[AXES.index(ax)] if ax in AXES else 0.0) for ax in coords}
+    # exact tangents (rotating bodies): node rows that depend nonlinearly on q (core/bodies.py)
+    nlr = NonlinearRows(scene, body_dofs) if scene.tangents == "exact" else None
 
     def body_point(body, offset):
         """Affine 3D position of a point fixed to a body (or the ground)."""
@@ -188,6 +194,10 @@ def _build(scene: Scene) -> Model:
         b = bodies[body]
         r = _Affine(np.asarray(b.position) + np.asarray(offset))
         for ax, j in body_dofs[body].items():
+            if ax == "travel":
+                r.add(j, b.joint_axis)
+            if ax not in AXES:
+                continue    # rotation: the nonlinear rows (NonlinearRows) carry it
             k = AXES.index(ax)
             r.r0[k] -= b.position[k]
             e = np.zeros(3)
@@ -311,6 +321,8 @@ def _build(scene: Scene) -> Model:
             if lump > 0 and sh.body is not None:
                 chord = T_out - T_in
                 for ax, jb in body_dofs[sh.body].items():
+                    if ax not in AXES:
+                        continue   # the wrap's rope turning with the body is neglected
                     kk = AXES.index(ax)
                     M0_terms.append((jb, jb, rhoA * lump))
                     M0_terms.append((jb, j, -rhoA * chord[kk]))
@@ -333,6 +345,7 @@ def _build(scene: Scene) -> Model:
 
         span_nodes = []
         rope_wraps = []    # W2: (stop, element indices) per wrap
+        nl_spans = _register_spans(nlr, scene, rope, stops, geo) if nlr is not None else None
         for k, (TA, TB) in enumerate(spans):
             e = (TB - TA) / np.linalg.norm(TB - TA)
             ends = []
@@ -359,6 +372,11 @@ def _build(scene: Scene) -> Model:
                         node["d"] = free_slope(f"{rope.name}.span{k}.{kind}", e)
                 nodes.append(node)
                 ends.append(len(nodes) - 1)
+                if nl_spans is not None:
+                    nlr.tangent_rows(len(nodes) - 1, nl_spans[k], 0 if kind == "start" else 1, comps_nd)
+            if nl_spans is not None and 0 < k and rope.wrap_model == "W1" and stops[k].sheave is not None:
+                nlr.wrap_row(ends[0], nl_spans[k - 1], nl_spans[k], sig[k], geo[k][1], geo[k][3],
+                            geo[k][2])
             if rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and wraps[k][0] > 0:
                 rope_wraps.append((k, _wrap_elements(
                     nodes, wrap_elements, span_nodes[k - 1][1], ends[0], geo[k], wraps[k],
@@ -413,6 +431,15 @@ def _build(scene: Scene) -> Model:
     # bodies: mass and gravity
     for b in scene.bodies:
         for ax, j in body_dofs[b.name].items():
+            if ax in ("theta", "angle"):   # about the centre of mass (theta) or the joint axis (angle)
+                M0_terms.append((j, j, b.inertia))
+                continue
+            if ax in ROTATION_VECTOR:      # M(q) and the quadratic-velocity terms: bodies.rigid_terms
+                continue
+            if ax == "travel":
+                M0_terms.append((j, j, b.mass))
+                F0[j] = F0.get(j, 0.0) + b.mass * (g @ np.asarray(b.joint_axis))
+                continue
             M0_terms.append((j, j, b.mass))
             F0[j] = F0.get(j, 0.0) + b.mass * g[AXES.index(ax)]
             if b.damping > 0:
@@ -495,6 +522,14 @@ def _build(scene: Scene) -> Model:
             el_map[ie, a, :len(nz)] = nz
             el_coef[ie, a, :len(nz)] = B[el_idx[ie, a], nz]
 
+    nl_fields = empty_fields(len(elements), ne, nq)
+    if nlr is not None:
+        def row_of(key):
+            if key[0] == "pos":
+                return key[1] * nd + comps_nd.index(key[2])
+            return n_nodes * nd + n_slope + key[1]
+        el_map, el_coef, nl_fields = nlr.finalize(nd, row_of, q0, B, c0, el_idx, el_map, el_coef)
+
     # CSR of B
     ptr, idx, val = [0], [], []
     for row in range(n_p):
@@ -536,7 +571,8 @@ def _build(scene: Scene) -> Model:
                 profile = speed_table(dv.table)
         elif dv.kind == "torque":
             torque_table = np.array(dv.torque, float).T.copy()
-    free = [j for j in range(nq) if j not in presc]
+    joints = _joint_tables(scene, body_dofs, g, springs)
+    free = [j for j in range(nq) if j not in presc and j not in joints["jp_dof"]]
 
     crp = _creep_table(scene, sheave_dof, tension_taps, slip_info)
     crp_index = {name: k for k, name in enumerate(crp["name"])}
@@ -550,7 +586,19 @@ def _build(scene: Scene) -> Model:
 
     for b in scene.bodies:
         dofs = body_dofs[b.name]
+        if b.joint is not None:
+            _joint_outputs(out, b, dofs)
+            continue
         for ax, j in dofs.items():
+            if ax == "theta":   # rad, counter-clockwise in the x-z drawing
+                out(f"{b.name}.angle", OUT_Q, j)
+                out(f"{b.name}.angular_velocity", OUT_V, j)
+                out(f"{b.name}.angular_acceleration", OUT_A, j)
+                continue
+            if ax in ROTATION_VECTOR:   # rotation vector from the scene's orientation [rad]
+                out(f"{b.name}.rotation.{ax[1]}", OUT_Q, j)
+                out(f"{b.name}.rotation_rate.{ax[1]}", OUT_V, j)
+                continue
             suffix = "" if (nd == 1 and len(dofs) == 1) else f".{ax}"
             out(f"{b.name}.position{suffix}", OUT_Q, j)
             out(f"{b.name}.velocity{suffix}", OUT_V, j)
@@ -641,11 +689,12 @@ def _build(scene: Scene) -> Model:
         crp_s=np.array(crp["s"], np.int64), crp_el_in=np.array(crp["el_in"], np.int64),
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
-        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
+        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG, **nl_fields, **joints,
+        **rigid_fields(scene, body_dofs),
     )
 
     # ------------------------------------------------------------------ statics sets
-    locked = set(presc)
+    locked = set(presc) | set(joints["jp_dof"].tolist())
     if dv.kind in ("torque", "external", "none") and mot_dof >= 0 and dv.kind != "none":
         locked.add(mot_dof)   # held by the brake/drive during the initial statics
     if slip_info:
@@ -672,6 +721,82 @@ def _build(scene: Scene) -> Model:
                  element_span=tuple((ir, k) for (_, _, ir, k) in elements),
                  info=dict(n_nodes=n_nodes, n_slope=n_slope, wraps=wrap_len_total, dof_R=dof_R,
                            wrap_el_idx=wrap_idx, creep_sheaves=tuple(crp["name"])))
+
+
+def _joint_tables(scene, body_dofs, g, springs):
+    """Kernel arrays of the joints: S-curve profiles of prescribed joints (jp_*), torque tables
+    (jt_*), the gravity moment of revolute bodies A cos(angle) + B sin(angle) (jg_*). Joint damping
+    is appended to springs."""
+    jp, jt, jg = [], [], []
+    for b in scene.bodies:
+        if b.joint is None:
+            continue
+        j = body_dofs[b.name]["angle" if b.joint == "revolute" else "travel"]
+        mo = b.motion
+        if mo.damping > 0:
+            springs.append((j, 0.0, mo.damping))
+        if mo.kind == "profile":
+            jp.append((j, scurve(mo.distance, mo.v_max, mo.a_max, mo.jerk, t_start=mo.t_start).arrays))
+        elif mo.kind == "torque":
+            jt.append((j, np.array(mo.torque, float).T))
+        if b.joint == "revolute":
+            # potential -m g . R(angle) d0 of the centre of mass, d0 from the pivot (Rodrigues)
+            a, d0 = np.asarray(b.joint_axis), np.asarray(b.position) - np.asarray(b.pivot)
+            A = b.mass * (g @ np.cross(a, d0))
+            Bc = b.mass * ((g @ a) * (a @ d0) - g @ d0)
+            if abs(A) + abs(Bc) > 0.0:
+                jg.append((j, A, Bc))
+
+    def stack(items, rows):
+        n = max([t.shape[1] for _, t in items], default=1)
+        out = np.zeros((len(items), rows, n))
+        for k, (_, t) in enumerate(items):
+            out[k, :, :t.shape[1]] = t
+            out[k, :, t.shape[1]:] = t[:, -1:]
+            out[k, 0, t.shape[1]:] = 1e300     # padding never reached: profile_eval/_interp stay in range
+        return out
+    return dict(jp_dof=np.array([j for j, _ in jp], np.int64), jp_prof=stack(jp, 5),
+                jt_dof=np.array([j for j, _ in jt], np.int64), jt_tab=stack(jt, 2),
+                jg_dof=np.array([x[0] for x in jg], np.int64), jg_A=np.array([x[1] for x in jg], float),
+                jg_B=np.array([x[2] for x in jg], float))
+
+
+def _joint_outputs(out, b, dofs):
+    """Outputs of a body on a joint: its coordinate, rate, acceleration and the joint torque (force)
+    that moves it (the drive's reaction for a prescribed motion)."""
+    if b.joint == "revolute":
+        j = dofs["angle"]
+        out(f"{b.name}.angle", OUT_Q, j)
+        out(f"{b.name}.angular_velocity", OUT_V, j)
+        out(f"{b.name}.angular_acceleration", OUT_A, j)
+        out(f"{b.name}.joint_torque", OUT_JOINT, j)
+    else:
+        j = dofs["travel"]
+        out(f"{b.name}.travel", OUT_Q, j)
+        out(f"{b.name}.velocity", OUT_V, j)
+        out(f"{b.name}.acceleration", OUT_A, j)
+        out(f"{b.name}.joint_force", OUT_JOINT, j)
+
+
+def _register_spans(nlr, scene, rope, stops, geo):
+    """Exact tangents: every span of the rope in the registry (core/bodies.py); returns their indices.
+    The nonlinear rows cover one linear element per span with rigid terminations."""
+    sheaves = {s.name: s for s in scene.sheaves}
+    where = f"{scene.source}: [ropes.{rope.name}]"
+    if rope.element != "linear" or rope.wrap_model == "W2" or rope.elements_per_span != 1:
+        raise SceneError(f"{where} exact tangent points (rotating bodies, scene.tangents = 'exact') are "
+                         f"implemented for linear elements, one per span (elements_per_span = 1), wraps W0/W1")
+    desc = []
+    for st, (c, R, a, sgn) in zip(stops, geo):     # c: the stop's world position at t = 0
+        if st.sheave is not None:
+            sh = sheaves[st.sheave]
+            desc.append((sh.body, c, R, sgn, np.asarray(sh.axis, float)))
+        else:
+            if st.hitch_stiffness > 0 or st.hitch_damping > 0:
+                raise SceneError(f"{where} route: hitch springs are not available with exact tangent points")
+            body = None if st.anchor == "ground" else st.anchor
+            desc.append((body, c, 0.0, 1.0, None))
+    return [nlr.span(desc[k], desc[k + 1]) for k in range(len(stops) - 1)]
 
 
 def _creep_table(scene, sheave_dof, tension_taps, slip_info):
