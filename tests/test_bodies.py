@@ -325,3 +325,18 @@ def test_non_physical_inertia_tensor_is_an_error_naming_the_key(inertia, match):
             .replace('free = ["x", "z", "theta"]', 'free = ["x", "y", "z", "rotation"]'))
     with pytest.raises(SceneError, match=rf"bodies\[0\]\.inertia\] .*{match}"):
         loads_scene(text, "bad.toml")
+
+
+def test_sheave_inside_another_is_an_error_naming_the_key():
+    text = _box_scene() + """
+[[sheaves]]
+name = "big"
+center = [0.0, 0.0, 1.0]
+radius = 0.5
+[[sheaves]]
+name = "small"
+center = [0.1, 0.0, 1.0]
+radius = 0.2
+"""
+    with pytest.raises(SceneError, match=r"sheaves\[1\]\.center\] sheave 'small' overlaps sheave 'big'"):
+        loads_scene(text, "bad.toml")

@@ -521,7 +521,24 @@ def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
         for i, s in enumerate(sheaves):
             if abs(abs(s.axis[1]) - 1.0) > 1e-9:
                 r.fail(f"sheaves[{i}].axis", f"model {model!r} needs sheave axes along y, got {list(s.axis)}")
+    _check_overlaps(r, sheaves)
     return sheaves
+
+
+def _check_overlaps(r: _Reader, sheaves):
+    """Two sheaves on the same body (or both on the ground) in one plane whose pitch circles overlap:
+    one would sit inside the other."""
+    for i, a in enumerate(sheaves):
+        for k in range(i):
+            b = sheaves[k]
+            if a.body != b.body or abs(abs(float(np.dot(a.axis, b.axis))) - 1.0) > 1e-9:
+                continue
+            d = np.asarray(a.center, float) - np.asarray(b.center, float)
+            axial = float(np.dot(d, a.axis))
+            radial = float(np.linalg.norm(d - axial * np.asarray(a.axis)))
+            if abs(axial) < 1e-6 and radial < a.radius + b.radius:
+                r.fail(f"sheaves[{i}].center", f"sheave {a.name!r} overlaps sheave {b.name!r} in the same plane "
+                                               f"(centre distance {radial:g} m < radii {a.radius:g} + {b.radius:g} m)")
 
 
 def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_names, used_sheaves) -> list:
