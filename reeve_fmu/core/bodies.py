@@ -152,7 +152,7 @@ def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
 
 
 @njit(cache=True)
-def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, f):
+def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, f):
     """The nonlinear rows f at q.
     Body b: bq[b] = q indices of (x, y, z, angle, rotation vector) (-1: fixed at b0[b]); bk[b] = 0: reference point
     (x, y, z) turned by the angle about the unit axis bax[b] (planar theta: -y; revolute joint: its
@@ -162,8 +162,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, f)
     span k runs from point sp[k, 0] to sp[k, 1] with sg[k] = (RA, sA, RB, sB) and the sheave axes
     sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
     component) or (ROW_WRAP, span in, span out, sigma index) with rf[r] = (R, sense relative to the
-    span-in end-B axis, s offset, centre point). P, TW, BR (body rotations), ANG (contact angles) are
-    scratch."""
+    span-in end-B axis, s offset, centre point). P, TW, BR (body rotations), ANG (contact angles), AX
+    (two axes) are scratch."""
     for b in range(bq.shape[0]):
         if bk[b] == 2:   # rotation vector phi: axis phi / |phi|, angle |phi|
             p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
@@ -194,8 +194,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, f)
         P[i, 0] = x + r0
         P[i, 1] = y + r1
         P[i, 2] = z + r2
-    aA = np.empty(3)
-    aB = np.empty(3)
+    aA = AX[0]
+    aB = AX[1]
     for k in range(sp.shape[0]):
         for e in range(2):
             b = pb[sp[k, e]]
@@ -245,7 +245,7 @@ def nl_update(K, c, q, v):
     f0, fp, fm, J = K.nl_f0, K.nl_fp, K.nl_fm, K.nl_J
     qs = K.nl_qs
     G = (K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_pb, K.nl_po, K.nl_sp, K.nl_sg, K.nl_sa, K.nl_rk, K.nl_rf,
-         K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG)
+         K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
     rows_jacobian(q, G, K.nl_cols, f0, fp, fm, qs, J)
     acc = K.nl_racc
     nrm = 0.0
@@ -301,7 +301,7 @@ def nl_convect(K, MEs, QEs, ie):
 
 
 GEOMETRY_FIELDS = ("nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa", "nl_rk",
-                   "nl_rf", "nl_P", "nl_TW", "nl_BR", "nl_ANG")
+                   "nl_rf", "nl_P", "nl_TW", "nl_BR", "nl_ANG", "nl_AX")
 
 
 def body_frame(b):
@@ -324,7 +324,7 @@ def empty_fields(n_el: int, ne: int, nq: int) -> dict:
                 nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
                 nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
                 nl_rf=f2.copy(), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
-                nl_ANG=np.zeros((0, 2)), nl_cols=np.zeros(0, np.int64),
+                nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
                 nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
                 nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)))
@@ -447,7 +447,7 @@ class NonlinearRows:
         nc = len(cols)
         f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_pb=pb, nl_po=po, nl_sp=sp,
                  nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf, nl_P=np.zeros((len(pb), 3)), nl_TW=np.zeros((len(sp), 6)),
-                 nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan),
+                 nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
                  nl_cols=np.array(cols, np.int64), nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
                  nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
                  nl_ent=ent, nl_acc=np.zeros(el_idx.shape))
@@ -469,10 +469,11 @@ class NonlinearRows:
 RB_H = 1e-6   # rad: central-difference step of the rotational mass matrix M(phi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rot_mass(p0, p1, p2, J, out):
     """out = T^T R J R^T T: the mass matrix of the rotation vector phi, with R = exp(phi^) (the
-    orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity."""
+    orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity. Written out
+    with scalars and fixed-size loops (no temporaries: it runs 7 times per residual and body)."""
     th2 = p0 * p0 + p1 * p1 + p2 * p2
     th = math.sqrt(th2)
     if th < 1e-4:   # series of (1 - cos)/th^2, (th - sin)/th^3 and sin/th
@@ -483,11 +484,29 @@ def _rot_mass(p0, p1, p2, J, out):
         a = (1.0 - math.cos(th)) / th2
         b = (th - math.sin(th)) / (th2 * th)
         s1 = math.sin(th) / th
-    P = np.array([[0.0, -p2, p1], [p2, 0.0, -p0], [-p1, p0, 0.0]])
-    P2 = P @ P
-    T = np.eye(3) + a * P + b * P2
-    R = np.eye(3) + s1 * P + a * P2          # Rodrigues
-    out[:, :] = T.T @ (R @ J @ R.T) @ T
+    # P = phi^, P2 = P P = phi phi^T - th2 I
+    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+    ph = (p0, p1, p2)
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
+            e = 1.0 if i == k else 0.0
+            T[i, k] = e + a * P[i][k] + b * p2ik
+            R[i, k] = e + s1 * P[i][k] + a * p2ik          # Rodrigues
+    # W = R^T T (body angular velocity map); out = W^T J W
+    W = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            W[i, k] = R[0, i] * T[0, k] + R[1, i] * T[1, k] + R[2, i] * T[2, k]
+    for i in range(3):
+        for k in range(3):
+            acc = 0.0
+            for r in range(3):
+                for c in range(3):
+                    acc += W[r, i] * J[r, c] * W[c, k]
+            out[i, k] = acc
 
 
 @njit(cache=True)
@@ -498,17 +517,22 @@ def rigid_terms(K, q, v, M, Q):
     Mr = np.empty((3, 3))
     Mp = np.empty((3, 3))
     Mm = np.empty((3, 3))
+    p = np.empty(3)
+    w = np.empty(3)
+    dMw = np.empty(3)
     for k in range(K.rb_q.shape[0]):
-        idx = (K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2])
-        p = np.array([q[idx[0]], q[idx[1]], q[idx[2]]])
-        w = np.array([v[idx[0]], v[idx[1]], v[idx[2]]])
+        for a in range(3):
+            p[a] = q[K.rb_q[k, a]]
+            w[a] = v[K.rb_q[k, a]]
+            dMw[a] = 0.0
         J = K.rb_J[k]
         _rot_mass(p[0], p[1], p[2], J, Mr)
         for a in range(3):
             for b in range(3):
-                M[idx[a], idx[b]] += Mr[a, b]
+                M[K.rb_q[k, a], K.rb_q[k, b]] += Mr[a, b]
+        if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
+            continue
         # dM_r/dt w = sum_c (dM_r/dphi_c) w_c w, and d/dphi_c of w^T M_r w / 2
-        dMw = np.zeros(3)
         for c in range(3):
             p[c] += RB_H
             _rot_mass(p[0], p[1], p[2], J, Mp)
@@ -521,9 +545,9 @@ def rigid_terms(K, q, v, M, Q):
                     dM = (Mp[a, b] - Mm[a, b]) / (2.0 * RB_H)
                     dMw[a] += dM * w[c] * w[b]
                     dT += 0.5 * w[a] * dM * w[b]
-            Q[idx[c]] += dT
+            Q[K.rb_q[k, c]] += dT
         for a in range(3):
-            Q[idx[a]] -= dMw[a]
+            Q[K.rb_q[k, a]] -= dMw[a]
 
 
 def rigid_fields(scene, body_dofs) -> dict:
