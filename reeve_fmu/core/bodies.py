@@ -317,7 +317,7 @@ def body_frame(b):
     return 2 if "rotation" in b.free else 0, np.array([0.0, -1.0, 0.0]), np.asarray(b.position, float), slots
 
 
-def empty_fields(n_el: int, ne: int, nq: int) -> dict:
+def empty_fields() -> dict:
     """Kernel fields of a model without nonlinear rows (nl_on = 0; nothing is evaluated)."""
     i2, f2 = np.zeros((0, 4), np.int64), np.zeros((0, 4))
     return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
