@@ -369,8 +369,8 @@ class SimBus:
                             raise RuntimeError("SimNet: every party waits forever")
                         net.now = max(net.now, nxt)
                         net.cv.notify_all()
-                    elif not net.cv.wait(60.0):
-                        raise RuntimeError("SimNet: a party stayed busy for 60 s of wall time")
+                    elif not net.cv.wait(600.0):
+                        raise RuntimeError("SimNet: a party stayed busy for 600 s of wall time")
             finally:
                 self.waiting_until = None
 
