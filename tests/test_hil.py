@@ -367,9 +367,12 @@ class SimBus:
                         nxt = min([b.inbox[0][0] for b in live if b.inbox] + [b.waiting_until for b in live])
                         if not math.isfinite(nxt):
                             raise RuntimeError("SimNet: every party waits forever")
-                        net.now = max(net.now, nxt)
-                        net.cv.notify_all()
-                    elif not net.cv.wait(600.0):
+                        if nxt > net.now:
+                            net.now = nxt
+                            net.cv.notify_all()
+                            continue
+                    # another party has something due now (or is busy): let it run
+                    if not net.cv.wait(600.0):
                         raise RuntimeError("SimNet: a party stayed busy for 600 s of wall time")
             finally:
                 self.waiting_until = None
