@@ -412,11 +412,12 @@ def q_terms(K, W, q, v, t, u):
             Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
             if k == K.mot_crp:
                 gain *= kap
-    for k in range(K.jt_dof.shape[0]):      # joint torque (force) tables
-        Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
-    for k in range(K.jg_dof.shape[0]):      # gravity moment of a revolute body about its joint
-        x = q[K.jg_dof[k]]
-        Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
+    if K.nl_on & 2:   # joints: torque (force) tables, gravity moments of revolute bodies
+        for k in range(K.jt_dof.shape[0]):
+            Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
+        for k in range(K.jg_dof.shape[0]):
+            x = q[K.jg_dof[k]]
+            Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
@@ -459,7 +460,8 @@ def assemble_ws(K, W, c, q, v, t, u):
         for j in range(nq):
             M[i, j] = M0[i, j]
     status = 0
-    nl = K.nl_on != 0
+    flags = K.nl_on     # bit 1: nonlinear rows, bit 2: joints or spatial rigid bodies (one read)
+    nl = (flags & 1) != 0
     if nl:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the nonlinear rows
         nl_update(K, c, q, v)
     for ie in range(el_map.shape[0]):
@@ -493,7 +495,7 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     q_terms(K, W, q, v, t, u)
-    if K.rb_q.shape[0] > 0:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
+    if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
     Md = W.Md
     for j in range(nq):
@@ -669,6 +671,8 @@ def energy_u(K, c, q, v, u):
 def set_joints(K, t, q, v, qdd):
     """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
     pose, as the profile at its start): q = x(t)."""
+    if K.nl_on & 2 == 0:
+        return
     for k in range(K.jp_dof.shape[0]):
         j = K.jp_dof[k]
         x, xd, xdd = profile_eval(K.jp_prof[k], t)
