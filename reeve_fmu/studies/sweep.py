@@ -224,7 +224,7 @@ def run_sweep(study: dict, client, progress: bool = True, max_chunk: int = MAX_C
     Rows are gathered as tasks finish and each task's result is released then."""
     from dask.distributed import as_completed
 
-    nw = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
+    nw = max(1, sum(client.nthreads().values()))
     base = {k: v for k, v in study.items() if k != "runs"}    # each task carries only its own runs
     futures = {}
     for ch in chunks(len(study["runs"]), nw, max_chunk):
@@ -304,6 +304,8 @@ def verdict_table(rows: list) -> list:
     limits, the unit and the source of the limit."""
     table = {}
     for r in rows:
+        if r.get("error") is not None:
+            continue
         for v in r.get("_verdicts") or ():
             e = table.setdefault(v["check"], {"check": v["check"], "PASS": 0, "WARN": 0, "FAIL": 0, "INFO": 0,
                                                "values": [], "limits": [], "unit": v["unit"], "source": v["source"]})
@@ -397,7 +399,7 @@ def cli_sweep(args) -> int:
     client = make_client(args.scheduler, args.workers)
     nw = None
     try:
-        nw = len(client.scheduler_info().get("workers", {}))
+        nw = len(client.nthreads())
         print(f"Dask: {client.scheduler.address} with {nw} workers")
         rows = run_sweep(study, client, progress=not args.no_progress)
     finally:
