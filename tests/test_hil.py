@@ -563,7 +563,10 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     """A 1 m trip on the in-process plant: summary.json, report.md (with the trip plots) and the console
     carry every verdict with value and limit. The checks use what the bench ran: the drive's default
     torque limit (1000 N m, not the one sized from the scene), its rated speed (the overspeed value is the
-    record's peak car speed over 1.6 m/s), and the coupling monitor over the exchanged torque and speed."""
+    record's peak car speed over 1.6 m/s), and the coupling monitor over the exchanged torque and speed:
+    the bench is a 1 ms Jacobi coupling, whose speed loop chatters on the brake's stick spring after the
+    brake drops (docs/hard-cases.md: peak 8.1 % of torque.max for the in-process 1 ms Jacobi round trip;
+    measured here 8.2 %, after the stop)."""
     from reeve_fmu.hil.run import _print_summary
 
     r = _run(tmp_path, t_end=5.5)
@@ -575,7 +578,9 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     assert all(v["status"] in ("PASS", "WARN", "FAIL") and isinstance(v["limit"], float) for v in vs.values())
     assert "torque.max 1000 N·m" in vs["drive at its torque/power limit"]["source"]
     assert vs["car speed / rated speed"]["value"] == pytest.approx(100 * r["car_speed_max_m_s"] / 1.6, rel=1e-12)
-    assert vs["co-simulation coupling"]["status"] == "PASS" and r["coupling"]["coupling_stable"] is True
+    assert vs["co-simulation coupling"]["status"] == "FAIL" and r["coupling"]["instability"]["criterion"] == "torque chatter"
+    assert r["coupling"]["instability_detected_at"] > r["trip_metrics"]["trips"][0]["t_stop_s"]
+    assert 0.06 < r["coupling"]["torque_chatter_max"] < 0.12
     assert vs["stopping accuracy"]["status"] == "PASS" and vs["HIL drive fault (watchdog, heartbeat, SYNC, plant)"]["status"] == "PASS"
     out = tmp_path / "hil"
     md = (out / "report.md").read_text(encoding="utf-8")
@@ -598,7 +603,8 @@ def test_hil_coupling_check_flags_an_alternating_torque():
     t = np.arange(n) * 1e-3
     base = {"hil.brake_command": np.ones(n), "motor.speed": np.full(n, 10.0), "motor.angle": 10.0 * t}
     bad = coupling_report(t, dict(base, **{"hil.torque": 500.0 + 300.0 * (-1.0) ** np.arange(n)}), 1e-3, 1000.0)
-    assert bad["coupling_stable"] is False and bad["instability"]["criterion"] == "torque chatter"
+    assert bad["coupling_stable"] is False
+    assert "torque chatter" in {e["criterion"] for e in bad["instability_episodes"]}
     assert bad["torque_chatter_max"] == pytest.approx(0.3, rel=1e-9)
     ok = coupling_report(t, dict(base, **{"hil.torque": np.full(n, 500.0)}), 1e-3, 1000.0)
     assert ok["coupling_stable"] is True

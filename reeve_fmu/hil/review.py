@@ -133,9 +133,10 @@ def _key_figures(summary: dict) -> list:
         rows.append(("trip time", " / ".join(f"{x:.2f}" for x in m["trip_time_s"]), "s"))
         rows.append(("max traction ratio", f"{m['traction_ratio_max']:.3f}", ""))
         rows += [(f"stopping error at {k}", f"{e:+.2f}", "mm") for k, e in m["stopping_error_mm"].items()]
-    for key in ("reference", "vs_demo_scheme"):
+    for key, what in (("reference", "the in-process run of the same coupling"),
+                      ("vs_demo_scheme", "the in-process run of the demo's coupling")):
         if key in summary:
-            rows.append((f"max |Δ car position| vs {key.replace('_', ' ')} run",
+            rows.append((f"car position: largest difference from {what}",
                          f"{summary[key]['max_abs_diff_car_position']:.3g}", "m"))
     return rows
 

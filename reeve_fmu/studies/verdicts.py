@@ -324,7 +324,11 @@ def _explain_one(v: Verdict, vs: list, summary: dict) -> str:
     if c.startswith("buffer contact"):
         return f"Buffers: a buffer force of {v.value:.4g} N: a buffer was reached, which normal operation never does."
     if c == "co-simulation coupling":
-        return f"Coupling: {v.note or 'the coupling monitor detected an instability'}; the results after it are not reliable."
+        return (f"Coupling: {v.note or 'the coupling monitor detected an instability'}. The torque exchanged "
+                "between drive and plant alternated from step to step, or the coupling created energy: values in "
+                "that episode are not reliable. A known case is the brake drop with one step of delay at 1 ms "
+                "(Jacobi coupling, as on the HIL bench): the speed loop chatters on the brake's stick spring for up "
+                "to 0.2 s while the brake holds the car (docs/hard-cases.md, 'Large communication steps').")
     if c.startswith("ride quality"):
         return (f"Ride quality: {c[len('ride quality: '):]} {v.value:.3g} {v.unit} above the typical target "
                 f"{v.limit:g} {v.unit} (a contract value, not a standard).")
