@@ -204,8 +204,10 @@ def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts:
     """DIR/report.md: scenario, verdicts with limits and sources, findings (what each WARN/FAIL means;
     default `verdicts.explain`), key figures, levelling, plots."""
     vs = [v if isinstance(v, Verdict) else Verdict(**v) for v in verdicts]
+    bad = [f"{v.status} {v.check}" for v in vs if v.status in ("FAIL", "WARN")]
     lines = [f"# {title}", "",
-             f"Overall verdict: **{worst(vs)}** — generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} "
+             f"Overall verdict: **{worst(vs)}**" + (f" ({'; '.join(bad)}: see Findings)" if bad else "")
+             + f" — generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} "
              f"UTC by reeve_fmu" + (f" (`{command}`)" if command else ""), "", "## Scenario", "",
              "| item | value |", "|---|---|"]
     lines += [f"| {k} | {_cell(v)} |" for k, v in scenario.items()]

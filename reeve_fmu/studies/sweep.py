@@ -187,7 +187,7 @@ def make_client(scheduler: str | None = None, workers: int | None = None):
         raise RuntimeError("sweeps need Dask: pip install -e '.[study]' (dask[distributed], pyarrow)") from None
     if scheduler:
         return Client(scheduler)
-    n = workers or os.cpu_count() or 1
+    n = (os.cpu_count() or 1) if workers is None else workers
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"--workers {n!r}: must be a whole number >= 1")
     with dask.config.set(DASK_CONFIG):     # the nanny hands its config to the worker process it starts
