@@ -115,8 +115,9 @@ def test_csv_denormals_and_thinning(tmp_path):
 
 def test_levelling_with_shaft_information_system(tmp_path):
     """The drive levels the car, not the sheave, when the SIS closes the position loop on the approach:
-    both stops within a few mm (measured +0.91 / +0.01 mm; motor encoder only: +26.8 mm at the top, the
-    car-side rope stretch the encoder cannot see). The run's report carries every verdict."""
+    both stops within a few mm (measured -0.18 / +0.77 mm; motor encoder only: +1.17 / -6.01 mm with the
+    rope creeping on the sheave, +26.7 mm at the top on the rigid rim). The run's report carries every
+    verdict."""
     import reeve_fmu
     from reeve_fmu.studies import report
     from reeve_fmu.studies.analysis import traction_limits
