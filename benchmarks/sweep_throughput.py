@@ -105,7 +105,8 @@ def _hold(_):
 
 
 def _line(r: dict) -> str:
-    share = "" if r["cpu_share"] != r["cpu_share"] else f", worker CPU share {r['cpu_share']:.2f}"
+    share = "" if r["cpu_share"] != r["cpu_share"] else \
+        f", worker CPU share {r['cpu_share']:.2f}, worker CPU per run {r['worker_cpu_s'] / r['runs']:.3f} s"
     return (f"{r['kind']:5s} {r['workers']} worker(s): {r['runs']} runs ({r['failed']} failed) in "
             f"{r['wall_s']:.1f} s = {r['rows_per_s']:.3f} rows/s (load average {r['loadavg_before'][0]:.2f} -> "
             f"{r['loadavg_after'][0]:.2f}{share}, {os.cpu_count()} CPUs)")
