@@ -25,7 +25,9 @@ def test_simulate_writes_csv_and_png(tmp_path, capsys):
     # verdicts with value and limit in summary.json, report.md and on the console
     s = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
     vs = {v["check"]: v for v in s["verdicts"]}
-    assert {"slack rope (minimum rope force)", "traction ratio during the trip"} <= set(vs)
+    assert {"slack rope (minimum rope force)", "traction ratio during the trip", "car speed / rated speed",
+            "EN 81-50 car loading (125 % at the lowest landing)", "EN 81-50 emergency braking (0.5 m/s²)",
+            "EN 81-50 car stalled (counterweight on its buffer)"} <= set(vs)
     tr = vs["traction ratio during the trip"]
     # results.csv carries 10 significant digits
     assert abs(tr["value"] - float(np.max(cols["traction.traction_ratio"]))) < 1e-9 * tr["value"]

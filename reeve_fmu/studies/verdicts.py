@@ -344,7 +344,10 @@ def explain(verdicts, summary: dict | None = None) -> list:
 
 def scene_verdicts(scene, t, c) -> list:
     """Verdicts of a `reeve-fmu simulate` run of any scene: slack rope, buffer contact and, for a traction
-    sheave, the traction ratio against the EN 81-50 limits of its groove."""
+    sheave, the traction ratio against the EN 81-50 limits of its groove; an elevator scene ([elevator])
+    adds the static EN 81-50 traction cases and the car speed against the [drive] rated speed."""
+    from types import SimpleNamespace
+
     out = generic_verdicts(t, c)
     for sh in scene.sheaves:
         name = f"{sh.name}.traction_ratio"
@@ -355,4 +358,8 @@ def scene_verdicts(scene, t, c) -> list:
         lim = traction_limits(scene, sh.name)
         r = float(np.nanmax(c[name]))
         out.append(_trip_traction({"traction_ratio_max": r}, lim))
+        if "elevator" in scene.extra:
+            out += en81_verdicts(scene, lim)
+            if "car.velocity" in c:
+                out.append(_overspeed(SimpleNamespace(drive_values={}, scene=scene), c))
     return out
