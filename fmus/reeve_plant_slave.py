@@ -84,11 +84,15 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        y = self.plant.step(dt, v["motor.torque"], v["brake.command"]).tolist()
+        y = self.plant.step(dt, v["motor.torque"], v["brake.command"])   # a new array every step
         for name, i in self._eager:
-            v[name] = y[i]
-        self.defer_outputs(lambda: self._write(y))
+            v[name] = y.item(i)
+        self._last = y                   # the snapshot _write_last writes when something reads it
+        self.defer_outputs(self._write_last)
         return True
+
+    def _write_last(self):
+        self._write(self._last)
 
     def get_hidden_state(self):
         return self.plant.get_state()
