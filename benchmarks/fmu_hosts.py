@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import gc
 import json
 import os
 import sys
@@ -160,19 +161,23 @@ def clock_cost(n=20000):
     return (time.thread_time() - c0) / n * 1e6
 
 
-def fmpy_pair(make, n, R, t0=0.0):
-    """(best CPU us/step, best wall us/step, per-call breakdown) of R + 1 fresh pairs from make(r)."""
-    runs, bd = [], {}
+def fmpy_runs(variants, n, R):
+    """{key: (best CPU us/step, best wall us/step, per-call breakdown)} for variants {key: make(r)}:
+    per round one fresh pair of each variant, interleaved (load changes hit all alike); round 0 gives the
+    breakdown (clock reads around every call), rounds 1..R the times."""
+    runs = {k: [] for k in variants}
+    bds = {k: {} for k in variants}
     for r in range(R + 1):
-        pair = make(r)
-        pair.run(5)                       # first steps: kernels load
-        if r == 0:
-            pair.run(n, t0=t0 + 5e-3, breakdown=bd)
-        else:
-            runs.append(pair.run(n, t0=t0 + 5e-3))
-        pair.close()
-    cpu, wall = best_of(runs)
-    return cpu, wall, bd
+        for key, make in variants.items():
+            pair = make(r)
+            pair.run(5)                       # first steps: kernels load
+            if r == 0:
+                pair.run(n, t0=5e-3, breakdown=bds[key])
+            else:
+                runs[key].append(pair.run(n, t0=5e-3))
+            pair.close()
+            gc.collect()
+    return {k: (*best_of(runs[k]), bds[k]) for k in variants}
 
 
 def measure_fmpy(out, triv, plant, drive, tmp, n, R):
@@ -180,19 +185,23 @@ def measure_fmpy(out, triv, plant, drive, tmp, n, R):
 
     vp = {v.name: v.valueReference for v in read_model_description(str(plant)).modelVariables}
     vd = {v.name: v.valueReference for v in read_model_description(str(drive)).modelVariables}
-    floor = lambda r: Pair([triv, triv], ["drive", "plant"], [INPUTS, INPUTS], [OUTPUTS, OUTPUTS],
-                           tmp / f"f{r}")
-    out["fmpy_floor_us"], out["fmpy_floor_wall_us"], out["fmpy_floor_breakdown_us"] = fmpy_pair(floor, n, R)
-    for key, fast in (("fmpy_fmus", "1"), ("fmpy_fmus_pythonfmu_path", "0")):
-        os.environ[fastlink.ENV] = fast       # read by each slave when the loader links it
 
-        def fmus(r, fast=fast):
+    def floor(r):
+        return Pair([triv, triv], ["drive", "plant"], [INPUTS, INPUTS], [OUTPUTS, OUTPUTS], tmp / f"f{r}")
+
+    def fmus(fast):
+        def make(r):
+            os.environ[fastlink.ENV] = fast       # read by each slave when the loader links it
             return Pair([drive, plant], ["drive", "plant"],
                         [(vd["motor.speed"], vd["motor.angle"]), (vp["motor.torque"], vp["brake.command"])],
                         [(vd["motor.torque"], vd["brake.command"]), (vp["motor.speed"], vp["motor.angle"])],
                         tmp / f"r{fast}{r}", start=(R1_DRIVE, {}))
-        out[f"{key}_us"], out[f"{key}_wall_us"], out[f"{key}_breakdown_us"] = fmpy_pair(fmus, n, R)
+        return make
+
+    res = fmpy_runs({"fmpy_floor": floor, "fmpy_fmus": fmus("1"), "fmpy_fmus_pythonfmu_path": fmus("0")}, n, R)
     os.environ.pop(fastlink.ENV)
+    for key, (cpu, wall, bd) in res.items():
+        out[f"{key}_us"], out[f"{key}_wall_us"], out[f"{key}_breakdown_us"] = cpu, wall, bd
     out["clock_reads_per_step_us"] = clock_cost()
 
 
@@ -209,12 +218,15 @@ def measure_c_host(out, triv, plant, drive, tmp, n, R):
     tplan = (f"fmu drive {dirs['triv']} {tid} {tguid}\nfmu plant {dirs['triv']} {tid} {tguid}\n"
              "input drive 0 plant 2\ninput drive 1 plant 3\ninput plant 0 drive 2\n"
              f"input plant 1 drive 3\nstep 0.001\nsteps {n}\n")
-    out["c_floor_us"], out["c_floor_wall_us"] = best_of(c_host(exe, tplan, tmp, n) for _ in range(R))
     plan = chost.cosim_plan(plant, drive, dirs["plant"], dirs["drive"], step=1e-3, steps=n,
                             drive_values=R1_DRIVE)
-    out["c_fmus_us"], out["c_fmus_wall_us"] = best_of(c_host(exe, plan, tmp, n) for _ in range(R))
-    out["c_fmus_pythonfmu_path_us"], out["c_fmus_pythonfmu_path_wall_us"] = best_of(
-        c_host(exe, plan, tmp, n, env={fastlink.ENV: "0"}) for _ in range(R))
+    variants = {"c_floor": (tplan, None), "c_fmus": (plan, None), "c_fmus_pythonfmu_path": (plan, {fastlink.ENV: "0"})}
+    runs = {k: [] for k in variants}
+    for _ in range(R):                    # interleaved, as in fmpy
+        for key, (text, env) in variants.items():
+            runs[key].append(c_host(exe, text, tmp, n, env=env))
+    for key in variants:
+        out[f"{key}_us"], out[f"{key}_wall_us"] = best_of(runs[key])
 
 
 def main() -> int:
