@@ -78,6 +78,7 @@ class ElectricDriveSlave(ReeveSlave):
         # per step only the exchanged outputs are written; the references etc. come from a snapshot
         # of the drive state when something reads them (ReeveSlave.defer_outputs)
         self.set_eager_outputs(("motor.torque", "brake.command"))
+        self._writer = self._write_snap          # bound once, not per step
 
     def _outputs(self, torque=None, brake=None):
         d = self.drive
@@ -123,7 +124,7 @@ class ElectricDriveSlave(ReeveSlave):
         v["motor.torque"], v["brake.command"] = d.step(t, dt, v["motor.speed"], v["motor.angle"])
         # the snapshot of the drive state for the other outputs: raw bytes (a tenth of tolist's cost)
         self._snap = (d._xs.tobytes(), d._xi.tobytes())
-        self.defer_outputs(self._write_snap)
+        self.defer_outputs(self._writer)
         return True
 
     def _write_snap(self):

@@ -606,20 +606,11 @@ class ReeveSlave(Fmi2Slave):
                 link.pull(self.values)
             if self._mode != "step" or self._fault or self._dirty or self._bad_inputs or self._pending:
                 return self._refuse_step(current_time, step_size)
-            dt = step_size
-            if not (dt > 0.0) or dt == math.inf:
-                self._error(f"doStep rejected: communicationStepSize={dt!r} at t={current_time!r} "
-                            f"(must be finite and > 0)")
-                return False
-            t = current_time
-            if t - t != 0.0:
-                self._error(f"doStep rejected: currentCommunicationPoint={t!r} is not finite")
-                return False
-            now = self.time
-            if now is not None and t != now and abs(t - now) > self.time_tolerance * dt + 1e-12 * abs(t):
-                self._error(f"doStep rejected: currentCommunicationPoint={t!r} but the FMU is at "
-                            f"t={now!r} (steps must be contiguous; use setFMUstate to go back)")
-                return False
+            t, dt, now = current_time, step_size, self.time
+            # the usual case in one test: dt finite and > 0, t finite and where the FMU is
+            if not (dt > 0.0 and dt - dt == 0.0 and t - t == 0.0 and (
+                    t == now or now is None or abs(t - now) <= self.time_tolerance * dt + 1e-12 * abs(t))):
+                return self._reject_step(t, dt, now)
             n_log = len(self.log_queue)
             try:
                 ok = self.step(t, dt)
@@ -645,6 +636,16 @@ class ReeveSlave(Fmi2Slave):
         except Exception:  # pragma: no cover - belt and braces
             self._error("do_step failed:\n" + traceback.format_exc())
             return False
+
+    def _reject_step(self, t, dt, now) -> bool:
+        if not (dt > 0.0) or dt == math.inf:
+            self._error(f"doStep rejected: communicationStepSize={dt!r} at t={t!r} (must be finite and > 0)")
+        elif t - t != 0.0:
+            self._error(f"doStep rejected: currentCommunicationPoint={t!r} is not finite")
+        else:
+            self._error(f"doStep rejected: currentCommunicationPoint={t!r} but the FMU is at "
+                        f"t={now!r} (steps must be contiguous; use setFMUstate to go back)")
+        return False
 
     def _refuse_step(self, t, dt) -> bool:
         if self._fault:
