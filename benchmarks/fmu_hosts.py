@@ -11,6 +11,8 @@ the start of the R1 trip: pre-torque, brake lift, acceleration):
   through pythonfmu's C++ -> Python path), of the same Plant/ElectricDrive objects stepped in-process
   without FMI (bare models), and a per-call breakdown of each (from a separate run with a CPU-clock
   read around every call; `clock_reads_per_step_us` is what those reads cost per step);
+* in-process (no FMI): the models' step methods, the slaves' step() hooks and the slaves' do_step
+  with the inputs held (`in_process_us`): what the slave layer adds in Python;
 * C host (tests/fmu_host/fmu_host.c, no LD_PRELOAD): us/step of the trivial slaves and of the FMUs,
   fast path on and off;
 * the ratios FMUs / floor and C host / fmpy, and the load average at start and end.
@@ -138,6 +140,73 @@ def bare_models(steps, repeat, h=1e-3):
     return best, best_wall
 
 
+def _slave_in_process(fmu, dest, name, values):
+    """The FMU's slave class instantiated in this process from its resources (no FMI, no loader)."""
+    import importlib.util
+    import zipfile
+
+    from reeve_fmu.fmu.slave import ReeveSlave
+
+    with zipfile.ZipFile(fmu) as zf:
+        zf.extractall(dest)
+    res = Path(dest) / "resources"
+    module = (res / "slavemodule.txt").read_text(encoding="utf-8").strip()
+    spec = importlib.util.spec_from_file_location(f"_bench_{name}_{module}", res / f"{module}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cls = next(c for c in vars(mod).values()
+               if isinstance(c, type) and issubclass(c, ReeveSlave) and c is not ReeveSlave)
+    s = cls(instance_name=name, resources=str(res), visible=False, logger=None)
+    s.setup_experiment(0.0, None, None)
+    s.enter_initialization_mode()
+    s.values.update(values)
+    s.exit_initialization_mode()
+    return s
+
+
+def slave_layers(plant, drive, tmp, steps, repeat):
+    """CPU us per step, in-process, of: the two models' step methods (drive.step, Plant.step), the
+    slaves' step() hooks (model + output bookkeeping) and the slaves' do_step (+ ReeveSlave's checks):
+    the Python the FMUs run per doStep besides the loader's call. Inputs held (torque 522.5 N m, brake
+    applied), so every variant does the same work; the best of `repeat`, interleaved."""
+    d = _slave_in_process(drive, tmp / "ip_drive", "drive", R1_DRIVE)
+    p = _slave_in_process(plant, tmp / "ip_plant", "plant", {})
+    p.values["motor.torque"] = 522.5
+    dm, pm = d.drive, p.plant
+
+    def models():
+        t = d.time
+        for _ in range(steps):
+            dm.step(t, 1e-3, 0.0, 0.0)
+            pm.step(1e-3, 522.5, 0.0)
+            t += 1e-3
+        d.time = p.time = t
+
+    def hooks():
+        t = d.time
+        for _ in range(steps):
+            d.step(t, 1e-3)
+            p.step(t, 1e-3)
+            t += 1e-3
+        d.time = p.time = t
+
+    def do_steps():
+        for _ in range(steps):
+            d.do_step(d.time, 1e-3)
+            p.do_step(p.time, 1e-3)
+
+    best = {"models": 1e9, "step_hooks": 1e9, "do_step": 1e9}
+    for _ in range(repeat):
+        for key, f in (("models", models), ("step_hooks", hooks), ("do_step", do_steps)):
+            c0 = time.thread_time()
+            f()
+            best[key] = min(best[key], (time.thread_time() - c0) / steps * 1e6)
+    bad = [m.msg for m in d.log_queue + p.log_queue if m.status.value >= 2]
+    if bad:
+        raise RuntimeError(f"in-process slaves logged problems: {bad[:3]}")
+    return best
+
+
 def c_host(exe, plan, tmp, steps, env=None):
     from fmu_host import chost
 
@@ -245,6 +314,7 @@ def main() -> int:
         plant, _ = build_plant_fmu(tmp / "fmus")
         drive, _ = build_drive_fmu(tmp / "fmus")
         measure_fmpy(out, triv, plant, drive, tmp, n, R)
+        out["in_process_us"] = slave_layers(plant, drive, tmp, n, R)
         bm = bare_models(n, R)
         out["bare_models_us"], out["bare_models_wall_us"] = bm[0] * 1e6, bm[1] * 1e6
         measure_c_host(out, triv, plant, drive, tmp, n, R)
