@@ -17,7 +17,9 @@ W2 (cubic ropes) represents that wrap by cubic elements on the pitch circle whos
 are folded into the same rows (builder/coordinates.py).
 The builder (core/builder/) compiles the scene in named steps; build_model runs them.
 Tangent points are computed from the initial geometry and stay fixed in the sheave's body frame
-(exact while the span directions keep their initial direction; bodies here only translate).
+(exact while the span directions keep their initial direction), unless the scene has rotating bodies or
+joints (scene.tangents = "exact"): then the rows of p on moving spans are nonlinear functions of q,
+recomputed with their Jacobian in every residual (core/bodies.py).
 
 Sign convention: a sheave angle theta = -(sigma - sigma_0)/R is positive when the rope runs over the
 sheave in the route direction (from the route's first stop toward its last). A positive drive torque

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 
+from ..bodies import rigid_fields
 from ..kernel import Kernel
 from ..traction import equivalent_friction
 from .coordinates import Arrays
@@ -66,6 +67,7 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
         mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
+        **arr.nl, **d.joints, **rigid_fields(scene, bs.body_dofs),
     )
 
 

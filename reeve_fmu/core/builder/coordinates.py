@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bodies import empty_fields
 from .state import BuildState
 
 
@@ -30,6 +31,7 @@ class Arrays:
     M0: np.ndarray
     F0: np.ndarray
     wrap_idx: np.ndarray    # W2 wrap elements -> rows of p
+    nl: dict = None         # kernel fields of the nonlinear rows (core/bodies.py)
 
 
 def node_arrays(bs: BuildState) -> Arrays:
@@ -37,6 +39,16 @@ def node_arrays(bs: BuildState) -> Arrays:
     B, Bpar, c0, n_nodes, n_slope = _affine_rows(bs)
     el_idx, el_g, el_C = _element_rows(bs, n_nodes, n_slope)
     el_map, el_coef = _element_maps(B, el_idx)
+    nd = bs.nd
+    nl = empty_fields()
+    if bs.nlr is not None:   # exact tangents: those rows' B (at q0) and maps come from core/bodies.py
+        comps = bs.comps_nd
+
+        def row_of(key):
+            if key[0] == "pos":
+                return key[1] * nd + comps.index(key[2])
+            return _sidx(nd, n_nodes, n_slope, key[1])
+        el_map, el_coef, nl = bs.nlr.finalize(nd, row_of, bs.q0, B, c0, el_idx, el_map, el_coef)
     ptr, idx, val = [0], [], []
     for row in range(B.shape[0]):
         nz = np.nonzero(B[row])[0]
@@ -49,7 +61,6 @@ def node_arrays(bs: BuildState) -> Arrays:
     F0v = np.zeros(nq)
     for j, vv in bs.F0.items():
         F0v[j] += vv
-    nd = bs.nd
     wrap_idx = np.zeros((len(bs.wrap_elements), 4 * nd + 2), np.int64)   # W2 wraps: cubic layout
     for iw, (a, b, _, _) in enumerate(bs.wrap_elements):
         wrap_idx[iw] = _pidx(nd, a) + _didx(nd, n_nodes, a) + [_sidx(nd, n_nodes, n_slope, a)] \
@@ -57,7 +68,7 @@ def node_arrays(bs: BuildState) -> Arrays:
     _fold_wraps(nd, bs.scene, bs.wrap_elements, wrap_idx, B, c0 + Bpar @ bs.par0, bs.q0, bs.g, M0, F0v)
     return Arrays(B=B, Bpar=Bpar, c0=c0, n_nodes=n_nodes, n_slope=n_slope, el_idx=el_idx, el_g=el_g,
                   el_C=el_C, el_map=el_map, el_coef=el_coef, ptr=ptr, idx=idx, val=val, M0=M0, F0=F0v,
-                  wrap_idx=wrap_idx)
+                  wrap_idx=wrap_idx, nl=nl)
 
 
 def _affine_rows(bs: BuildState):

@@ -1,5 +1,6 @@
 """Build step: elimination. A speed drive prescribes its sheave's coordinate (it leaves the free
-set, its value follows the profile); the creep table names the sheaves whose angle is integrated;
+set, its value follows the profile), and so does a joint moved by a profile (joint_tables); the
+creep table names the sheaves whose angle is integrated;
 the statics sets say which coordinates the initial statics solves for and which equations it uses."""
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ class Drive:
     profile: Profile = None
     torque_table: np.ndarray = None
     free: list = field(default_factory=list)          # q indices the integrator solves for
+    joints: dict = None                               # joint_tables: the joints' kernel arrays
 
 
 def drive_setup(bs: BuildState) -> Drive:
@@ -50,8 +52,48 @@ def drive_setup(bs: BuildState) -> Drive:
                 d.profile = speed_table(dv.table)
         elif dv.kind == "torque":
             d.torque_table = np.array(dv.torque, float).T.copy()
-    d.free = [j for j in range(len(bs.q_names)) if j not in d.presc]
+    d.joints = joint_tables(bs.scene, bs.body_dofs, bs.g, bs.springs)
+    d.free = [j for j in range(len(bs.q_names)) if j not in d.presc and j not in d.joints["jp_dof"]]
     return d
+
+
+def joint_tables(scene, body_dofs, g, springs):
+    """Kernel arrays of the joints: S-curve profiles of prescribed joints (jp_*), torque tables
+    (jt_*), the gravity moment of revolute bodies A cos(angle) + B sin(angle) (jg_*). Joint damping
+    is appended to springs."""
+    jp, jt, jg = [], [], []
+    for b in scene.bodies:
+        if b.joint is None:
+            continue
+        j = body_dofs[b.name]["angle" if b.joint == "revolute" else "travel"]
+        mo = b.motion
+        if mo.damping > 0:
+            springs.append((j, 0.0, mo.damping))
+        if mo.kind == "profile":
+            jp.append((j, scurve(mo.distance, mo.v_max, mo.a_max, mo.jerk, t_start=mo.t_start).arrays))
+        elif mo.kind == "torque":
+            jt.append((j, np.array(mo.torque, float).T))
+        if b.joint == "revolute":
+            # potential -m g . R(angle) d0 of the centre of mass, d0 from the pivot (Rodrigues)
+            a, d0 = np.asarray(b.joint_axis), np.asarray(b.position) - np.asarray(b.pivot)
+            A = b.mass * (g @ np.cross(a, d0))
+            Bc = b.mass * ((g @ a) * (a @ d0) - g @ d0)
+            if abs(A) + abs(Bc) > 0.0:
+                jg.append((j, A, Bc))
+
+    def stack(items, rows):
+        n = max([t.shape[1] for _, t in items], default=1)
+        out = np.zeros((len(items), rows, n))
+        for k, (_, t) in enumerate(items):
+            out[k, :, :t.shape[1]] = t
+            out[k, :, t.shape[1]:] = t[:, -1:]
+            out[k, 0, t.shape[1]:] = 1e300     # padding never reached: profile_eval/_interp stay in range
+        return out
+    return dict(jp_dof=np.array([j for j, _ in jp], np.int64), jp_prof=stack(jp, 5),
+                jt_dof=np.array([j for j, _ in jt], np.int64), jt_tab=stack(jt, 2),
+                jg_dof=np.array([x[0] for x in jg], np.int64), jg_A=np.array([x[1] for x in jg], float),
+                jg_B=np.array([x[2] for x in jg], float))
+
 
 
 def creep_table(scene, sheave_dof, tension_taps, slip_info):
@@ -84,7 +126,7 @@ def statics_sets(bs: BuildState, d: Drive):
     scene = bs.scene
     dv = scene.drive
     nq = len(bs.q_names)
-    locked = set(d.presc)
+    locked = set(d.presc) | set(d.joints["jp_dof"].tolist())
     if dv.kind in ("torque", "external", "none") and d.dof >= 0 and dv.kind != "none":
         locked.add(d.dof)   # held by the brake/drive during the initial statics
     if bs.slip_info:

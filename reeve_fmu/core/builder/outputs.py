@@ -8,7 +8,7 @@ from .elimination import Drive
 from .state import BuildState
 
 (OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
- OUT_FRICTION, OUT_CANGLE, OUT_CSPEED) = range(13)
+ OUT_FRICTION, OUT_CANGLE, OUT_CSPEED, OUT_JOINT) = range(14)
 
 
 @dataclass
@@ -32,7 +32,19 @@ def output_table(bs: BuildState, d: Drive, crp_index: dict, mot_crp: int) -> Out
     scene = bs.scene
     for b in scene.bodies:
         dofs = bs.body_dofs[b.name]
+        if b.joint is not None:
+            _joint_outputs(o.add, b, dofs)
+            continue
         for ax, j in dofs.items():
+            if ax == "theta":   # rad, counter-clockwise in the x-z drawing
+                o.add(f"{b.name}.angle", OUT_Q, j)
+                o.add(f"{b.name}.angular_velocity", OUT_V, j)
+                o.add(f"{b.name}.angular_acceleration", OUT_A, j)
+                continue
+            if ax in ("rx", "ry", "rz"):   # rotation vector from the scene's orientation [rad]
+                o.add(f"{b.name}.rotation.{ax[1]}", OUT_Q, j)
+                o.add(f"{b.name}.rotation_rate.{ax[1]}", OUT_V, j)
+                continue
             suffix = "" if (bs.nd == 1 and len(dofs) == 1) else f".{ax}"
             o.add(f"{b.name}.position{suffix}", OUT_Q, j)
             o.add(f"{b.name}.velocity{suffix}", OUT_V, j)
@@ -84,3 +96,20 @@ def _sheave_outputs(o: Outputs, bs: BuildState, sh, crp_index) -> None:
         to = o.add(f"{sh.name}.tension_out", OUT_TENSION, taps["out"][0], taps["out"][1])
     if sh.kind == "traction" and ti is not None and to is not None:
         o.add(f"{sh.name}.traction_ratio", OUT_RATIO, ti, to)
+
+
+def _joint_outputs(out, b, dofs):
+    """Outputs of a body on a joint: its coordinate, rate, acceleration and the joint torque (force)
+    that moves it (the drive's reaction for a prescribed motion)."""
+    if b.joint == "revolute":
+        j = dofs["angle"]
+        out(f"{b.name}.angle", OUT_Q, j)
+        out(f"{b.name}.angular_velocity", OUT_V, j)
+        out(f"{b.name}.angular_acceleration", OUT_A, j)
+        out(f"{b.name}.joint_torque", OUT_JOINT, j)
+    else:
+        j = dofs["travel"]
+        out(f"{b.name}.travel", OUT_Q, j)
+        out(f"{b.name}.velocity", OUT_V, j)
+        out(f"{b.name}.acceleration", OUT_A, j)
+        out(f"{b.name}.joint_force", OUT_JOINT, j)

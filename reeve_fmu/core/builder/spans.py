@@ -28,6 +28,7 @@ class _Rope:
     spans: list
     wraps: dict
     sig: dict      # stop index -> sigma q index
+    nl_spans: list = None   # exact tangents: span indices in bs.nlr
 
     def s_row(self, kind, k):
         """s of the node at the start of span k (kind 'start') or its end ('end')."""
@@ -55,6 +56,7 @@ def add_rope(bs: BuildState, ir: int, rope) -> None:
     rb = _Rope(ir=ir, rope=rope, rhoA=rope.rhoA * rope.count, stops=stops, geo=geo, spans=spans,
                wraps=wraps, sig={})
     _add_sheave_coordinates(bs, rb, s_at, scale)
+    rb.nl_spans = register_spans(bs.nlr, bs.scene, rope, stops, geo) if bs.nlr is not None else None
     span_nodes = []
     rope_wraps = []    # W2: (stop, element indices) per wrap
     for k in range(len(spans)):
@@ -97,6 +99,8 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
         if lump > 0 and sh.body is not None:
             chord = T_out - T_in
             for ax, jb in bs.body_dofs[sh.body].items():
+                if ax not in AXES:
+                    continue   # the wrap's rope turning with the body is neglected
                 kk = AXES.index(ax)
                 bs.M0_terms.append((jb, jb, rb.rhoA * lump))
                 bs.M0_terms.append((jb, j, -rb.rhoA * chord[kk]))
@@ -111,6 +115,12 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     e = (TB - TA) / np.linalg.norm(TB - TA)
     ends = [_end_node(bs, rb, kind, k, T, stop, e) for kind, T, stop in (("start", TA, k), ("end", TB, k + 1))]
     stops = rb.stops
+    if rb.nl_spans is not None:      # exact tangents: the end nodes (and a W1 wrap's s) follow the poses
+        for end, node in enumerate(ends):
+            bs.nlr.tangent_rows(node, rb.nl_spans[k], end, bs.comps_nd)
+        if 0 < k and rb.rope.wrap_model == "W1" and stops[k].sheave is not None:
+            bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
+                            rb.geo[k][2])
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
         rope_wraps.append((k, _add_wrap_elements(bs, span_nodes[k - 1][1], ends[0], rb.geo[k], rb.wraps[k],
                                                  bs.sheaves[stops[k].sheave], rb.sig[k],
@@ -127,6 +137,28 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     if stops[k + 1].sheave is not None:
         bs.tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(bs.elements) - 1, 1)
     return (chain[0], chain[-1], first_el, len(bs.elements) - 1)
+
+
+def register_spans(nlr, scene, rope, stops, geo):
+    """Exact tangents: every span of the rope in the registry (core/bodies.py); returns their indices.
+    The nonlinear rows cover one linear element per span with rigid terminations."""
+    from ..scene import SceneError
+    sheaves = {s.name: s for s in scene.sheaves}
+    where = f"{scene.source}: [ropes.{rope.name}]"
+    if rope.element != "linear" or rope.wrap_model == "W2" or rope.elements_per_span != 1:
+        raise SceneError(f"{where} exact tangent points (rotating bodies, joints, scene.tangents = 'exact') "
+                         f"are implemented for linear elements, one per span (elements_per_span = 1), "
+                         f"wraps W0/W1")
+    desc = []
+    for st, (c, R, a, sgn) in zip(stops, geo):     # c: the stop's world position at t = 0
+        if st.sheave is not None:
+            sh = sheaves[st.sheave]
+            desc.append((sh.body, c, R, sgn, np.asarray(sh.axis, float)))
+        else:
+            if st.hitch_stiffness > 0 or st.hitch_damping > 0:
+                raise SceneError(f"{where} route: hitch springs are not available with exact tangent points")
+            desc.append((None if st.anchor == "ground" else st.anchor, c, 0.0, 1.0, None))
+    return [nlr.span(desc[k], desc[k + 1]) for k in range(len(stops) - 1)]
 
 
 def _end_node(bs: BuildState, rb: _Rope, kind, k, T, stop, e) -> int:

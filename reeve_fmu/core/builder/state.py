@@ -55,6 +55,8 @@ class BuildState:
     F0: dict = field(default_factory=dict)          # q index -> force
     springs: list = field(default_factory=list)     # (dof, k, c)
     drums: list = field(default_factory=list)       # (dof, rhoA, sign)
+    # exact tangents: the nonlinear rows (core/bodies.NonlinearRows), None when tangents are frozen
+    nlr: object = None
 
     def new_q(self, name, kind, value) -> int:
         """Append a generalized coordinate; returns its index."""
