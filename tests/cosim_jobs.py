@@ -515,8 +515,9 @@ def fast_path_run(plant_fmu, drive_fmu, fast, steps=400):
     _host_package()
     r = _runner()
     res = {"rows": [], "full": [], "status": []}
+    values = {"pretorque[1]": 522.5, "pretorque[2]": 331.5, "trip.start_delay": 0.0}   # torque from t = 0
     with r.SlaveHandle.open(drive_fmu, "drive") as d, r.SlaveHandle.open(plant_fmu, "plant") as p:
-        d.setup(0.0, start_values={"pretorque[1]": 522.5, "pretorque[2]": 331.5})
+        d.setup(0.0, start_values=values)
         p.setup(0.0)
         links = _linked_slaves()
         res["linked"] = {k: v is not None for k, v in links.items()}
@@ -560,7 +561,7 @@ def fast_path_run(plant_fmu, drive_fmu, fast, steps=400):
         res["last_successful_time"], res["terminated"] = lst.value, term.value
         res["plant_time"] = p.time
         d.reset()
-        d.setup(0.0, start_values={"pretorque[1]": 522.5, "pretorque[2]": 331.5})
+        d.setup(0.0, start_values=values)
         res["relinked"] = _linked_slaves().get("drive") is not None
         d.set_many({"motor.speed": 0.0, "motor.angle": 0.0})
         res["after_reset"] = [d.step(DT), *d.get_many(["motor.torque", "brake.command"])]
