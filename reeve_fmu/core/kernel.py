@@ -30,7 +30,8 @@ Kernel = namedtuple("Kernel", [
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
-    # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on = 0: none
+    # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
+    # rows, bit 2: joints or spatial rigid bodies; 0: none of them
     "nl_on", "nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_BR", "nl_ANG", "nl_AX", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa",
     "nl_rk", "nl_rf", "nl_P", "nl_TW", "nl_cols", "nl_colbody", "nl_f0", "nl_fp", "nl_fm",
     "nl_J", "nl_qs", "nl_racc", "nl_rw", "nl_ent", "nl_acc",
