@@ -12,39 +12,13 @@ from __future__ import annotations
 import argparse
 import ctypes
 import os
-import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
-SLAVE = '''
-from pythonfmu import Fmi2Slave, Fmi2Causality, Real
-
-
-class TrivialFloorSlave(Fmi2Slave):
-    author = "reeve_fmu"
-    description = "trivial slave: y = u"
-
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.u1 = self.u2 = self.y1 = self.y2 = 0.0
-        for name, c in (("u1", Fmi2Causality.input), ("u2", Fmi2Causality.input),
-                        ("y1", Fmi2Causality.output), ("y2", Fmi2Causality.output)):
-            self.register_variable(Real(name, causality=c))
-
-    def do_step(self, current_time, step_size):
-        self.y1, self.y2 = self.u1, self.u2
-        return True
-'''
-
-
-def build(tmp: str) -> str:
-    src = os.path.join(tmp, "trivial_floor_slave.py")
-    with open(src, "w", encoding="utf-8") as fh:
-        fh.write(SLAVE)
-    subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", src, "-d", tmp], check=True,
-                   capture_output=True)
-    return os.path.join(tmp, "TrivialFloorSlave.fmu")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from trivial_slave import INPUTS, OUTPUTS, build  # noqa: E402
 
 
 def main() -> int:
@@ -56,7 +30,7 @@ def main() -> int:
     from fmpy.fmi2 import FMU2Slave
 
     with tempfile.TemporaryDirectory() as tmp:
-        fmu = build(tmp)
+        fmu = str(build(tmp, "TrivialFloorSlave"))
         md = read_model_description(fmu)
         slaves = []
         for name in ("drive", "plant"):
@@ -68,7 +42,7 @@ def main() -> int:
             s.exitInitializationMode()
             slaves.append(s)
         a, b = slaves
-        vr_u, vr_y = (ctypes.c_uint * 2)(0, 1), (ctypes.c_uint * 2)(2, 3)
+        vr_u, vr_y = (ctypes.c_uint * 2)(*INPUTS), (ctypes.c_uint * 2)(*OUTPUTS)
         buf_a, buf_b = (ctypes.c_double * 2)(), (ctypes.c_double * 2)()
         h, best = 1e-3, float("inf")
         for _ in range(args.repeat):

@@ -12,6 +12,8 @@ Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end
         samples at the start of the step).
 Parameters: reeve_fmu.fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
 """
+import numpy as np
+
 from reeve_fmu.core.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
                                   _X_XREF, PHASE_NAMES)
 from reeve_fmu.fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
@@ -76,6 +78,7 @@ class ElectricDriveSlave(ReeveSlave):
         # per step only the exchanged outputs are written; the references etc. come from a snapshot
         # of the drive state when something reads them (ReeveSlave.defer_outputs)
         self.set_eager_outputs(("motor.torque", "brake.command"))
+        self._writer = self._write_snap          # bound once, not per step
 
     def _outputs(self, torque=None, brake=None):
         d = self.drive
@@ -119,10 +122,14 @@ class ElectricDriveSlave(ReeveSlave):
         v = self.values
         d = self.drive
         v["motor.torque"], v["brake.command"] = d.step(t, dt, v["motor.speed"], v["motor.angle"])
-        xs = d._xs[:_X_IQ + 1].tolist()
-        xi = d._xi.tolist()
-        self.defer_outputs(lambda: self._write_snapshot(xs, xi))
+        # the snapshot of the drive state for the other outputs: raw bytes (a tenth of tolist's cost)
+        self._snap = (d._xs.tobytes(), d._xi.tobytes())
+        self.defer_outputs(self._writer)
         return True
+
+    def _write_snap(self):
+        xs, xi = self._snap
+        self._write_snapshot(np.frombuffer(xs).tolist(), np.frombuffer(xi, dtype=np.int64).tolist())
 
     def get_hidden_state(self):
         return self.drive.get_state()

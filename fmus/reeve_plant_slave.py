@@ -75,8 +75,9 @@ class ReevingPlantSlave(ReeveSlave):
         outs = self.plant.outputs()
         self._write([outs[n] for n in names])
         # per step only what the drive needs is written at once; the other outputs when read
-        self._eager = [(n, names.index(n)) for n in ("motor.speed", "motor.angle")]
-        self.set_eager_outputs(n for n, _ in self._eager)
+        self._iw, self._ia = names.index("motor.speed"), names.index("motor.angle")
+        self._writer = self._write_last          # bound once, not per step
+        self.set_eager_outputs(("motor.speed", "motor.angle"))
         self.plant.warm_up()     # JIT load/compile here, not inside the first doStep
 
     def _write(self, y):
@@ -84,11 +85,15 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        y = self.plant.step(dt, v["motor.torque"], v["brake.command"]).tolist()
-        for name, i in self._eager:
-            v[name] = y[i]
-        self.defer_outputs(lambda: self._write(y))
+        y = self.plant.step(dt, v["motor.torque"], v["brake.command"])   # a new array every step
+        v["motor.speed"] = y.item(self._iw)
+        v["motor.angle"] = y.item(self._ia)
+        self._last = y                   # the snapshot _write_last writes when something reads it
+        self.defer_outputs(self._writer)
         return True
+
+    def _write_last(self):
+        self._write(self._last)
 
     def get_hidden_state(self):
         return self.plant.get_state()

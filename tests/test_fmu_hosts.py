@@ -146,6 +146,27 @@ def test_c_host_runs_plant_and_drive_bit_identical_to_fmpy(fmus, host, unzipped,
     assert max(ref["brake.command"]) == 1.0 and ref["car.position"][-1] > 0.1   # the car moves
 
 
+def test_loader_fast_path_gives_the_results_of_pythonfmus_path(fmus):
+    """With the loader's fast path (setReal/getReal through tables shared with the slave, doStep
+    called directly) a master sees exactly what pythonfmu's path gives: the exchange, every output,
+    a rewind, a rejected input (its reason logged), a reset, fmi2LastSuccessfulTime/fmi2Terminated."""
+    on = run_in_subprocess(f"{JOBS}:fast_path_run", fmus["plant"], fmus["drive"], 1, timeout=600)
+    off = run_in_subprocess(f"{JOBS}:fast_path_run", fmus["plant"], fmus["drive"], 0, timeout=600)
+    assert on["linked"] == {"drive": True, "plant": True}, on["linked"]
+    assert off["linked"] == {"drive": False, "plant": False}, off["linked"]
+    assert on["table_pending"] == [1, True]           # the torque waited in the table, not in Python
+    assert on["relinked"] is True                     # fmi2Reset: the new Python slave is linked
+    for key in ("rows", "full", "status", "rewound", "rejected_step", "after_rejected",
+                "last_successful_time", "terminated", "plant_time", "after_reset"):
+        assert on[key] == off[key], key               # exact float equality
+    assert all(list(st) == [0, 0] for st in on["status"])
+    assert on["rewound"] == on["rows"][len(on["rows"]) // 2:]
+    assert on["rejected_step"] == 2 and on["after_rejected"] == 0
+    assert any("brake.command = 2.0 is outside [0.0, 1.0]" in m for m in on["rejected_msgs"])
+    assert on["last_successful_time"] == on["plant_time"] and on["terminated"] == 1
+    assert max(r[2] for r in on["rows"]) > 500.0      # the exchange is live: the pre-torque (522.5 N m) built up
+
+
 # ------------------------------------------------------------------------------------------------
 # Python hosts: plain fmpy scripts end with exit code 0
 # ------------------------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ._jit import njit
+from ._jit import entry_point, njit
 from .profiles import Profile, profile_eval, scurve_phases, trip_sequence
 
 # ---------------------------------------------------------------------------------------------------
@@ -44,6 +44,7 @@ PHASE_RAMPDOWN = 6    # brake engaged, torque ramps linearly to zero
 PHASE_DWELL = 7       # at rest between moves: torque off, brake applied
 PHASE_DONE = 8        # after the last move
 PHASE_NAMES = ("idle", "pretorque", "lift", "run", "hold", "drop", "rampdown", "dwell", "done")
+_RELEASED = (PHASE_LIFT, PHASE_RUN, PHASE_HOLD)   # phases with the brake commanded open
 
 # schedule columns (one row per move)
 _S_TP, _S_TL, _S_TR, _S_TS, _S_TD, _S_TZ, _S_TO, _S_X0, _S_PRE, _S_X1 = range(10)
@@ -466,6 +467,7 @@ class ElectricDrive:
         self._sis_hist: list = []          # (t, car position) samples not yet older than sis_delay
         self._xs = np.zeros(_X_BUF0 + max(nd, 1))
         self._xi = np.zeros(_NI, dtype=np.int64)
+        self._advance = _advance           # its entry point after the first call (step)
         self.reset()
 
     # -- setup ---------------------------------------------------------------------------------------
@@ -540,13 +542,17 @@ class ElectricDrive:
             raise ValueError(f"step: dt must be a finite number > 0, got {dt!r}")
         if not (math.isfinite(motor_speed) and math.isfinite(motor_angle)):
             raise ValueError(f"step: motor_speed and motor_angle must be finite, got {motor_speed!r}, {motor_angle!r}")
-        t_int = float(self._xs[_X_TIME])
+        xs, xi = self._xs, self._xi
+        t_int = xs.item(_X_TIME)
         if not abs(t - t_int) <= 1e-6:
             raise ValueError(f"step: t = {t!r} s does not continue from the drive time {t_int!r} s "
                              "(use reset(t0) or set_state to move the drive in time)")
-        tau = _advance(self._xs, self._xi, self._P, self._sched, self._prof, t_int, float(t) + float(dt),
-                       float(motor_speed), float(motor_angle), self._sis_reading(float(t), car_position))
-        return float(tau), self.brake_command
+        xsis = self._sis_reading(float(t), car_position) if self.params.sis else math.nan
+        tau = self._advance(xs, xi, self._P, self._sched, self._prof, t_int, float(t) + float(dt),
+                            float(motor_speed), float(motor_angle), xsis)
+        if self._advance is _advance:      # compiled now: call it without numba's argument typing
+            self._advance = entry_point(_advance)
+        return float(tau), (1.0 if xi.item(_I_PHASE) in _RELEASED else 0.0)
 
     def warm_up(self) -> None:
         """Load (or compile) the step kernel now with a throw-away step on copies of the state, so that
@@ -603,7 +609,7 @@ class ElectricDrive:
     @property
     def brake_command(self) -> float:
         """1.0 = release (open) the brake, 0.0 = apply (close) it."""
-        return 1.0 if self.phase in (PHASE_LIFT, PHASE_RUN, PHASE_HOLD) else 0.0
+        return 1.0 if self.phase in _RELEASED else 0.0
 
     @property
     def torque(self) -> float:

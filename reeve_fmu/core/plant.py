@@ -80,13 +80,16 @@ class Plant:
         """Advance by dt (> 0) with motor torque [N m] and brake command (1 = release, 0 = apply)
         held; returns the outputs. Raises ValueError for bad inputs, SolverError if the solver
         stops (the state is then left at the last good step)."""
-        if not (dt > 0.0 and math.isfinite(dt)):
-            raise ValueError(f"communication step must be a finite number > 0, got {dt}")
-        if not math.isfinite(torque):
-            raise ValueError(f"motor.torque must be finite, got {torque}")
-        if not math.isfinite(brake_command):
+        torque, brake_command = float(torque), float(brake_command)
+        if not (dt > 0.0 and dt - dt == 0.0 and torque - torque == 0.0 and brake_command - brake_command == 0.0):
+            # (x - x == 0.0 is False exactly for NaN and +-inf: one test per step for all inputs)
+            if not (dt > 0.0 and math.isfinite(dt)):
+                raise ValueError(f"communication step must be a finite number > 0, got {dt}")
+            if not math.isfinite(torque):
+                raise ValueError(f"motor.torque must be finite, got {torque}")
             raise ValueError(f"brake.command must be finite, got {brake_command}")
-        self._y = self.sim.step(self.state, self.state.t + dt, float(torque), float(brake_command)).copy()
+        st = self.state
+        self._y = self.sim.step(st, st.t + dt, torque, brake_command).copy()
         return self._y
 
     def warm_up(self) -> None:

@@ -944,6 +944,7 @@ class Simulator:
         fast = self._fast_integrate
         if fast is None:
             buf = self._stepbuf = np.empty((1, len(self.model.output_names) + 1))
+            self._steprow = buf[0, 1:]      # the returned view, made once
             status, t, done = self._integrate(st, t0, h, n, buf, n)
             self._sp_state = st
             self._fast_integrate = _entry_point(integrate if self._sp is None else integrate_sparse)
@@ -959,7 +960,7 @@ class Simulator:
             st.t = t0 + done * h
             raise SolverError(self._status_message(status, st))
         st.t = t_end
-        return buf[0, 1:]
+        return self._steprow
 
     def _status_message(self, status: int, st: State) -> str:
         msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"

@@ -63,6 +63,7 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Integer, Real, String
 
+from . import fastlink
 from ._bootstrap import STAMP_NAME, package_hash
 
 __all__ = [
@@ -250,6 +251,7 @@ class ReeveSlave(Fmi2Slave):
         self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
         self._deferred: Optional[Callable] = None  # writes the outputs step() left for later
         self._eager_vrs: frozenset = frozenset()   # Reals step() always writes (see defer_outputs)
+        self._link: Optional[fastlink.FastLink] = None  # tables shared with the native loader
         self._mode = "instantiated"
         self._initialized = False
         self.start_time: Optional[float] = None
@@ -277,6 +279,7 @@ class ReeveSlave(Fmi2Slave):
         except Exception:
             self.log("reeve_fmu package stamp check failed:\n" + traceback.format_exc(),
                      Fmi2Status.warning)
+        fastlink.offer(self)
 
     # ------------------------------------------------------------------ hooks (override these)
     def define(self) -> None:
@@ -435,6 +438,9 @@ class ReeveSlave(Fmi2Slave):
         """The Real outputs step() writes into self.values on every step (typically what the master
         exchanges); all others may be left to `defer_outputs`."""
         self._eager_vrs = frozenset(self._by_name[n].vr for n in names)
+        if self._link is not None:
+            self._link.set_outputs(self._link_outputs())
+            self._sync_link()
 
     def defer_outputs(self, write: Optional[Callable[[], None]]) -> None:
         """Called by step(): `write()` puts the remaining outputs into self.values. It runs only when
@@ -443,6 +449,46 @@ class ReeveSlave(Fmi2Slave):
         `write` must use a snapshot taken in step() (the next step replaces it unrun), never live
         model state."""
         self._deferred = write
+
+    # ------------------------------------------------------------------ the loader's fast path
+    def _native_link(self) -> int:
+        """Called once by the FMU's native loader: the address of the tables shared with it
+        (reeve_fmu.fmu.fastlink), or 0 to decline (then every call goes through pythonfmu)."""
+        try:
+            if not fastlink.enabled() or self._fault is not None:
+                return 0
+            inputs = [(vr, s.name, s.min, s.max) for vr, s in self._set["Real"].items()
+                      if s.causality == Fmi2Causality.input and s.name not in self._user_setters]
+            link = fastlink.FastLink(len(self._specs), inputs, sys.float_info.max)
+            link.set_outputs(self._link_outputs())
+            self._link = link
+            self._sync_link()
+            return link.address
+        except Exception:
+            self._link = None
+            self._error("the loader's fast path is off for this instance:\n" + traceback.format_exc(),
+                        Fmi2Status.warning)
+            return 0
+
+    def _link_outputs(self) -> list:
+        names = self._real_names
+        return [(vr, names[vr]) for vr in sorted(self._eager_vrs)
+                if names[vr] is not None and self._specs[vr].causality == Fmi2Causality.output]
+
+    def _sync_link(self) -> None:
+        """Tell the loader what it may do without Python (after any change of mode, rejected inputs or
+        outputs outside do_step)."""
+        link = self._link
+        if link is None:
+            return
+        step = self._mode == "step"
+        link.state[0] = 1 if step and not self._bad_inputs else 0
+        link.state[1] = 1 if step and self._initialized and link.publish(self.values) else 0
+
+    def _pull(self) -> None:
+        link = self._link
+        if link is not None and link.state[2]:
+            link.pull(self.values)
 
     def _flush(self) -> None:
         write = self._deferred
@@ -542,6 +588,7 @@ class ReeveSlave(Fmi2Slave):
             except BaseException:
                 self._fault = "initialize() failed:\n" + traceback.format_exc()
                 self._error(self._fault)
+            self._sync_link()
         except Exception:  # pragma: no cover
             self._error("exit_initialization_mode failed:\n" + traceback.format_exc())
 
@@ -554,29 +601,31 @@ class ReeveSlave(Fmi2Slave):
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:
+            link = self._link
+            if link is not None and link.state[2]:
+                link.pull(self.values)
             if self._mode != "step" or self._fault or self._dirty or self._bad_inputs or self._pending:
                 return self._refuse_step(current_time, step_size)
-            dt = step_size
-            if not (dt > 0.0) or dt == math.inf:
-                self._error(f"doStep rejected: communicationStepSize={dt!r} at t={current_time!r} "
-                            f"(must be finite and > 0)")
-                return False
-            t = current_time
-            if t - t != 0.0:
-                self._error(f"doStep rejected: currentCommunicationPoint={t!r} is not finite")
-                return False
-            now = self.time
-            if now is not None and t != now and abs(t - now) > self.time_tolerance * dt + 1e-12 * abs(t):
-                self._error(f"doStep rejected: currentCommunicationPoint={t!r} but the FMU is at "
-                            f"t={now!r} (steps must be contiguous; use setFMUstate to go back)")
-                return False
+            t, dt, now = current_time, step_size, self.time
+            # the usual case in one test: dt finite and > 0, t finite and where the FMU is
+            if not (dt > 0.0 and dt - dt == 0.0 and t - t == 0.0 and (
+                    t == now or now is None or abs(t - now) <= self.time_tolerance * dt + 1e-12 * abs(t))):
+                return self._reject_step(t, dt, now)
             n_log = len(self.log_queue)
             try:
                 ok = self.step(t, dt)
             except BaseException:  # incl. SystemExit/KeyboardInterrupt: never into pythonfmu's C++
                 self._dirty = (f"step(t={t!r}, dt={dt!r}) raised:\n" + traceback.format_exc())
                 self._error(self._dirty)
+                self._sync_link()
                 return False
+            if link is not None:
+                try:   # link.publish, inlined: the exchanged outputs into the loader's table
+                    val, vals = link.val, self.values
+                    for vr, name in link.outputs:
+                        val[vr] = vals[name]
+                except TypeError:
+                    link.state[1] = 1 if link.publish(self.values) else 0
             if ok is False:
                 if len(self.log_queue) == n_log:
                     self._error(f"step(t={t!r}, dt={dt!r}) returned False without logging a reason",
@@ -587,6 +636,16 @@ class ReeveSlave(Fmi2Slave):
         except Exception:  # pragma: no cover - belt and braces
             self._error("do_step failed:\n" + traceback.format_exc())
             return False
+
+    def _reject_step(self, t, dt, now) -> bool:
+        if not (dt > 0.0) or dt == math.inf:
+            self._error(f"doStep rejected: communicationStepSize={dt!r} at t={t!r} (must be finite and > 0)")
+        elif t - t != 0.0:
+            self._error(f"doStep rejected: currentCommunicationPoint={t!r} is not finite")
+        else:
+            self._error(f"doStep rejected: currentCommunicationPoint={t!r} but the FMU is at "
+                        f"t={now!r} (steps must be contiguous; use setFMUstate to go back)")
+        return False
 
     def _refuse_step(self, t, dt) -> bool:
         if self._fault:
@@ -624,9 +683,11 @@ class ReeveSlave(Fmi2Slave):
                                 -sys.float_info.max if spec.min is None else float(spec.min),
                                 sys.float_info.max if spec.max is None else float(spec.max))
         self._fast_real = fast
+        self._sync_link()
 
     def _get_values(self, kind, vrs, conv, bad):
         g = self._get[kind]
+        self._pull()
         try:
             self._flush()
             return [conv(g[vr]()) for vr in vrs]
@@ -655,6 +716,7 @@ class ReeveSlave(Fmi2Slave):
         # no getter call per variable (the plant's 25 outputs: ~3x faster); anything else (a user
         # getter, a bad value reference, a non-float value) takes the checked path
         try:
+            self._pull()
             if self._deferred is not None and not self._eager_vrs.issuperset(vrs):
                 self._flush()
             vals = self.values
@@ -692,6 +754,7 @@ class ReeveSlave(Fmi2Slave):
 
     def set_real(self, vrs, values):
         try:
+            self._pull()   # earlier values the loader wrote must not overwrite these
             # fast path: plain Real inputs (no user setter) in step mode, finite and within bounds
             fast = self._fast_real
             vals = self.values
@@ -704,8 +767,10 @@ class ReeveSlave(Fmi2Slave):
                 if self._bad_inputs:
                     for vr in vrs:
                         self._bad_inputs.pop(self._specs[vr].name, None)
+                    self._sync_link()
                 return
             self._set_real_checked(vrs, values)
+            self._sync_link()
         except Exception:
             self._call_error("set_real failed:\n" + traceback.format_exc())
 
@@ -759,6 +824,7 @@ class ReeveSlave(Fmi2Slave):
                     continue
                 spec.setter(x)
                 self._bad_inputs.pop(spec.name, None)
+            self._sync_link()
         except Exception:
             self._call_error(f"set_{kind.lower()} failed:\n" + traceback.format_exc())
 
@@ -774,6 +840,7 @@ class ReeveSlave(Fmi2Slave):
     # ------------------------------------------------------------------ FMU state
     def _get_fmu_state(self):
         try:
+            self._pull()
             self._flush()
             hidden = self.get_hidden_state() if self._initialized else {}
             return canonical_state({
@@ -813,6 +880,7 @@ class ReeveSlave(Fmi2Slave):
             if self._fault is not None and state["initialized"]:
                 raise RuntimeError("cannot restore into a faulty instance (reset it first):\n"
                                    + self._fault)
+            self._pull()
             self._deferred = None
             self.values.update(values)
             self.time = state["time"]
@@ -838,8 +906,10 @@ class ReeveSlave(Fmi2Slave):
                     user_setter(v)
             if self._initialized:
                 self.set_hidden_state(canonical_state(state["hidden"]))
+            self._sync_link()
         except Exception:
             self._call_error("setFMUstate failed:\n" + traceback.format_exc())
+            self._sync_link()
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:

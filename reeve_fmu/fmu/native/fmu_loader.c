@@ -42,11 +42,22 @@
  *    host asked for logging (fmi2Instantiate's loggingOn, fmi2SetDebugLogging with its categories).
  *    Messages are passed on as printf formats with every '%' escaped.
  *
+ * 5. A fast path for reeve_fmu's slaves. pythonfmu turns every call into a Python method call looked up
+ *    by name, with lists built per call and its log queue polled after it (about 1 us per call).
+ *    A reeve_fmu slave (reeve_fmu.fmu.slave.ReeveSlave) instead shares tables with the loader
+ *    (ReeveLink below; it appends itself to a list the loader puts into sys while pythonfmu constructs
+ *    it): fmi2SetReal of its Real inputs writes the values into the table, fmi2GetReal of the outputs
+ *    its step() writes reads them from it, both without Python (no GIL); fmi2DoStep calls the slave's
+ *    do_step directly, then lets pythonfmu forward queued log messages. A value outside its bounds, any
+ *    other variable, or a slave not in step mode takes pythonfmu's path, which checks and logs as
+ *    before. REEVE_FMU_FAST_PATH=0 in the environment switches it off (the slave declines the link).
+ *
  * Every other fmi2 function is forwarded unchanged to pythonfmu's binary.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <link.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -124,6 +135,19 @@ static struct {
     PyObject *(*ObjectStr)(PyObject *);
     const char *(*UnicodeAsUTF8AndSize)(PyObject *, ptrdiff_t *);
     void (*DecRef)(PyObject *);
+    /* the fast path (5.) */
+    void (*IncRef)(PyObject *);
+    PyObject *(*FloatFromDouble)(double);
+    PyObject *(*CallFunctionObjArgs)(PyObject *, ...);
+    int (*ObjectIsTrue)(PyObject *);
+    PyObject *(*ListNew)(ptrdiff_t);
+    ptrdiff_t (*ListSize)(PyObject *);
+    PyObject *(*ListGetItem)(PyObject *, ptrdiff_t);
+    PyObject *(*SysGetObject)(const char *);
+    int (*SysSetObject)(const char *, PyObject *);
+    PyObject *(*ObjectGetAttrString)(PyObject *, const char *);
+    void *(*LongAsVoidPtr)(PyObject *);
+    void (*ErrClear)(void);
 } py;
 
 static const char *py_names[] = {
@@ -131,7 +155,9 @@ static const char *py_names[] = {
     "PyGILState_Release", "PyGILState_GetThisThreadState", "PyDict_New", "PyDict_SetItemString",
     "PyDict_GetItemString", "PyEval_GetBuiltins", "PyUnicode_DecodeFSDefault", "PyBool_FromLong",
     "Py_CompileString", "PyEval_EvalCode", "PyErr_Fetch", "PyObject_Str", "PyUnicode_AsUTF8AndSize",
-    "Py_DecRef",
+    "Py_DecRef", "Py_IncRef", "PyFloat_FromDouble", "PyObject_CallFunctionObjArgs", "PyObject_IsTrue",
+    "PyList_New", "PyList_Size", "PyList_GetItem", "PySys_GetObject", "PySys_SetObject",
+    "PyObject_GetAttrString", "PyLong_AsVoidPtr", "PyErr_Clear",
 };
 
 /* ------------------------------------------------------------------ the fmi2 functions */
@@ -141,17 +167,12 @@ static const char *py_names[] = {
     X(fmi2Status, fmi2EnterInitializationMode, (fmi2Component c), (W))                                \
     X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component c), (W))                                 \
     X(fmi2Status, fmi2Terminate, (fmi2Component c), (W))                                              \
-    X(fmi2Status, fmi2Reset, (fmi2Component c), (W))                                                  \
-    X(fmi2Status, fmi2GetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n, fmi2Real *x), \
-      (W, v, n, x))                                                                                     \
     X(fmi2Status, fmi2GetInteger, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
                                    fmi2Integer *x), (W, v, n, x))                                       \
     X(fmi2Status, fmi2GetBoolean, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
                                    fmi2Boolean *x), (W, v, n, x))                                       \
     X(fmi2Status, fmi2GetString, (fmi2Component c, const fmi2ValueReference *v, size_t n,            \
                                   fmi2String *x), (W, v, n, x))                                         \
-    X(fmi2Status, fmi2SetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n,              \
-                                const fmi2Real *x), (W, v, n, x))                                       \
     X(fmi2Status, fmi2SetInteger, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
                                    const fmi2Integer *x), (W, v, n, x))                                 \
     X(fmi2Status, fmi2SetBoolean, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
@@ -173,24 +194,48 @@ static const char *py_names[] = {
       size_t n, const fmi2Integer *o, const fmi2Real *x), (W, v, n, o, x))                              \
     X(fmi2Status, fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference *v,       \
       size_t n, const fmi2Integer *o, fmi2Real *x), (W, v, n, o, x))                                    \
-    X(fmi2Status, fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean p), (W, t, h, p))   \
     X(fmi2Status, fmi2CancelStep, (fmi2Component c), (W))                                             \
     X(fmi2Status, fmi2GetStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Status *v), (W, k, v))   \
-    X(fmi2Status, fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Real *v), (W, k, v)) \
     X(fmi2Status, fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Integer *v),   \
       (W, k, v))                                                                                        \
-    X(fmi2Status, fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v),   \
-      (W, k, v))                                                                                        \
     X(fmi2Status, fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind k, fmi2String *v),     \
+      (W, k, v))
+
+/* the functions the loader defines itself (the fast path, 5.), forwarding what it does not handle */
+#define FMI2_OWN(X)                                                                                  \
+    X(fmi2Status, fmi2Reset, (fmi2Component c), (W))                                                  \
+    X(fmi2Status, fmi2GetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n, fmi2Real *x), \
+      (W, v, n, x))                                                                                     \
+    X(fmi2Status, fmi2SetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n,              \
+                                const fmi2Real *x), (W, v, n, x))                                       \
+    X(fmi2Status, fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean p), (W, t, h, p))   \
+    X(fmi2Status, fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Real *v), (W, k, v)) \
+    X(fmi2Status, fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v),   \
       (W, k, v))
 
 /* the inner (pythonfmu) function pointers */
 #define DECLARE_INNER(ret, name, params, args) static ret(*inner_##name) params;
 FMI2_FORWARDED(DECLARE_INNER)
+FMI2_OWN(DECLARE_INNER)
 static fmi2Component (*inner_fmi2Instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                               const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
 static void (*inner_fmi2FreeInstance)(fmi2Component);
 static fmi2Status (*inner_fmi2SetDebugLogging)(fmi2Component, fmi2Boolean, size_t, const fmi2String *);
+
+/* The tables a reeve_fmu slave shares with the loader (reeve_fmu/fmu/fastlink.py, same layout), all
+ * indexed by value reference and owned by the Python slave (the loader holds a reference to it). */
+#define REEVE_LINK_VERSION 1
+typedef struct ReeveLink {
+    int version;       /* REEVE_LINK_VERSION */
+    int n_vr;          /* length of every table */
+    int *state;        /* [0] setReal may be done here, [1] getReal may be done here,
+                        * [2] some input was written here and is not yet pulled into Python */
+    const int *kind;   /* 1: a Real input without side effects, 2: an output kept current in val */
+    const double *lo;  /* bounds of an input (+-DBL_MAX when none: inf and NaN fail them) */
+    const double *hi;
+    double *val;       /* the value */
+    int *dirty;        /* 1: written here, not yet pulled */
+} ReeveLink;
 
 /* one wrapper per instance: the host sees this, pythonfmu sees `inner` */
 typedef struct {
@@ -201,6 +246,11 @@ typedef struct {
     size_t ncat;
     char **categories;
     char *instance_name;
+    /* the fast path (5.): NULL/0 when the model did not link */
+    struct ReeveLink *link;
+    PyObject *obj, *do_step, *log_queue; /* the Python slave, its bound do_step, its log queue */
+    double last_ok_time;                 /* fmi2LastSuccessfulTime of the loader's doSteps */
+    int stepped, wants_terminate;
 } Wrap;
 
 /* ------------------------------------------------------------------ process-wide loading state */
@@ -472,6 +522,7 @@ static int load_pythonfmu(char *err, size_t esize)
         return -1;                                                                                   \
     }
     FMI2_FORWARDED(RESOLVE)
+    FMI2_OWN(RESOLVE)
     RESOLVE(, fmi2Instantiate, , )
     RESOLVE(, fmi2FreeInstance, , )
     RESOLVE(, fmi2SetDebugLogging, , )
@@ -554,6 +605,116 @@ done:
     return rc;
 }
 
+
+/* ------------------------------------------------------------------ the fast path (5.) */
+#define LINK_BOX "_reeve_fmu_link_box"
+static pthread_mutex_t link_lock = PTHREAD_MUTEX_INITIALIZER; /* one construction at a time */
+
+/* Before pythonfmu constructs the Python slave: a list in sys that ReeveSlave.__init__ appends itself
+ * to (pythonfmu gives the loader no handle on the object). Returns a new reference or NULL. */
+static PyObject *open_box(void)
+{
+    int gil = py.GILStateEnsure();
+    PyObject *box = py.ListNew(0);
+    if (box && py.SysSetObject(LINK_BOX, box) != 0) {
+        py.ErrClear();
+        py.DecRef(box);
+        box = NULL;
+    }
+    py.GILStateRelease(gil);
+    return box;
+}
+
+static void unlink_instance(Wrap *w)
+{
+    int gil;
+    if (!w->obj) return;
+    gil = py.GILStateEnsure();
+    py.DecRef(w->do_step);
+    py.DecRef(w->log_queue);
+    py.DecRef(w->obj);
+    py.GILStateRelease(gil);
+    w->obj = w->do_step = w->log_queue = NULL;
+    w->link = NULL;
+}
+
+/* After the construction: if exactly this box holds one slave with _native_link(), take its tables.
+ * Anything unexpected leaves the instance on pythonfmu's path (correct, only slower). */
+static void close_box(Wrap *w, PyObject *box)
+{
+    int gil = py.GILStateEnsure();
+    PyObject *obj = NULL, *r = NULL, *m = NULL;
+    ReeveLink *L = NULL;
+    if (box && py.SysGetObject(LINK_BOX) == box && py.ListSize(box) == 1)
+        obj = py.ListGetItem(box, 0); /* borrowed */
+    if (obj && (m = py.ObjectGetAttrString(obj, "_native_link")) != NULL &&
+        (r = py.CallFunctionObjArgs(m, NULL)) != NULL)
+        L = (ReeveLink *)py.LongAsVoidPtr(r);
+    if (L && L->version == REEVE_LINK_VERSION && L->n_vr >= 0) {
+        w->do_step = py.ObjectGetAttrString(obj, "do_step");
+        w->log_queue = py.ObjectGetAttrString(obj, "log_queue");
+        if (w->do_step && w->log_queue) {
+            py.IncRef(obj);
+            w->obj = obj;
+            w->link = L;
+        } else {
+            if (w->do_step) py.DecRef(w->do_step);
+            if (w->log_queue) py.DecRef(w->log_queue);
+            w->do_step = w->log_queue = NULL;
+        }
+    }
+    py.ErrClear();
+    if (r) py.DecRef(r);
+    if (m) py.DecRef(m);
+    if (box) {
+        if (py.SysGetObject(LINK_BOX) == box) py.SysSetObject(LINK_BOX, NULL);
+        py.ErrClear();
+        py.DecRef(box);
+    }
+    py.GILStateRelease(gil);
+}
+
+/* doStep without pythonfmu's C++ layer: one call of the slave's do_step (ReeveSlave never raises out
+ * of it); queued log messages are then handed to pythonfmu, which forwards them to the logger. */
+static fmi2Status fast_step(Wrap *w, fmi2Real t, fmi2Real h)
+{
+    int ok = 0, gil = py.GILStateEnsure();
+    char err[4096] = "";
+    ptrdiff_t nlog;
+    PyObject *a = py.FloatFromDouble(t), *b = py.FloatFromDouble(h), *r = NULL;
+    if (a && b) r = py.CallFunctionObjArgs(w->do_step, a, b, NULL);
+    if (r) {
+        ok = py.ObjectIsTrue(r) == 1;
+        py.DecRef(r);
+    } else {
+        PyObject *et = NULL, *ev = NULL, *tb = NULL;
+        py.ErrFetch(&et, &ev, &tb);
+        copy_str(ev ? ev : et, err, sizeof err);
+        if (et) py.DecRef(et);
+        if (ev) py.DecRef(ev);
+        if (tb) py.DecRef(tb);
+        if (!err[0]) snprintf(err, sizeof err, "unknown error");
+    }
+    if (a) py.DecRef(a);
+    if (b) py.DecRef(b);
+    nlog = py.ListSize(w->log_queue);
+    py.GILStateRelease(gil);
+    if (nlog > 0) inner_fmi2SetReal(w->inner, NULL, 0, NULL); /* pythonfmu flushes its log queue */
+    if (err[0]) {
+        loader_log(w, fmi2Error, "%s: doStep(t=%.17g, h=%.17g) raised: %s", REEVE_MODEL_IDENTIFIER, t, h,
+                   err);
+        return fmi2Error;
+    }
+    w->stepped = 1;
+    if (ok) {
+        w->last_ok_time = t + h;
+        return fmi2OK;
+    }
+    w->last_ok_time = t;
+    w->wants_terminate = 1;
+    return fmi2Discard;
+}
+
 /* ------------------------------------------------------------------ exported fmi2 functions */
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
 EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
@@ -575,6 +736,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
 {
     char resources[4096], uri[8300], err[8192];
     size_t i, j;
+    PyObject *box;
     Wrap *w = (Wrap *)calloc(1, sizeof(Wrap));
     if (!w) return NULL;
     if (functions) w->host = *functions;
@@ -619,7 +781,13 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     w->relay = w->host;
     w->relay.logger = relay_logger;
     w->relay.componentEnvironment = w;
+    w->last_ok_time = NAN; /* before the first step, as pythonfmu */
+    pthread_mutex_lock(&link_lock);
+    box = open_box();
     w->inner = inner_fmi2Instantiate(instanceName, fmuType, fmuGUID, uri, &w->relay, visible, 1);
+    close_box(w, box);
+    if (!w->inner) unlink_instance(w);
+    pthread_mutex_unlock(&link_lock);
     if (!w->inner) {
         loader_log(w, fmi2Error, "%s: pythonfmu could not instantiate the model (reason above)",
                    REEVE_MODEL_IDENTIFIER);
@@ -634,6 +802,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
     Wrap *w = (Wrap *)c;
     if (!w) return;
     ensure_thread_state();
+    unlink_instance(w);
     inner_fmi2FreeInstance(w->inner);
     free_wrap(w);
 }
@@ -668,5 +837,102 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     }
 #define W w->inner
 FMI2_FORWARDED(DEFINE_FORWARD)
+
+/* pythonfmu constructs a new Python slave: link to that one */
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    Wrap *w = (Wrap *)c;
+    fmi2Status s;
+    PyObject *box;
+    if (!w) return fmi2Error;
+    ensure_thread_state();
+    pthread_mutex_lock(&link_lock);
+    unlink_instance(w);
+    box = open_box();
+    s = inner_fmi2Reset(w->inner);
+    close_box(w, box);
+    pthread_mutex_unlock(&link_lock);
+    return s;
+}
+
+/* Real inputs straight into the slave's table (it pulls them at its next call); anything else, a
+ * value outside its bounds, or a slave not in step mode: pythonfmu's path, which checks and logs. */
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference *v, size_t n, const fmi2Real *x)
+{
+    Wrap *w = (Wrap *)c;
+    const ReeveLink *L;
+    size_t i;
+    if (!w) return fmi2Error;
+    L = w->link;
+    if (L && L->state[0]) {
+        for (i = 0; i < n; i++) {
+            unsigned k = v[i];
+            if (k >= (unsigned)L->n_vr || L->kind[k] != 1 || !(x[i] >= L->lo[k] && x[i] <= L->hi[k]))
+                goto slow;
+        }
+        for (i = 0; i < n; i++) {
+            L->val[v[i]] = x[i];
+            L->dirty[v[i]] = 1;
+        }
+        if (n) L->state[2] = 1;
+        return fmi2OK;
+    }
+slow:
+    ensure_thread_state();
+    return inner_fmi2SetReal(w->inner, v, n, x);
+}
+
+/* outputs the slave keeps current in its table (what step() writes each step); others: pythonfmu */
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference *v, size_t n, fmi2Real *x)
+{
+    Wrap *w = (Wrap *)c;
+    const ReeveLink *L;
+    size_t i;
+    if (!w) return fmi2Error;
+    L = w->link;
+    if (L && L->state[1]) {
+        for (i = 0; i < n; i++)
+            if (v[i] >= (unsigned)L->n_vr || L->kind[v[i]] != 2) goto slow;
+        for (i = 0; i < n; i++) x[i] = L->val[v[i]];
+        return fmi2OK;
+    }
+slow:
+    ensure_thread_state();
+    return inner_fmi2GetReal(w->inner, v, n, x);
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean p)
+{
+    Wrap *w = (Wrap *)c;
+    if (!w) return fmi2Error;
+    ensure_thread_state();
+    if (w->link) return fast_step(w, t, h);
+    return inner_fmi2DoStep(w->inner, t, h, p);
+}
+
+/* pythonfmu's answers, for the steps the loader made */
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *x)
+{
+    Wrap *w = (Wrap *)c;
+    if (!w) return fmi2Error;
+    if (w->stepped && k == fmi2LastSuccessfulTime && x) {
+        *x = w->last_ok_time;
+        return fmi2OK;
+    }
+    ensure_thread_state();
+    return inner_fmi2GetRealStatus(w->inner, k, x);
+}
+
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *x)
+{
+    Wrap *w = (Wrap *)c;
+    if (!w) return fmi2Error;
+    if (w->stepped && k == fmi2Terminated && x) {
+        *x = w->wants_terminate;
+        return fmi2OK;
+    }
+    ensure_thread_state();
+    return inner_fmi2GetBooleanStatus(w->inner, k, x);
+}
 
 #endif /* REEVE_EXIT_HELPER */
