@@ -481,8 +481,6 @@ def assemble_ws(K, W, c, q, v, t, u):
         else:
             linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
                               QE, VE, MEs, QEs, ie)
-        if nl:
-            nl_convect(K, MEs, QEs, ie)
         for a in range(ne):
             for wa in range(nw):
                 ba = el_coef[ie, a, wa]
@@ -494,6 +492,8 @@ def assemble_ws(K, W, c, q, v, t, u):
                     mab = ba * MEs[ie, a, b]
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
+    if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
+        _nl_convect_all(K, MEs, QEs, Q)
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
@@ -501,6 +501,27 @@ def assemble_ws(K, W, c, q, v, t, u):
     for j in range(nq):
         M[j, j] += Md[j]
     return status
+
+
+@njit(cache=True)
+def _nl_convect_all(K, MEs, QEs, Q):
+    """Convective terms of the nonlinear rows (bodies.nl_convect) for every element: QEs[ie] gets
+    them as before, and Q the change, scattered like the element forces."""
+    el_map = K.el_map
+    el_coef = K.el_coef
+    ne = QEs.shape[1]
+    nw = el_map.shape[2]
+    old = np.empty(ne)
+    for ie in range(el_map.shape[0]):
+        for a in range(ne):
+            old[a] = QEs[ie, a]
+        nl_convect(K, MEs, QEs, ie)
+        for a in range(ne):
+            d = QEs[ie, a] - old[a]
+            for wa in range(nw):
+                ba = el_coef[ie, a, wa]
+                if ba != 0.0:
+                    Q[el_map[ie, a, wa]] += ba * d
 
 
 @njit(cache=True)
@@ -671,7 +692,7 @@ def energy_u(K, c, q, v, u):
 def set_joints(K, t, q, v, qdd):
     """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
     pose, as the profile at its start): q = x(t)."""
-    if K.nl_on & 2 == 0:
+    if (K.nl_on & 2) == 0:
         return
     for k in range(K.jp_dof.shape[0]):
         j = K.jp_dof[k]
