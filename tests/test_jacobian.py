@@ -69,8 +69,8 @@ def _random_state(m, sim, seed=7):
 def _model(name, contact):
     sc = dataclasses.replace(MODELS[name](), sheave_contact=contact)
     m = build_model(sc)
-    # Kelvin-Voigt damping large enough to be seen next to the stiffness
-    return m, compiled_kernel(m.K._replace(el_nu=np.full_like(m.K.el_nu, 0.05)))
+    # Kelvin-Voigt damping on every rope (the elevator ropes' 2e-3 s where a scene has none)
+    return m, compiled_kernel(m.K._replace(el_nu=np.where(m.K.el_nu > 0.0, m.K.el_nu, 2e-3)))
 
 
 @pytest.mark.parametrize("name", list(MODELS))
@@ -85,7 +85,7 @@ def test_element_jacobians(name):
     QE, VE, MEs, QEs = np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne))
     X, XD, MEt, QEt = np.empty((1, ne)), np.empty((1, ne)), np.empty((1, ne, ne)), np.empty((1, ne))
     r0, r1, S, JE = np.empty(ne), np.empty(ne), np.empty((5, ne)), np.empty((ne, ne))
-    worst = 0.0
+    worst = (0.0, -1, "")
     for ie in range(n_el):
         element_eval(KJ, st.c, st.q, st.v, ie, QE, VE, MEs, QEs)
         ae = np.einsum("aw,aw->a", m.K.el_coef[ie], qdd[m.K.el_map[ie]])
@@ -97,19 +97,29 @@ def test_element_jacobians(name):
         Kq, Cv = parts[0], parts[1] - parts[0]
         G1 = m.K.el_g[ie:ie + 1].copy()
         Aq, Av = np.empty((ne, ne)), np.empty((ne, ne))
-        for b in range(ne):
-            for A, arr in ((Aq, X), (Av, XD)):
-                X[0], XD[0] = QE[ie], VE[ie]
-                h = 1e-7 * (1.0 + abs(arr[0, b]))
-                arr[0, b] += h
-                _element_res(KJ, ie, True, X, XD, ae, G1, MEt, QEt, r1)
-                arr[0, b] -= 2.0 * h
-                _element_res(KJ, ie, True, X, XD, ae, G1, MEt, QEt, r0)
-                A[:, b] = (r1 - r0) / (2.0 * h)
-        eq = np.max(np.abs(Kq - Aq)) / np.max(np.abs(Aq))
-        ev = np.max(np.abs(Cv - Av)) / np.max(np.abs(Av))
-        worst = max(worst, eq, ev)
-    assert worst <= 1e-6, worst
+
+        def central(arr, b, h):
+            X[0], XD[0] = QE[ie], VE[ie]
+            arr[0, b] += h
+            _element_res(KJ, ie, True, X, XD, ae, G1, MEt, QEt, r1)
+            arr[0, b] -= 2.0 * h
+            _element_res(KJ, ie, True, X, XD, ae, G1, MEt, QEt, r0)
+            return (r1 - r0) / (2.0 * h)
+        # the reference at two steps (q: Richardson-extrapolated central differences, the tension-only
+        # law bends within 1e-6 strain; v: central, exact for the quadratic inertia terms); where they
+        # differ (round-off, a slack span's smoothed law) that difference is the reference's uncertainty
+        ref = {}
+        for k in (1.0, 0.1):
+            hq, hv = 1e-7 * k * (1.0 + np.abs(QE[ie])), 1e-5 * k * (1.0 + np.abs(VE[ie]))
+            for b in range(ne):
+                Aq[:, b] = (4.0 * central(X, b, 0.5 * hq[b]) - central(X, b, hq[b])) / 3.0
+                Av[:, b] = central(XD, b, hv[b])
+            ref[k] = (Aq.copy(), Av.copy())
+        for part, B, A1, A2 in (("q", Kq, ref[1.0][0], ref[0.1][0]), ("v", Cv, ref[1.0][1], ref[0.1][1])):
+            err = np.max((np.abs(B - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2)))
+            worst = max(worst, (err, ie, part))
+    print(name, worst)
+    assert worst[0] <= 1e-6, worst
 
 
 @pytest.mark.parametrize("contact", ["rigid", "creep"])
@@ -131,16 +141,21 @@ def test_newton_matrix_equals_differences(name, contact):
     def r(qq, vv, aa):
         assemble(KJ, st.c, qq, vv, 0.0, ue, M, Q)
         return (M @ aa - Q)[SP.perm]
-    A = np.empty((SP.n, SP.n))
-    for jb, j in enumerate(SP.perm):
-        dx = 1e-7 * (1.0 + abs(st.q[j])) / bq
-        cols = []
-        for s in (1.0, -1.0):
-            qq, vv, aa = st.q.copy(), st.v.copy(), qdd.copy()
-            qq[j] += s * bq * dx
-            vv[j] += s * gv * dx
-            aa[j] += s * dx
-            cols.append(r(qq, vv, aa))
-        A[:, jb] = (cols[0] - cols[1]) / (2.0 * dx)
-    err = np.max(np.abs(unpack_dense(J, SP) - A)) / np.max(np.abs(A))
+    ref = []
+    for rel in (1e-7, 1e-9):       # two steps: their difference is the reference's own uncertainty
+        A = np.empty((SP.n, SP.n))
+        for jb, j in enumerate(SP.perm):
+            dx = rel * (1.0 + abs(st.q[j])) / bq
+            cols = []
+            for s in (1.0, -1.0):
+                qq, vv, aa = st.q.copy(), st.v.copy(), qdd.copy()
+                qq[j] += s * bq * dx
+                vv[j] += s * gv * dx
+                aa[j] += s * dx
+                cols.append(r(qq, vv, aa))
+            A[:, jb] = (cols[0] - cols[1]) / (2.0 * dx)
+        ref.append(A)
+    A1, A2 = ref
+    err = np.max(np.abs(unpack_dense(J, SP) - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2))
+    print(name, contact, err)
     assert err <= 1e-6, err

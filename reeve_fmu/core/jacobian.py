@@ -12,9 +12,9 @@ straight into the banded layout of core/sparse.py:
     material-length dependence through l = s2 - s1 and the Eshelby force on the s rows) and gravity:
     closed form (`linear_stiffness`);
   * linear element, inertia terms (d(M_e a_e)/dq_e and the quadratic-velocity vector): element-local
-    forward differences of the kernel with stiffness and gravity switched off: they are a ~1e-3 part of
-    the matrix at h = 1 ms and smooth on the scale of the element, so a 1e-8 step gives them to ~1e-8;
-  * cubic element: element-local forward differences of the whole kernel (ne kernel calls per
+    central differences of the kernel with stiffness and gravity switched off (2 ne kernel calls per
+    element; exact in v, where these terms are quadratic, second order in q, on the element's scale);
+  * cubic element: element-local central differences of the whole kernel (2 ne kernel calls per
     element; closed form of its bending and ALE inertia terms not done);
   * q-level terms: hitch springs and dampers, buffers, stored drum rope, brake and the groove friction's
     spring law in closed form (`qlevel_closed`); what couples a q-level row to element strains (a creep
@@ -33,7 +33,8 @@ from .elements.linear import SLACK_STRAIN, linear_element_at
 from .sparse import bordered_factor, residual_sparse
 from .system import UE_CREEP, _static_end_tension, creep_kappa, creep_terms, element_eval, q_terms
 
-FD_STEP = 1e-8     # coordinate step of the element-local and q-level differences, x (1 + |q|)
+FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
+QL_STEP = 1e-9     # and of the q-level ones (the friction laws saturate within ~1e-5 m)
 
 
 @njit(cache=True, inline="always")
@@ -158,25 +159,21 @@ def element_block(K, ie, QE, VE, MEs, QEs, ae, ba, bq, gv, JE, X, XD, G1, MEt, Q
         XD[0, a] = VE[ie, a]
     for k in range(nd):
         G1[0, k] = K.el_g[ie, k] if cubic else 0.0
-    if cubic:
-        # the whole kernel is differenced: its residual at the state is the residual's (same inputs)
-        for a in range(ne):
-            x = -QEs[ie, a]
-            for b in range(ne):
-                x += MEs[ie, a, b] * ae[b]
-            r0[a] = x
-    else:
+    if not cubic:
         linear_stiffness(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g, QE, VE, ie,
                          bq, gv, JE, S)
-        _element_res(K, ie, False, X, XD, ae, G1, MEt, QEt, r0)
+    # central differences: exact for the quadratic-velocity terms (quadratic in v), second order in q
     for b in range(ne):
         hq = FD_STEP * (1.0 + abs(QE[ie, b]))
         dx = hq / bq
         X[0, b] = QE[ie, b] + hq
         XD[0, b] = VE[ie, b] + gv * dx
         _element_res(K, ie, False, X, XD, ae, G1, MEt, QEt, r1)
+        X[0, b] = QE[ie, b] - hq
+        XD[0, b] = VE[ie, b] - gv * dx
+        _element_res(K, ie, False, X, XD, ae, G1, MEt, QEt, r0)
         for a in range(ne):
-            JE[a, b] += (r1[a] - r0[a]) / dx
+            JE[a, b] += (r1[a] - r0[a]) / (2.0 * dx)
         X[0, b] = QE[ie, b]
         XD[0, b] = VE[ie, b]
 
@@ -392,7 +389,7 @@ def qlevel_coupled(K, SP, W, c, q, v, qdd, t, u, pos, mark, els, J, bq, gv):
     for j in range(K.nq):
         if not mark[j] or pos[j] < 0:
             continue
-        hq = FD_STEP * (1.0 + abs(q[j]))
+        hq = QL_STEP * (1.0 + abs(q[j]))
         dx = hq / bq
         q0, v0 = q[j], v[j]
         q[j] = q0 + hq
