@@ -30,6 +30,14 @@ Kernel = namedtuple("Kernel", [
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
+    # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on = 0: none
+    "nl_on", "nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_BR", "nl_ANG", "nl_AX", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa",
+    "nl_rk", "nl_rf", "nl_P", "nl_TW", "nl_cols", "nl_f0", "nl_fp", "nl_fm",
+    "nl_J", "nl_qs", "nl_racc", "nl_rw", "nl_ent", "nl_acc",
+    # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
+    "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
+    # spatial rigid bodies (bodies.rigid_terms): rotation-vector indices, inertia tensors in body axes
+    "rb_q", "rb_J",
 ])
 
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
@@ -113,6 +121,42 @@ if JIT:
         ("crp_kind", types.int64[::1]),
         ("mot_crp", types.int64),
         ("crp_vreg", types.float64),
+        ("nl_on", types.int64),
+        ("nl_bq", types.int64[:, ::1]),
+        ("nl_b0", types.float64[:, ::1]),
+        ("nl_bk", types.int64[::1]),
+        ("nl_bax", types.float64[:, ::1]),
+        ("nl_BR", types.float64[:, ::1]),
+        ("nl_ANG", types.float64[:, ::1]),
+        ("nl_AX", types.float64[:, ::1]),
+        ("nl_pb", types.int64[::1]),
+        ("nl_po", types.float64[:, ::1]),
+        ("nl_sp", types.int64[:, ::1]),
+        ("nl_sg", types.float64[:, ::1]),
+        ("nl_sa", types.float64[:, ::1]),
+        ("nl_rk", types.int64[:, ::1]),
+        ("nl_rf", types.float64[:, ::1]),
+        ("nl_P", types.float64[:, ::1]),
+        ("nl_TW", types.float64[:, ::1]),
+        ("nl_cols", types.int64[::1]),
+        ("nl_f0", types.float64[::1]),
+        ("nl_fp", types.float64[::1]),
+        ("nl_fm", types.float64[::1]),
+        ("nl_J", types.float64[:, ::1]),
+        ("nl_qs", types.float64[::1]),
+        ("nl_racc", types.float64[::1]),
+        ("nl_rw", types.int64[:, ::1]),
+        ("nl_ent", types.int64[:, ::1]),
+        ("nl_acc", types.float64[:, ::1]),
+        ("jp_dof", types.int64[::1]),
+        ("jp_prof", types.float64[:, :, ::1]),
+        ("jt_dof", types.int64[::1]),
+        ("jt_tab", types.float64[:, :, ::1]),
+        ("jg_dof", types.int64[::1]),
+        ("jg_A", types.float64[::1]),
+        ("jg_B", types.float64[::1]),
+        ("rb_q", types.int64[:, ::1]),
+        ("rb_J", types.float64[:, :, ::1]),
     ])
 
     @structref.register
@@ -191,7 +235,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -254,6 +298,42 @@ if JIT:
         k.crp_kind = crp_kind
         k.mot_crp = mot_crp
         k.crp_vreg = crp_vreg
+        k.nl_on = nl_on
+        k.nl_bq = nl_bq
+        k.nl_b0 = nl_b0
+        k.nl_bk = nl_bk
+        k.nl_bax = nl_bax
+        k.nl_BR = nl_BR
+        k.nl_ANG = nl_ANG
+        k.nl_AX = nl_AX
+        k.nl_pb = nl_pb
+        k.nl_po = nl_po
+        k.nl_sp = nl_sp
+        k.nl_sg = nl_sg
+        k.nl_sa = nl_sa
+        k.nl_rk = nl_rk
+        k.nl_rf = nl_rf
+        k.nl_P = nl_P
+        k.nl_TW = nl_TW
+        k.nl_cols = nl_cols
+        k.nl_f0 = nl_f0
+        k.nl_fp = nl_fp
+        k.nl_fm = nl_fm
+        k.nl_J = nl_J
+        k.nl_qs = nl_qs
+        k.nl_racc = nl_racc
+        k.nl_rw = nl_rw
+        k.nl_ent = nl_ent
+        k.nl_acc = nl_acc
+        k.jp_dof = jp_dof
+        k.jp_prof = jp_prof
+        k.jt_dof = jt_dof
+        k.jt_tab = jt_tab
+        k.jg_dof = jg_dof
+        k.jg_A = jg_A
+        k.jg_B = jg_B
+        k.rb_q = rb_q
+        k.rb_J = rb_J
         return k
 
 
@@ -266,7 +346,7 @@ def compiled_kernel(K: Kernel):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
         elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out",
-                      "el_type", "mot_crp"):
+                      "el_type", "mot_crp", "nl_on"):
             value = int(value)
         else:
             value = float(value)

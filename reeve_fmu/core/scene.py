@@ -11,6 +11,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
@@ -18,6 +20,8 @@ except ModuleNotFoundError:  # Python 3.10
 
 MODELS = ("axial-1d", "planar", "spatial", "spatial-torsion")
 AXES = ("x", "y", "z")
+BODY_COORDS = AXES + ("theta", "rotation")   # theta: planar rotation (counter-clockwise in the x-z
+#                                               drawing); rotation: spatial rotation vector (3 coordinates)
 
 
 class SceneError(ValueError):
@@ -30,8 +34,28 @@ class Body:
     name: str
     mass: float                      # kg
     position: tuple                  # m, reference point [x, y, z] at t = 0
-    free: tuple                      # free translations, subset of ("x", "y", "z")
+    free: tuple                      # free coordinates, subset of ("x", "y", "z", "theta")
     damping: float = 0.0             # N s/m, viscous guide friction on every free axis
+    inertia: object = 0.0            # kg m^2: about y through the centre of mass (theta), about the joint axis;
+    #                                  3x3 tensor about the centre of mass in body axes (rotation)
+    joint: str | None = None         # None (free coordinates) | revolute | prismatic (to the ground)
+    joint_axis: tuple = (0.0, 0.0, 1.0)
+    pivot: tuple = (0.0, 0.0, 0.0)   # m, a point on a revolute joint's axis
+    motion: "Motion | None" = None   # how the joint coordinate moves
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A joint's motion: free (with viscous damping), a jerk-limited S-curve profile of the joint
+    coordinate, or a torque (force) table acting on the joint's inertia."""
+    kind: str = "free"               # free | profile | torque
+    distance: float = 0.0            # rad (revolute) or m (prismatic), S-curve travel
+    v_max: float = 0.1
+    a_max: float = 0.1
+    jerk: float = 0.2
+    t_start: float = 0.0
+    torque: tuple = ()               # ((t, tau), ...) N m (revolute) or N (prismatic)
+    damping: float = 0.0             # N m s/rad or N s/m
 
 
 @dataclass(frozen=True)
@@ -150,16 +174,19 @@ class Scene:
     description: str = ""
     extra: dict = field(default_factory=dict)   # sections owned by other layers (e.g. [accuracy])
     sheave_contact: str = "creep"    # creep: the rope rides the rim at its arriving strain; rigid: unstrained
+    tangents: str = "frozen"         # frozen: tangent points fixed at t = 0; exact: from the current poses
 
     def with_overrides(self, **kw) -> "Scene":
         return replace(self, **kw)
 
 
 SCHEMA_KEYS = {
-    "scene": {"name", "description", "model", "gravity", "t_end", "output_step", "sheave_contact"},
+    "scene": {"name", "description", "model", "gravity", "t_end", "output_step", "sheave_contact", "tangents"},
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
-    "bodies": {"name", "mass", "position", "free", "damping"},
+    "bodies": {"name", "mass", "position", "free", "damping", "inertia", "joint", "motion"},
+    "joint": {"kind", "axis", "pivot"},
+    "motion": {"kind", "distance", "v_max", "a_max", "jerk", "t_start", "torque", "damping"},
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
@@ -308,7 +335,8 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     statics = r.string(ini, "initial", "statics", "positions", ("positions", "rope-length", "none"))
 
     names: dict[str, str] = {}      # every named item: bodies, sheaves, ropes and buffers share one namespace
-    bodies = _parse_bodies(r, data, names)
+    bodies = _parse_bodies(r, data, names, model)
+    tangents = _parse_tangents(r, sc, model, bodies)
     sheaves = _parse_sheaves(r, data, names, model, {b.name for b in bodies})
     used_sheaves: dict[str, str] = {}
     ropes = _parse_ropes(r, data, names, model, statics, {b.name for b in bodies}, {s.name: s for s in sheaves},
@@ -322,7 +350,8 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                  bodies=tuple(bodies), sheaves=tuple(sheaves), ropes=tuple(ropes), drive=drive,
                  solver=solver, brake=brake, buffers=tuple(buffers), statics=statics, t_end=t_end, output_step=output_step, source=source,
                  description=r.string(sc, "scene", "description", ""), extra=extra,
-                 sheave_contact=r.string(sc, "scene", "sheave_contact", "creep", ("creep", "rigid")))
+                 sheave_contact=r.string(sc, "scene", "sheave_contact", "creep", ("creep", "rigid")),
+                 tangents=tangents)
 
 
 def _parse_solver(r: _Reader, data) -> Solver:
@@ -341,20 +370,114 @@ def _parse_solver(r: _Reader, data) -> Solver:
     return solver
 
 
-def _parse_bodies(r: _Reader, data, names) -> list:
+def _parse_bodies(r: _Reader, data, names, model="axial-1d") -> list:
     bodies = []
     for i, b in enumerate(r.array_of_tables(data, "bodies")):
         path = f"bodies[{i}]"
         r.table(b, path, SCHEMA_KEYS["bodies"])
         name = _unique_name(r, b, path, names)
+        if "joint" in b:
+            bodies.append(_parse_joint_body(r, b, path, name, model))
+            continue
+        if "motion" in b:
+            r.fail(f"{path}.motion", "a motion drives a joint: give the body a 'joint' table")
         free = b.get("free", ["z"])
-        if not isinstance(free, list) or not all(a in AXES for a in free) or len(set(free)) != len(free):
-            r.fail(f"{path}.free", f"must be a list of distinct axes from {AXES}, got {free!r}")
+        if (not isinstance(free, list) or not all(a in BODY_COORDS for a in free)
+                or len(set(free)) != len(free)):
+            r.fail(f"{path}.free", f"must be a list of distinct coordinates from {BODY_COORDS}, got {free!r}")
+        if "theta" in free and model != "planar":
+            r.fail(f"{path}.free", f"'theta' (rotation in the x-z plane) needs model = 'planar', "
+                                   f"the scene's model is {model!r}")
+        if "rotation" in free and model != "spatial":
+            r.fail(f"{path}.free", f"'rotation' (spatial rotation) needs model = 'spatial', "
+                                   f"the scene's model is {model!r}")
+        if "rotation" in free:
+            inertia = _inertia_tensor(r, b, path)
+        else:
+            inertia = r.number(b, path, "inertia", 0.0, nonneg=True)
+        if "theta" in free and not inertia > 0.0:
+            r.fail(f"{path}.inertia", f"a body free to rotate ('theta' in free) needs a positive moment of "
+                                      f"inertia about its centre of mass [kg m^2], got {inertia:g}")
         bodies.append(Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
                            position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
-                           free=tuple(a for a in AXES if a in free),
-                           damping=r.number(b, path, "damping", 0.0, nonneg=True)))
+                           free=tuple(a for a in BODY_COORDS if a in free),
+                           damping=r.number(b, path, "damping", 0.0, nonneg=True), inertia=inertia))
     return bodies
+
+
+def _inertia_tensor(r: _Reader, b, path):
+    """Inertia tensor about the centre of mass in body axes (= world axes at t = 0) [kg m^2]: a list of
+    three principal moments or a symmetric 3x3 list of lists; it must be positive definite and obey
+    the triangle inequalities of a real body."""
+    v = b.get("inertia")
+    key = f"{path}.inertia"
+    if v is None:
+        r.fail(key, "missing: a body free to rotate ('rotation' in free) needs its inertia tensor [kg m^2]")
+    try:
+        J = np.diag(np.asarray(v, float)) if np.ndim(v) == 1 else np.asarray(v, float)
+    except (TypeError, ValueError):
+        J = None
+    if J is None or J.shape != (3, 3) or not np.all(np.isfinite(J)):
+        r.fail(key, f"must be [Ixx, Iyy, Izz] or a 3x3 list of lists, got {v!r}")
+    if np.max(np.abs(J - J.T)) > 1e-9 * np.max(np.abs(J)):
+        r.fail(key, "the inertia tensor must be symmetric")
+    lam = np.linalg.eigvalsh(J)
+    if lam[0] <= 0.0:
+        r.fail(key, f"the inertia tensor must be positive definite, its principal moments are "
+                    f"{', '.join(f'{x:g}' for x in lam)} kg m^2")
+    if lam[0] + lam[1] < lam[2] * (1.0 - 1e-9):
+        r.fail(key, f"principal moments {', '.join(f'{x:g}' for x in lam)} kg m^2 violate I1 + I2 >= I3 "
+                    f"(no real body has them)")
+    return tuple(map(tuple, J.tolist()))
+
+
+def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
+    """A body on a joint to the ground: revolute (slewing, luffing: coordinate `angle`, rad) or
+    prismatic (trolley: coordinate `travel`, m), moved by its [motion]."""
+    if "free" in b:
+        r.fail(f"{path}.free", "a body on a joint moves with its joint coordinate only; remove 'free'")
+    jt = r.table(b["joint"], f"{path}.joint", SCHEMA_KEYS["joint"])
+    kind = r.string(jt, f"{path}.joint", "kind", required=True, choices=("revolute", "prismatic"))
+    axis = r.vector(jt, f"{path}.joint", "axis", required=True, unit=True)
+    if model in ("axial-1d", "planar") and kind == "revolute" and abs(abs(axis[1]) - 1.0) > 1e-9:
+        r.fail(f"{path}.joint.axis", f"model {model!r}: a revolute joint turns about y, got {list(axis)}")
+    if model in ("axial-1d", "planar") and kind == "prismatic" and abs(axis[1]) > 1e-9:
+        r.fail(f"{path}.joint.axis", f"model {model!r}: a prismatic joint slides in the x-z plane, got {list(axis)}")
+    if model == "axial-1d":
+        r.fail(f"{path}.joint", "joints need model = 'planar' or 'spatial'")
+    pivot = r.vector(jt, f"{path}.joint", "pivot", required=kind == "revolute", default=(0.0, 0.0, 0.0))
+    inertia = r.number(b, path, "inertia", 0.0, nonneg=True)
+    if kind == "revolute" and not inertia > 0.0:
+        r.fail(f"{path}.inertia", f"a revolute joint needs a positive moment of inertia about its axis "
+                                  f"[kg m^2] (including m d^2 of the centre of mass), got {inertia:g}")
+    mo = r.table(b.get("motion", {}), f"{path}.motion", SCHEMA_KEYS["motion"])
+    mp = f"{path}.motion"
+    motion = Motion(kind=r.string(mo, mp, "kind", "free", ("free", "profile", "torque")),
+                    distance=r.number(mo, mp, "distance", 0.0), v_max=r.number(mo, mp, "v_max", 0.1, positive=True),
+                    a_max=r.number(mo, mp, "a_max", 0.1, positive=True),
+                    jerk=r.number(mo, mp, "jerk", 0.2, positive=True),
+                    t_start=r.number(mo, mp, "t_start", 0.0, nonneg=True), torque=r.pairs(mo, mp, "torque"),
+                    damping=r.number(mo, mp, "damping", 0.0, nonneg=True))
+    if motion.kind == "torque" and not motion.torque:
+        r.fail(f"{mp}.torque", "missing: motion.kind = 'torque' needs a [[t, tau], ...] table")
+    if "damping" in b:
+        r.fail(f"{path}.damping", "the damping of a joint is motion.damping")
+    return Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
+                position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
+                free=("angle",) if kind == "revolute" else ("travel",), inertia=inertia, joint=kind,
+                joint_axis=axis, pivot=pivot, motion=motion)
+
+
+def _parse_tangents(r: _Reader, sc, model, bodies) -> str:
+    """[scene] tangents: "exact" (default when a body rotates) recomputes the tangent points from the
+    current poses in every residual; "frozen" keeps them at their t = 0 place on their body."""
+    rotating = [b.name for b in bodies if "theta" in b.free or "rotation" in b.free or b.joint is not None]
+    tangents = r.string(sc, "scene", "tangents", "exact" if rotating else "frozen", ("exact", "frozen"))
+    if tangents == "exact" and model == "axial-1d":
+        r.fail("scene.tangents", "exact tangent points need model = 'planar' or 'spatial'")
+    if tangents == "frozen" and rotating:
+        r.fail("scene.tangents", f"the rotating bodies {', '.join(rotating)} need tangents = 'exact'")
+    return tangents
 
 
 def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
@@ -398,7 +521,24 @@ def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
         for i, s in enumerate(sheaves):
             if abs(abs(s.axis[1]) - 1.0) > 1e-9:
                 r.fail(f"sheaves[{i}].axis", f"model {model!r} needs sheave axes along y, got {list(s.axis)}")
+    _check_overlaps(r, sheaves)
     return sheaves
+
+
+def _check_overlaps(r: _Reader, sheaves):
+    """Two sheaves on the same body (or both on the ground) in one plane whose pitch circles overlap:
+    one would sit inside the other."""
+    for i, a in enumerate(sheaves):
+        for k in range(i):
+            b = sheaves[k]
+            if a.body != b.body or abs(abs(float(np.dot(a.axis, b.axis))) - 1.0) > 1e-9:
+                continue
+            d = np.asarray(a.center, float) - np.asarray(b.center, float)
+            axial = float(np.dot(d, a.axis))
+            radial = float(np.linalg.norm(d - axial * np.asarray(a.axis)))
+            if abs(axial) < 1e-6 and radial < a.radius + b.radius:
+                r.fail(f"sheaves[{i}].center", f"sheave {a.name!r} overlaps sheave {b.name!r} in the same plane "
+                                               f"(centre distance {radial:g} m < radii {a.radius:g} + {b.radius:g} m)")
 
 
 def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_names, used_sheaves) -> list:

@@ -611,6 +611,8 @@ class Simulator:
         nf = len(m.K.free)
         if self.method != "gen-alpha" or self.sparse is False or (self.sparse is None and nf < SPARSE_MIN_FREE):
             return None
+        if m.K.nl_on:
+            return None   # rows recomputed from the poses (core/bodies.py): the dense path only
         SP = build_sparse(m.K)
         if self.sparse is None and 3 * SP.kl + SP.ku + 1 + 2 * SP.nb >= nf:
             return None               # the band is the whole matrix: dense LU is as cheap

@@ -14,6 +14,7 @@ import numpy as np
 from ._jit import njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element, linear_element_1d_at, linear_element_at
+from .bodies import nl_convect, nl_update, rigid_terms
 from .kernel import new_work
 from .profiles import profile_eval
 
@@ -379,6 +380,11 @@ def q_terms(K, W, q, v, t, u):
             Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
             if k == K.mot_crp:
                 gain *= kap
+    for k in range(K.jt_dof.shape[0]):      # joint torque (force) tables
+        Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
+    for k in range(K.jg_dof.shape[0]):      # gravity moment of a revolute body about its joint
+        x = q[K.jg_dof[k]]
+        Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
@@ -421,6 +427,9 @@ def assemble_ws(K, W, c, q, v, t, u):
         for j in range(nq):
             M[i, j] = M0[i, j]
     status = 0
+    nl = K.nl_on != 0
+    if nl:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the nonlinear rows
+        nl_update(K, c, q, v)
     for ie in range(el_map.shape[0]):
         # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
         # this loop cost ~30 % of the 1D step
@@ -438,6 +447,8 @@ def assemble_ws(K, W, c, q, v, t, u):
         else:
             linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
                               QE, VE, MEs, QEs, ie)
+        if nl:
+            nl_convect(K, MEs, QEs, ie)
         for a in range(ne):
             for wa in range(nw):
                 ba = el_coef[ie, a, wa]
@@ -450,6 +461,8 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     q_terms(K, W, q, v, t, u)
+    if K.rb_q.shape[0] > 0:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
+        rigid_terms(K, q, v, M, Q)
     Md = W.Md
     for j in range(nq):
         M[j, j] += Md[j]
@@ -557,6 +570,15 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
         elif kind == 12:
             i = K.out_i[k]
             y[k] = -kaps[i] * v[K.crp_s[i]] / K.crp_R[i]
+        elif kind == 13:   # joint torque (force): the reaction of a prescribed joint, or its table
+            j = K.out_i[k]
+            r = -Q[j]
+            for m in range(M.shape[1]):
+                r += M[j, m] * qdd[m]
+            for m in range(K.jt_dof.shape[0]):
+                if K.jt_dof[m] == j:
+                    r += _interp(K.jt_tab[m], t)
+            y[k] = r
 
 
 @njit(cache=True)
@@ -582,6 +604,9 @@ def energy_u(K, c, q, v, u):
     U = 0.0
     for i in range(nq):
         Vg -= K.F0[i] * q[i]
+    for k in range(K.jg_dof.shape[0]):
+        x = q[K.jg_dof[k]]
+        Vg += K.jg_B[k] * math.cos(x) - K.jg_A[k] * math.sin(x)
     n_el = K.el_idx.shape[0]
     QE = np.empty((n_el, ne))
     VE = np.empty((n_el, ne))
@@ -607,8 +632,22 @@ def energy_u(K, c, q, v, u):
 
 
 @njit(cache=True, inline="always")
+def set_joints(K, t, q, v, qdd):
+    """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
+    pose, as the profile at its start): q = x(t)."""
+    for k in range(K.jp_dof.shape[0]):
+        j = K.jp_dof[k]
+        x, xd, xdd = profile_eval(K.jp_prof[k], t)
+        q[j] = x
+        v[j] = xd
+        qdd[j] = xdd
+
+
+@njit(cache=True, inline="always")
 def set_prescribed(K, q_ref, t, q, v, qdd):
-    """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile))."""
+    """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile)),
+    and the prescribed joints."""
+    set_joints(K, t, q, v, qdd)
     if K.presc.shape[0] == 0:
         return
     x, xd, xdd = profile_eval(K.profile, t)
@@ -626,6 +665,7 @@ def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
     """set_prescribed for a speed-driven creep sheave over the step t0 -> t1 (q holds the step start):
     the profile prescribes the rim, so sigma follows it at the arriving strain,
     d sigma = gain dx / kappa."""
+    set_joints(K, t1, q, v, qdd)
     x, xd, xdd = profile_eval(K.profile, t1)
     x0 = profile_eval(K.profile, t0)[0]
     m = K.mot_crp

@@ -1,0 +1,559 @@
+"""Rotating rigid bodies and exact tangent points from the current poses (compiled part).
+
+The 1D and translating models map coordinates to rope-node coordinates by a constant affine map
+p = B q + c. A body that rotates, or a sheave whose span direction turns, makes some rows of p
+nonlinear: p_r = f_r(q). This module evaluates those rows in every residual:
+
+* body poses (x, y, z, theta): theta turns the body counter-clockwise in the x-z drawing (x right,
+  z up), i.e. about -y, the default sheave axis; the body's position is its centre of mass;
+* points fixed to a body at an offset in body axes (sheave centres, rope anchors);
+* the common tangent of the two stops of each span (closed form for coplanar circles, the same formula
+  as geometry.tangent), so tangent points slide on the pitch circles as the span turns;
+* W1 wraps: the material coordinate of the leaving node is sigma + R * wrap angle(q), so the rope
+  stored on a wrap follows the current wrap angle and the rope length is conserved exactly.
+
+For each nonlinear row the Jacobian row B_r(q) (central differences, step NL_H) and the convective
+acceleration (dB/dt qdot)_r (second central difference along qdot, step NL_EPS) are recomputed.
+`nl_update` writes them into the kernel's element maps (el_coef) and into c (so that the unchanged
+gather gives x = f(q) and its velocity B(q) qdot); `nl_convect` subtracts M_e (dB/dt qdot) from an
+element's force vector. Models without nonlinear rows never call either (kernel.nl_on = 0).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import njit
+
+NL_H = 1e-4      # m or rad: Jacobian step; truncation ~ h^2/6 |f'''| ~ 2e-9 m, round-off ~ 1e-16 |f| / h
+NL_EPS = 5e-4    # step of the second difference along qdot (normalised by its largest component)
+ROW_TANGENT, ROW_WRAP = 0, 1
+
+
+@njit(cache=True, inline="always")
+def _basis(a0, a1, a2):
+    """Two unit vectors u, v with (u, v, a) right-handed (as geometry._basis)."""
+    if abs(a0) < 0.9:
+        h0, h1, h2 = 1.0, 0.0, 0.0
+    else:
+        h0, h1, h2 = 0.0, 0.0, 1.0
+    d = h0 * a0 + h1 * a1 + h2 * a2
+    u0, u1, u2 = h0 - a0 * d, h1 - a1 * d, h2 - a2 * d
+    n = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    u0, u1, u2 = u0 / n, u1 / n, u2 / n
+    return u0, u1, u2, a1 * u2 - a2 * u1, a2 * u0 - a0 * u2, a0 * u1 - a1 * u0
+
+
+@njit(cache=True)
+def tangent_planar(P, iA, iB, RA, sA, RB, sB, a, out):
+    """Touching points of the span from stop A (point P[iA], radius RA, sense sA) to stop B, for
+    coplanar circles with the reference axis a: out[0:3] = TA, out[3:6] = TB (geometry._planar)."""
+    u0, u1, u2, v0, v1, v2 = _basis(a[0], a[1], a[2])
+    D0, D1, D2 = P[iB, 0] - P[iA, 0], P[iB, 1] - P[iA, 1], P[iB, 2] - P[iA, 2]
+    Du = D0 * u0 + D1 * u1 + D2 * u2
+    Dv = D0 * v0 + D1 * v1 + D2 * v2
+    L = math.sqrt(Du * Du + Dv * Dv)
+    rho = sB * RB - sA * RA
+    x = rho / L
+    if x > 1.0:
+        x = 1.0
+    elif x < -1.0:
+        x = -1.0
+    th = math.atan2(Dv, Du) - math.asin(x)
+    ct, st = math.cos(th), math.sin(th)
+    t0, t1, t2 = ct * u0 + st * v0, ct * u1 + st * v1, ct * u2 + st * v2
+    n0, n1, n2 = a[1] * t2 - a[2] * t1, a[2] * t0 - a[0] * t2, a[0] * t1 - a[1] * t0
+    out[0] = P[iA, 0] - sA * RA * n0
+    out[1] = P[iA, 1] - sA * RA * n1
+    out[2] = P[iA, 2] - sA * RA * n2
+    out[3] = P[iB, 0] - sB * RB * n0
+    out[4] = P[iB, 1] - sB * RB * n1
+    out[5] = P[iB, 2] - sB * RB * n2
+
+
+@njit(cache=True, inline="always")
+def _wrap_angle(c, a, sg, T_in, T_out):
+    """Angle in [0, 2 pi) swept from T_in to T_out about c in the sense sg * a (geometry.wrap_angle)."""
+    u0, u1, u2, v0, v1, v2 = _basis(sg * a[0], sg * a[1], sg * a[2])
+    p0, p1, p2 = T_in[0] - c[0], T_in[1] - c[1], T_in[2] - c[2]
+    q0, q1, q2 = T_out[0] - c[0], T_out[1] - c[1], T_out[2] - c[2]
+    ang = (math.atan2(q0 * v0 + q1 * v1 + q2 * v2, q0 * u0 + q1 * u1 + q2 * u2)
+           - math.atan2(p0 * v0 + p1 * v1 + p2 * v2, p0 * u0 + p1 * u1 + p2 * u2))
+    two_pi = 2.0 * math.pi
+    return ang - two_pi * math.floor(ang / two_pi)
+
+
+@njit(cache=True, inline="always")
+def _rotate(R, b, v0, v1, v2):
+    """v turned by body b's rotation R[b] = (axis, cos, sin) (Rodrigues)."""
+    a0, a1, a2, c, s = R[b, 0], R[b, 1], R[b, 2], R[b, 3], R[b, 4]
+    d = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
+    return (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * d, v1 * c + (a2 * v0 - a0 * v2) * s + a1 * d,
+            v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
+
+
+@njit(cache=True)
+def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
+    """Touching points of a span between circles with any axes (world aA, aB; a point has R = 0):
+    D = TB - TA perpendicular to both radii (geometry.tangent), Newton on the contact angles ang[0:2]
+    (warm start from the last call; NaN: from the coplanar formula). Coplanar circles: closed form."""
+    ref = aA if RA > 0.0 else aB
+    D0, D1, D2 = P[iB, 0] - P[iA, 0], P[iB, 1] - P[iA, 1], P[iB, 2] - P[iA, 2]
+    scale = 1.0 + abs(D0) + abs(D1) + abs(D2)
+    par = (RA == 0.0 or RB == 0.0 or abs(abs(aA[0] * aB[0] + aA[1] * aB[1] + aA[2] * aB[2]) - 1.0) < 1e-12)
+    if (RA == 0.0 and RB == 0.0) or (par and abs(D0 * ref[0] + D1 * ref[1] + D2 * ref[2]) < 1e-12 * scale):
+        tangent_planar(P, iA, iB, RA, sA, RB, sB, ref, out)
+        return
+    uA0, uA1, uA2, vA0, vA1, vA2 = _basis(aA[0], aA[1], aA[2])
+    uB0, uB1, uB2, vB0, vB1, vB2 = _basis(aB[0], aB[1], aB[2])
+    if not (ang[0] == ang[0]):
+        tangent_planar(P, iA, iB, RA, sA, RB, sB, ref, out)
+        x0, x1, x2 = out[0] - P[iA, 0], out[1] - P[iA, 1], out[2] - P[iA, 2]
+        ang[0] = math.atan2(x0 * vA0 + x1 * vA1 + x2 * vA2, x0 * uA0 + x1 * uA1 + x2 * uA2)
+        x0, x1, x2 = out[3] - P[iB, 0], out[4] - P[iB, 1], out[5] - P[iB, 2]
+        ang[1] = math.atan2(x0 * vB0 + x1 * vB1 + x2 * vB2, x0 * uB0 + x1 * uB1 + x2 * uB2)
+    for it in range(40):
+        cA, sA_ = math.cos(ang[0]), math.sin(ang[0])
+        cB, sB_ = math.cos(ang[1]), math.sin(ang[1])
+        nA0, nA1, nA2 = cA * uA0 + sA_ * vA0, cA * uA1 + sA_ * vA1, cA * uA2 + sA_ * vA2
+        tA0, tA1, tA2 = -sA_ * uA0 + cA * vA0, -sA_ * uA1 + cA * vA1, -sA_ * uA2 + cA * vA2
+        nB0, nB1, nB2 = cB * uB0 + sB_ * vB0, cB * uB1 + sB_ * vB1, cB * uB2 + sB_ * vB2
+        tB0, tB1, tB2 = -sB_ * uB0 + cB * vB0, -sB_ * uB1 + cB * vB1, -sB_ * uB2 + cB * vB2
+        d0 = P[iB, 0] + RB * nB0 - P[iA, 0] - RA * nA0
+        d1 = P[iB, 1] + RB * nB1 - P[iA, 1] - RA * nA1
+        d2 = P[iB, 2] + RB * nB2 - P[iA, 2] - RA * nA2
+        rA = d0 * nA0 + d1 * nA1 + d2 * nA2
+        rB = d0 * nB0 + d1 * nB1 + d2 * nB2
+        jAA = d0 * tA0 + d1 * tA1 + d2 * tA2
+        jAB = RB * (tB0 * nA0 + tB1 * nA1 + tB2 * nA2)
+        jBA = -RA * (tA0 * nB0 + tA1 * nB1 + tA2 * nB2)
+        jBB = d0 * tB0 + d1 * tB1 + d2 * tB2
+        if RA == 0.0:
+            dA, dB = 0.0, rB / jBB
+        elif RB == 0.0:
+            dA, dB = rA / jAA, 0.0
+        else:
+            det = jAA * jBB - jAB * jBA
+            dA = (rA * jBB - jAB * rB) / det
+            dB = (jAA * rB - jBA * rA) / det
+        ang[0] -= dA
+        ang[1] -= dB
+        if abs(dA) + abs(dB) < 1e-12:   # the step just taken leaves an error ~ its square
+            break
+    cA, sA_ = math.cos(ang[0]), math.sin(ang[0])
+    cB, sB_ = math.cos(ang[1]), math.sin(ang[1])
+    out[0] = P[iA, 0] + RA * (cA * uA0 + sA_ * vA0)
+    out[1] = P[iA, 1] + RA * (cA * uA1 + sA_ * vA1)
+    out[2] = P[iA, 2] + RA * (cA * uA2 + sA_ * vA2)
+    out[3] = P[iB, 0] + RB * (cB * uB0 + sB_ * vB0)
+    out[4] = P[iB, 1] + RB * (cB * uB1 + sB_ * vB1)
+    out[5] = P[iB, 2] + RB * (cB * uB2 + sB_ * vB2)
+
+
+@njit(cache=True)
+def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, f):
+    """The nonlinear rows f at q.
+    Body b: bq[b] = q indices of (x, y, z, angle, rotation vector) (-1: fixed at b0[b]); bk[b] = 0: reference point
+    (x, y, z) turned by the angle about the unit axis bax[b] (planar theta: -y; revolute joint: its
+    axis, the reference point its pivot); bk[b] = 1: prismatic joint, reference b0[b] + q[bq[b, 0]] bax[b];
+    bk[b] = 2: spatial rigid body, (x, y, z) turned by the rotation vector bq[b, 4:7].
+    Point i sits on body pb[i] (-1: ground) at offset po[i] from the reference point (axes at angle 0);
+    span k runs from point sp[k, 0] to sp[k, 1] with sg[k] = (RA, sA, RB, sB) and the sheave axes
+    sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
+    component) or (ROW_WRAP, span in, span out, sigma index) with rf[r] = (R, sense relative to the
+    span-in end-B axis, s offset, centre point). P, TW, BR (body rotations), ANG (contact angles), AX
+    (two axes) are scratch."""
+    for b in range(bq.shape[0]):
+        if bk[b] == 2:   # rotation vector phi: axis phi / |phi|, angle |phi|
+            p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
+            th = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+            if th > 0.0:
+                BR[b, 0], BR[b, 1], BR[b, 2] = p0 / th, p1 / th, p2 / th
+            else:
+                BR[b, 0], BR[b, 1], BR[b, 2] = 0.0, 0.0, 1.0
+        else:
+            th = q[bq[b, 3]] if bq[b, 3] >= 0 else b0[b, 3]
+            BR[b, 0], BR[b, 1], BR[b, 2] = bax[b, 0], bax[b, 1], bax[b, 2]
+        BR[b, 3], BR[b, 4] = math.cos(th), math.sin(th)
+    for i in range(pb.shape[0]):
+        b = pb[i]
+        if b < 0:
+            for k in range(3):
+                P[i, k] = po[i, k]
+            continue
+        if bk[b] == 1:
+            u = q[bq[b, 0]]
+            for k in range(3):
+                P[i, k] = b0[b, k] + u * bax[b, k] + po[i, k]
+            continue
+        x = q[bq[b, 0]] if bq[b, 0] >= 0 else b0[b, 0]
+        y = q[bq[b, 1]] if bq[b, 1] >= 0 else b0[b, 1]
+        z = q[bq[b, 2]] if bq[b, 2] >= 0 else b0[b, 2]
+        r0, r1, r2 = _rotate(BR, b, po[i, 0], po[i, 1], po[i, 2])
+        P[i, 0] = x + r0
+        P[i, 1] = y + r1
+        P[i, 2] = z + r2
+    aA = AX[0]
+    aB = AX[1]
+    for k in range(sp.shape[0]):
+        for e in range(2):
+            b = pb[sp[k, e]]
+            v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
+            if b >= 0 and bk[b] != 1:
+                v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+            w = aA if e == 0 else aB
+            w[0], w[1], w[2] = v0, v1, v2
+        tangent_spatial(P, sp[k, 0], sp[k, 1], sg[k, 0], sg[k, 1], sg[k, 2], sg[k, 3], aA, aB, ANG[k], TW[k])
+    for r in range(rk.shape[0]):
+        if rk[r, 0] == ROW_TANGENT:
+            f[r] = TW[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+        else:
+            k_in, k_out = rk[r, 1], rk[r, 2]
+            ip = int(rf[r, 3])
+            b = pb[ip]
+            v0, v1, v2 = sa[k_in, 3], sa[k_in, 4], sa[k_in, 5]
+            if b >= 0 and bk[b] != 1:
+                v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+            aB[0], aB[1], aB[2] = v0, v1, v2
+            ang = _wrap_angle(P[ip], aB, rf[r, 1], TW[k_in, 3:6], TW[k_out, 0:3])
+            f[r] = q[rk[r, 3]] + rf[r, 2] + rf[r, 0] * ang
+
+
+@njit(cache=True)
+def rows_jacobian(q, G, cols, f0, fp, fm, qs, J):
+    """f0 = f(q) and J[:, k] = d f / d q[cols[k]] by central differences (step NL_H); G = the
+    geometry arrays of rows_eval (a tuple)."""
+    rows_eval(q, *G, f0)
+    for i in range(q.shape[0]):
+        qs[i] = q[i]
+    for k in range(cols.shape[0]):
+        j = cols[k]
+        qs[j] = q[j] + NL_H
+        rows_eval(qs, *G, fp)
+        qs[j] = q[j] - NL_H
+        rows_eval(qs, *G, fm)
+        qs[j] = q[j]
+        for r in range(f0.shape[0]):
+            J[r, k] = (fp[r] - fm[r]) / (2.0 * NL_H)
+
+
+@njit(cache=True)
+def nl_update(K, c, q, v):
+    """Nonlinear rows at (q, v): element maps el_coef <- B(q), c <- f(q) - B(q) q, K.nl_acc <- dB/dt v
+    for every element coordinate that is a nonlinear row."""
+    f0, fp, fm, J = K.nl_f0, K.nl_fp, K.nl_fm, K.nl_J
+    qs = K.nl_qs
+    G = (K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_pb, K.nl_po, K.nl_sp, K.nl_sg, K.nl_sa, K.nl_rk, K.nl_rf,
+         K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
+    rows_jacobian(q, G, K.nl_cols, f0, fp, fm, qs, J)
+    acc = K.nl_racc
+    nrm = 0.0
+    for k in range(K.nl_cols.shape[0]):
+        x = abs(v[K.nl_cols[k]])
+        if x > nrm:
+            nrm = x
+    if nrm > 0.0:
+        # second derivative of f along the body velocities (sigma enters linearly)
+        for k in range(K.nl_cols.shape[0]):
+            j = K.nl_cols[k]
+            qs[j] = q[j] + NL_EPS * v[j] / nrm
+        rows_eval(qs, *G, fp)
+        for k in range(K.nl_cols.shape[0]):
+            j = K.nl_cols[k]
+            qs[j] = q[j] - NL_EPS * v[j] / nrm
+        rows_eval(qs, *G, fm)
+        for k in range(K.nl_cols.shape[0]):
+            qs[K.nl_cols[k]] = q[K.nl_cols[k]]
+        sc = nrm * nrm / (NL_EPS * NL_EPS)
+        for r in range(f0.shape[0]):
+            acc[r] = (fp[r] - 2.0 * f0[r] + fm[r]) * sc
+    else:
+        for r in range(f0.shape[0]):
+            acc[r] = 0.0
+    el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, K.el_coef, K.nl_ent, K.nl_rw
+    for ie in range(ent.shape[0]):
+        for a in range(ent.shape[1]):
+            r = ent[ie, a]
+            if r < 0:
+                continue
+            x = f0[r]
+            for w in range(el_map.shape[2]):
+                k = rw[r, w]
+                b = 0.0 if k == -1 else (1.0 if k == -2 else J[r, k])
+                el_coef[ie, a, w] = b
+                x -= b * q[el_map[ie, a, w]]
+            c[el_idx[ie, a]] = x
+            K.nl_acc[ie, a] = acc[r]
+
+
+@njit(cache=True, inline="always")
+def nl_convect(K, MEs, QEs, ie):
+    """QEs[ie] -= MEs[ie] (dB/dt qdot) for element ie: the part of the nodes' acceleration that is
+    not B qddot (centripetal terms of rotating bodies, turning tangent points)."""
+    acc = K.nl_acc
+    ne = QEs.shape[1]
+    for a in range(ne):
+        s = 0.0
+        for b in range(ne):
+            s += MEs[ie, a, b] * acc[ie, b]
+        QEs[ie, a] -= s
+
+
+GEOMETRY_FIELDS = ("nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa", "nl_rk",
+                   "nl_rf", "nl_P", "nl_TW", "nl_BR", "nl_ANG", "nl_AX")
+
+
+def body_frame(b):
+    """(kind, axis, reference point at t = 0, coordinate -> slot) of a scene body for rows_eval:
+    planar theta turns about -y through the centre of mass; a revolute joint turns about its axis
+    through its pivot; a prismatic joint (kind 1) slides along its axis."""
+    joint = getattr(b, "joint", None)
+    if joint == "revolute":
+        return 0, np.asarray(b.joint_axis, float), np.asarray(b.pivot, float), {"angle": 3}
+    if joint == "prismatic":
+        return 1, np.asarray(b.joint_axis, float), np.asarray(b.position, float), {"travel": 0}
+    slots = {"x": 0, "y": 1, "z": 2, "theta": 3, "rx": 4, "ry": 5, "rz": 6}
+    return 2 if "rotation" in b.free else 0, np.array([0.0, -1.0, 0.0]), np.asarray(b.position, float), slots
+
+
+def empty_fields() -> dict:
+    """Kernel fields of a model without nonlinear rows (nl_on = 0; nothing is evaluated)."""
+    i2, f2 = np.zeros((0, 4), np.int64), np.zeros((0, 4))
+    return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
+                nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
+                nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
+                nl_rf=f2.copy(), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
+                nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
+                nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
+                nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
+                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)))
+
+
+class NonlinearRows:
+    """Build-time registry of the nonlinear rows of a model (model.build_model fills it while it lays out
+    the routes, then `finalize` turns it into kernel fields). Every span of an exact-tangent model is
+    registered; rows become nonlinear when a span touches a moving body."""
+
+    def __init__(self, scene, body_dofs):
+        self.scene = scene
+        self.body_dofs = body_dofs
+        self.frames = {b.name: body_frame(b) for b in scene.bodies}
+        self.bodies = {}        # body name -> index
+        self.points = []        # (body index or -1, offset from the body's reference point)
+        self.spans = []         # (point A, point B, RA, sA, RB, sB, sheave axes A and B in body axes)
+        self.moving = []        # per span: True if a stop is on a body with a free coordinate
+        self.rows = {}          # ("pos", node, world comp) | ("s", node) -> row spec
+
+    def _body(self, name):
+        if name is None or name == "ground":
+            return -1
+        if name not in self.bodies:
+            self.bodies[name] = len(self.bodies)
+        return self.bodies[name]
+
+    def point(self, body, world):
+        """A point fixed to body (None: ground) at its t = 0 world position."""
+        ib = self._body(body)
+        ref = self.frames[body][2] if ib >= 0 else np.zeros(3)
+        self.points.append((ib, np.asarray(world, float) - ref))
+        return len(self.points) - 1
+
+    def span(self, stopA, stopB):
+        """stop = (body name or None, world point at t = 0, radius, sense, axis in body axes or None);
+        returns the span index."""
+        (bA, wA, RA, sA, aA), (bB, wB, RB, sB, aB) = stopA, stopB
+        dflt = np.array([0.0, -1.0, 0.0])
+        aA = dflt if aA is None else np.asarray(aA, float)
+        aB = dflt if aB is None else np.asarray(aB, float)
+        moving = any(b is not None and b != "ground" and self.body_dofs.get(b) for b in (bA, bB))
+        self.spans.append((self.point(bA, wA), self.point(bB, wB), RA, sA, RB, sB, np.r_[aA, aB]))
+        self.moving.append(moving)
+        return len(self.spans) - 1
+
+    def tangent_rows(self, node, span, end, comps):
+        if self.moving[span]:
+            for comp in comps:
+                self.rows[("pos", node, comp)] = (ROW_TANGENT, span, end, comp, 0.0, 0.0, 0.0, 0, None)
+
+    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis):
+        """s of the node leaving a W1 wrap: sigma + R * current wrap angle (about the sheave's axis,
+        which is the incoming span's end-B axis)."""
+        if self.moving[span_in] or self.moving[span_out]:
+            centre = self.spans[span_in][1]
+            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, 0.0, centre, j_sigma)
+
+    def _cols(self):
+        """q indices of every registered body coordinate and the body tables of rows_eval."""
+        nb = len(self.bodies)
+        bq, b0 = -np.ones((nb, 7), np.int64), np.zeros((nb, 4))
+        bk, bax = np.zeros(nb, np.int64), np.zeros((nb, 3))
+        for name, ib in self.bodies.items():
+            kind, axis, ref, slots = self.frames[name]
+            bk[ib], bax[ib], b0[ib, :3] = kind, axis, ref
+            for ax, j in self.body_dofs[name].items():
+                bq[ib, slots[ax]] = j
+        cols = sorted({int(j) for j in bq.ravel() if j >= 0})
+        return bq, b0, bk, bax, cols
+
+    def finalize(self, nd, row_of, q0, B, c0, el_idx, el_map, el_coef):
+        """Kernel fields; B and c0 rows of the nonlinear rows set from the Jacobian at q0; el_map and
+        el_coef widened so that every nonlinear entry lists its columns. row_of(key) -> p row."""
+        bq, b0, bk, bax, cols = self._cols()
+        keys = list(self.rows)
+        specs = [self.rows[k] for k in keys]
+        nr = len(keys)
+        rk = np.array([[s[0], s[1], s[2], s[3]] for s in specs], np.int64).reshape(nr, 4)
+        rf = np.array([[s[4], s[5], s[6], s[7]] for s in specs], float).reshape(nr, 4)
+        col_k = {j: k for k, j in enumerate(cols)}
+        body_cols = {ib: [col_k[int(j)] for j in bq[ib] if j >= 0] for ib in range(len(self.bodies))}
+
+        def span_cols(k):
+            out = []
+            for ip in self.spans[k][:2]:
+                out += body_cols.get(self.points[ip][0], [])
+            return out
+
+        deps = []
+        for s in specs:
+            d = span_cols(s[1]) + (span_cols(s[2]) if s[0] == ROW_WRAP else [])
+            d = sorted(set(d))
+            deps.append(d + ([-2] if s[0] == ROW_WRAP else []))
+        W = max([el_map.shape[2]] + [len(d) for d in deps])
+        rw = -np.ones((nr, W), np.int64)
+        for r, d in enumerate(deps):
+            rw[r, :len(d)] = d
+        new_map = np.zeros(el_map.shape[:2] + (W,), np.int64)
+        new_coef = np.zeros(el_coef.shape[:2] + (W,))
+        new_map[:, :, :el_map.shape[2]] = el_map
+        new_coef[:, :, :el_coef.shape[2]] = el_coef
+        prow = {row_of(k): r for r, k in enumerate(keys)}
+        ent = -np.ones(el_idx.shape, np.int64)
+        for ie in range(el_idx.shape[0]):
+            for a in range(el_idx.shape[1]):
+                r = prow.get(int(el_idx[ie, a]))
+                if r is None:
+                    continue
+                ent[ie, a] = r
+                for w in range(W):
+                    k = rw[r, w]
+                    new_map[ie, a, w] = cols[k] if k >= 0 else (specs[r][8] if k == -2 else 0)
+                    new_coef[ie, a, w] = 0.0
+        pb = np.array([p[0] for p in self.points], np.int64)
+        po = np.array([p[1] for p in self.points], float).reshape(-1, 3)
+        sp = np.array([s[:2] for s in self.spans], np.int64).reshape(-1, 2)
+        sg = np.array([s[2:6] for s in self.spans], float).reshape(-1, 4)
+        sa = np.array([s[6] for s in self.spans], float).reshape(-1, 6)
+        nc = len(cols)
+        f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_pb=pb, nl_po=po, nl_sp=sp,
+                 nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf, nl_P=np.zeros((len(pb), 3)), nl_TW=np.zeros((len(sp), 6)),
+                 nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
+                 nl_cols=np.array(cols, np.int64), nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
+                 nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
+                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape))
+        if nr:
+            q0 = np.asarray(q0, float)
+            G = tuple(f[k] for k in GEOMETRY_FIELDS)
+            rows_jacobian(q0, G, f["nl_cols"], f["nl_f0"], f["nl_fp"], f["nl_fm"], f["nl_qs"], f["nl_J"])
+            for key, r in zip(keys, range(nr)):
+                row = row_of(key)
+                B[row, :] = 0.0
+                for k, j in enumerate(cols):
+                    B[row, j] = f["nl_J"][r, k]
+                if specs[r][0] == ROW_WRAP:
+                    B[row, specs[r][8]] = 1.0
+                c0[row] = f["nl_f0"][r] - B[row] @ q0
+        return new_map, new_coef, f
+
+
+RB_H = 1e-6   # rad: central-difference step of the rotational mass matrix M(phi)
+
+
+@njit(cache=True, inline="always")
+def _rot_mass(p0, p1, p2, J, out):
+    """out = T^T R J R^T T: the mass matrix of the rotation vector phi, with R = exp(phi^) (the
+    orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity. Written out
+    with scalars and fixed-size loops (no temporaries: it runs 7 times per residual and body)."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    th = math.sqrt(th2)
+    if th < 1e-4:   # series of (1 - cos)/th^2, (th - sin)/th^3 and sin/th
+        a = 0.5 - th2 / 24.0
+        b = 1.0 / 6.0 - th2 / 120.0
+        s1 = 1.0 - th2 / 6.0
+    else:
+        a = (1.0 - math.cos(th)) / th2
+        b = (th - math.sin(th)) / (th2 * th)
+        s1 = math.sin(th) / th
+    # P = phi^, P2 = P P = phi phi^T - th2 I
+    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+    ph = (p0, p1, p2)
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
+            e = 1.0 if i == k else 0.0
+            T[i, k] = e + a * P[i][k] + b * p2ik
+            R[i, k] = e + s1 * P[i][k] + a * p2ik          # Rodrigues
+    # W = R^T T (body angular velocity map); out = W^T J W
+    W = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            W[i, k] = R[0, i] * T[0, k] + R[1, i] * T[1, k] + R[2, i] * T[2, k]
+    for i in range(3):
+        for k in range(3):
+            acc = 0.0
+            for r in range(3):
+                for c in range(3):
+                    acc += W[r, i] * J[r, c] * W[c, k]
+            out[i, k] = acc
+
+
+@njit(cache=True)
+def rigid_terms(K, q, v, M, Q):
+    """Rotational inertia of the spatial rigid bodies: M[phi, phi] += M_r(phi) and the
+    quadratic-velocity force -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2), both by central
+    differences of M_r (step RB_H)."""
+    Mr = np.empty((3, 3))
+    Mp = np.empty((3, 3))
+    Mm = np.empty((3, 3))
+    p = np.empty(3)
+    w = np.empty(3)
+    dMw = np.empty(3)
+    for k in range(K.rb_q.shape[0]):
+        for a in range(3):
+            p[a] = q[K.rb_q[k, a]]
+            w[a] = v[K.rb_q[k, a]]
+            dMw[a] = 0.0
+        J = K.rb_J[k]
+        _rot_mass(p[0], p[1], p[2], J, Mr)
+        for a in range(3):
+            for b in range(3):
+                M[K.rb_q[k, a], K.rb_q[k, b]] += Mr[a, b]
+        if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
+            continue
+        # dM_r/dt w = sum_c (dM_r/dphi_c) w_c w, and d/dphi_c of w^T M_r w / 2
+        for c in range(3):
+            p[c] += RB_H
+            _rot_mass(p[0], p[1], p[2], J, Mp)
+            p[c] -= 2.0 * RB_H
+            _rot_mass(p[0], p[1], p[2], J, Mm)
+            p[c] += RB_H
+            dT = 0.0
+            for a in range(3):
+                for b in range(3):
+                    dM = (Mp[a, b] - Mm[a, b]) / (2.0 * RB_H)
+                    dMw[a] += dM * w[c] * w[b]
+                    dT += 0.5 * w[a] * dM * w[b]
+            Q[K.rb_q[k, c]] += dT
+        for a in range(3):
+            Q[K.rb_q[k, a]] -= dMw[a]
+
+
+def rigid_fields(scene, body_dofs) -> dict:
+    """Kernel fields of the spatial rigid bodies ('rotation' in free): rotation-vector indices and
+    inertia tensors about the centre of mass in body axes."""
+    rb = [b for b in scene.bodies if "rotation" in b.free]
+    return dict(rb_q=np.array([[body_dofs[b.name][c] for c in ("rx", "ry", "rz")] for b in rb],
+                              np.int64).reshape(-1, 3),
+                rb_J=np.array([b.inertia for b in rb], float).reshape(-1, 3, 3))

@@ -1,0 +1,85 @@
+"""Build step: the Kernel, the arrays the compiled step reads, from the other steps' results."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..bodies import rigid_fields
+from ..kernel import Kernel
+from ..traction import equivalent_friction
+from .coordinates import Arrays
+from .elimination import Drive
+from .outputs import Outputs
+from .state import BuildState
+
+CREEP_VREG = 1e-3   # m/s: material speed over which the arriving side changes at a reversal (tanh blend)
+
+
+def motor_creep_index(scene, crp) -> int:
+    """Index in the creep table of the driven sheave whose angle the motor outputs report (-1: the
+    motor angle follows sigma, or the sheave slips and has its own angle coordinate)."""
+    dv = scene.drive
+    crp_index = {name: k for k, name in enumerate(crp["name"])}
+    mot_crp = crp_index.get(dv.sheave, -1) if dv.kind != "none" else -1
+    if mot_crp >= 0 and crp["kind"][mot_crp] != 0:
+        mot_crp = -1     # a slipping sheave has its own angle coordinate
+    return mot_crp
+
+
+def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, mot_crp: int) -> Kernel:
+    scene = bs.scene
+    dv = scene.drive
+    rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in bs.elements]
+    buffers = scene.buffers
+    return Kernel(
+        nd=bs.nd, nq=len(bs.q_names),
+        B_ptr=np.array(arr.ptr, np.int64), B_idx=np.array(arr.idx, np.int64), B_val=np.array(arr.val, float),
+        el_idx=arr.el_idx, el_map=arr.el_map, el_coef=arr.el_coef,
+        el_rhoA=np.array([r.rhoA * r.count for r in rope_of_el], float),
+        el_EA=np.array([r.EA * r.count for r in rope_of_el], float),
+        el_nu=np.array([r.damping for r in rope_of_el], float),
+        el_tonly=np.array([int(r.tension_only) for r in rope_of_el], np.int64),
+        el_g=arr.el_g, el_C=arr.el_C, M0=arr.M0, F0=arr.F0,
+        spr_dof=np.array([s[0] for s in bs.springs], np.int64), spr_k=np.array([s[1] for s in bs.springs], float),
+        spr_c=np.array([s[2] for s in bs.springs], float),
+        drum_dof=np.array([x[0] for x in bs.drums], np.int64), drum_rhoA=np.array([x[1] for x in bs.drums], float),
+        drum_sign=np.array([x[2] for x in bs.drums], float),
+        mot_dof=d.dof, mot_R=float(d.R), drive_kind=d.kind, torque_table=d.torque_table,
+        brake_T=float(scene.brake.torque) if dv.kind in ("torque", "external") else 0.0,
+        brake_wreg=float(scene.brake.stick_angle),
+        brake_tau=float(scene.brake.engage_time),
+        free=np.array(d.free, np.int64), presc=np.array(d.presc, np.int64),
+        presc_gain=np.array(d.presc_gain, float), profile=d.profile.arrays,
+        out_kind=np.array(o.kind, np.int64), out_i=np.array(o.i, np.int64), out_j=np.array(o.j, np.int64),
+        out_scale=np.array(o.scale, float),
+        l_min=float(scene.solver.min_span),
+        buf_dof=np.array([bs.body_dofs[b.body][b.axis] for b in buffers], np.int64),
+        buf_z=np.array([b.position for b in buffers], float),
+        buf_sign=np.array([1.0 if b.side == "below" else -1.0 for b in buffers], float),
+        buf_k=np.array([b.stiffness for b in buffers], float),
+        buf_c=np.array([b.damping for b in buffers], float),
+        mot_gain=float(d.gain),
+        **_traction_fields(bs),
+        el_type=1 if bs.cubic else 0,
+        el_EI=np.array([r.EI * r.count for r in rope_of_el], float),
+        crp_s=np.array(crp["s"], np.int64), crp_el_in=np.array(crp["el_in"], np.int64),
+        crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
+        crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
+        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
+        **arr.nl, **d.joints, **rigid_fields(scene, bs.body_dofs),
+    )
+
+
+def _traction_fields(bs: BuildState) -> dict:
+    """The slipping traction sheave's coordinates, groove friction e^(mu' theta) - 1, creep length
+    and the elements that meet it (defaults when no sheave slips)."""
+    slip = bs.slip_info
+    if not slip:
+        return dict(trac_s=-1, trac_th=-1, trac_R=1.0, trac_efa=0.0, trac_zmax=1.0, trac_el_in=-1, trac_el_out=-1)
+    sh = slip["sheave"]
+    taps = bs.tension_taps[sh.name]
+    return dict(trac_s=int(slip["s"]), trac_th=int(slip["th"]), trac_R=float(sh.radius),
+                trac_efa=math.exp(equivalent_friction(sh.mu, sh.undercut_angle, sh.groove_angle, sh.groove)
+                                  * slip["wrap"]) - 1.0,
+                trac_zmax=float(sh.creep), trac_el_in=int(taps["in"][0]), trac_el_out=int(taps["out"][0]))

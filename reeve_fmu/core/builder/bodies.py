@@ -1,0 +1,77 @@
+"""Build step: bodies and joints. A body moves along its free axes (x, y, z): one generalized
+coordinate per free axis, the absolute coordinate of the body's reference point. Points fixed to a
+body (sheave centres, tangent points, anchors) are affine in those coordinates. A body that rotates
+(planar theta, spatial rotation vector rx, ry, rz) or sits on a joint to the ground (revolute angle,
+prismatic travel) makes its points nonlinear in q: the scene then has exact tangents and
+core/bodies.NonlinearRows carries those rows."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..bodies import NonlinearRows
+from ..scene import AXES, SceneError
+from .state import Affine, BuildState
+
+ROTATION_VECTOR = ("rx", "ry", "rz")   # coordinates of a spatial rigid body's rotation vector [rad]
+
+
+def add_body_coordinates(bs: BuildState) -> None:
+    """One coordinate per free axis of every body, in scene order."""
+    scene = bs.scene
+    for b in scene.bodies:
+        if scene.model == "planar" and "y" in b.free:
+            raise SceneError(f"{scene.source}: [bodies.{b.name}.free] the planar model moves in x-z; "
+                             f"'y' cannot be free")
+        coords = [c for ax in b.free for c in (ROTATION_VECTOR if ax == "rotation" else (ax,))]
+        bs.body_dofs[b.name] = {ax: bs.new_q(f"{b.name}.{ax}", "body",
+                                             b.position[AXES.index(ax)] if ax in AXES else 0.0)
+                                for ax in coords}
+    if scene.tangents == "exact":
+        bs.nlr = NonlinearRows(scene, bs.body_dofs)
+
+
+def body_point(bs: BuildState, body, offset) -> Affine:
+    """Affine 3D position of a point fixed to a body (or the ground)."""
+    if body is None or body == "ground":
+        return Affine(offset)
+    b = bs.bodies[body]
+    r = Affine(np.asarray(b.position) + np.asarray(offset))
+    for ax, j in bs.body_dofs[body].items():
+        if ax == "travel":
+            r.add(j, b.joint_axis)
+        if ax not in AXES:
+            continue    # rotation: the nonlinear rows (core/bodies.NonlinearRows) carry it
+        k = AXES.index(ax)
+        r.r0[k] -= b.position[k]
+        e = np.zeros(3)
+        e[k] = 1.0
+        r.add(j, e)
+    return r
+
+
+def world(bs: BuildState, body, offset) -> np.ndarray:
+    """Position in the scene's configuration of a point fixed to a body (or the ground)."""
+    if body is None or body == "ground":
+        return np.asarray(offset, float)
+    return np.asarray(bs.bodies[body].position, float) + np.asarray(offset, float)
+
+
+def add_body_inertia(bs: BuildState) -> None:
+    """Mass, weight and viscous damping of the bodies on their coordinates; rotations: the inertia
+    about the centre of mass (theta) or the joint axis (angle); the rotation vector's mass matrix
+    is not constant (core/bodies.rigid_terms)."""
+    for b in bs.scene.bodies:
+        for ax, j in bs.body_dofs[b.name].items():
+            if ax in ("theta", "angle"):   # the position is the centre of mass: no gravity moment
+                bs.M0_terms.append((j, j, b.inertia))   # (a revolute body's: elimination.joint_tables)
+                continue
+            if ax in ROTATION_VECTOR:
+                continue
+            if ax == "travel":
+                bs.M0_terms.append((j, j, b.mass))
+                bs.F0[j] = bs.F0.get(j, 0.0) + b.mass * (bs.g @ np.asarray(b.joint_axis))
+                continue
+            bs.M0_terms.append((j, j, b.mass))
+            bs.F0[j] = bs.F0.get(j, 0.0) + b.mass * bs.g[AXES.index(ax)]
+            if b.damping > 0:
+                bs.springs.append((j, 0.0, b.damping))
