@@ -309,6 +309,11 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         j = K.drum_dof[k]
         if pos[j] >= 0 and not mark[j]:
             _add(J, pos[j], pos[j], K.drum_rhoA[k] * (bq * qdd[j] + gv * v[j]), n1, kl, ku, wb, nb)
+    for k in range(K.jg_dof.shape[0]):      # gravity moment A cos x + B sin x of a revolute body
+        j = K.jg_dof[k]
+        if pos[j] >= 0 and not mark[j]:
+            dQ = -K.jg_A[k] * math.sin(q[j]) + K.jg_B[k] * math.cos(q[j])
+            _add(J, pos[j], pos[j], -bq * dQ, n1, kl, ku, wb, nb)
     j = K.mot_dof
     if K.brake_T > 0.0 and j >= 0 and pos[j] >= 0 and not mark[j]:
         gain = K.mot_gain
@@ -372,7 +377,7 @@ def qlevel_coupled(K, SP, W, c, q, v, qdd, t, u, pos, mark, els, J, bq, gv):
     wb = 3 * kl + ku + 1
     seen = np.zeros(K.nq, np.bool_)
     rl = []
-    for arr in (K.crp_s, K.spr_dof, K.buf_dof, K.drum_dof):
+    for arr in (K.crp_s, K.spr_dof, K.buf_dof, K.drum_dof, K.jg_dof):
         for i in arr:
             if not seen[i]:
                 seen[i] = True
