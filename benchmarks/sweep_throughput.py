@@ -1,16 +1,21 @@
 """Throughput of `reeve-fmu sweep` on a local Dask cluster: a load-case sweep of the R1 2:1 round trip
 (load 0-125 % of the rated load, evenly spaced) on 1 and on 2 worker processes; rows per second and
-the ratio, with the load average (docs/performance.md, "Sweeps").
+the ratio, with the load average and the CPU time the workers got (docs/performance.md, "Sweeps").
 
-    python benchmarks/sweep_throughput.py [--runs 200] [--workers 1,2] [--json FILE]
+    python benchmarks/sweep_throughput.py [--runs 200] [--workers 1,2] [--rounds 1] [--plain] [--json FILE]
 
 Each cluster first runs one warm-up task per worker (numba kernels load from the cache: not counted).
+--rounds R repeats the measurement in the order 1,2 | 2,1 | 1,2 ... so that a drift of the machine's
+background load falls on both sizes; the speed-up is that of the median rows/s per size. --plain also
+runs the same runs on a plain process pool (no Dask) of each size: the ceiling the hardware gives.
+The workers' CPU share (CPU seconds / (wall x workers)) tells whether they got whole cores.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -29,6 +34,19 @@ def study(runs: int) -> dict:
     return st
 
 
+def _cpu_seconds() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _record(kind, n_workers, runs, failed, wall, cpu, load0, load1) -> dict:
+    return {"kind": kind, "workers": n_workers, "runs": runs, "failed": failed, "wall_s": wall,
+            "rows_per_s": runs / wall, "worker_cpu_s": cpu, "cpu_share": cpu / (wall * n_workers),
+            "loadavg_before": load0, "loadavg_after": load1}
+
+
 def measure(n_workers: int, runs: int) -> dict:
     st = study(runs)
     client = sweep.make_client(workers=n_workers)
@@ -36,35 +54,101 @@ def measure(n_workers: int, runs: int) -> dict:
         warm = [client.submit(sweep.run_one, study(1), -1, {"load_percent": 100.0}, pure=False, workers=[w])
                 for w in client.scheduler_info()["workers"]]
         client.gather(warm)
+        del warm
+        cpu0 = sum(client.run(_cpu_seconds).values())
         load0 = os.getloadavg()
         t0 = time.perf_counter()
         rows = sweep.run_sweep(st, client, progress=False)
         wall = time.perf_counter() - t0
         load1 = os.getloadavg()
+        cpu = sum(client.run(_cpu_seconds).values()) - cpu0
     finally:
-        client.cluster.close()
+        cluster = client.cluster
         client.close()
+        cluster.close()
     failed = sum(r["verdict"] == "ERROR" for r in rows)
-    return {"workers": n_workers, "runs": runs, "failed": failed, "wall_s": wall, "rows_per_s": runs / wall,
-            "loadavg_before": load0, "loadavg_after": load1}
+    return _record("dask", n_workers, runs, failed, wall, cpu, load0, load1)
+
+
+def _plain_init():
+    for k, v in sweep.WORKER_ENV.items():
+        os.environ[k] = v
+    sweep.run_one(study(1), -1, {"load_percent": 100.0})      # warm-up: kernels from the cache
+
+
+def _plain_run(args):
+    st, i, p = args
+    return sweep.run_one(st, i, p)["verdict"]
+
+
+def measure_plain(n_workers: int, runs: int) -> dict:
+    """The same runs on a plain spawn-process pool (no Dask): the ceiling of the hardware."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    st = study(runs)
+    base = {k: v for k, v in st.items() if k != "runs"}
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_plain_init) as ex:
+        list(ex.map(_hold, range(n_workers)))    # every process started and warm
+        load0 = os.getloadavg()
+        t0 = time.perf_counter()
+        out = list(ex.map(_plain_run, [(base, i, p) for i, p in enumerate(st["runs"])]))
+        wall = time.perf_counter() - t0
+        load1 = os.getloadavg()
+    failed = sum(v == "ERROR" for v in out)
+    return _record("plain", n_workers, runs, failed, wall, float("nan"), load0, load1)
+
+
+def _hold(_):
+    time.sleep(0.5)               # holds this process so that the next task goes to another one
+
+
+def _line(r: dict) -> str:
+    share = "" if r["cpu_share"] != r["cpu_share"] else \
+        f", worker CPU share {r['cpu_share']:.2f}, worker CPU per run {r['worker_cpu_s'] / r['runs']:.3f} s"
+    return (f"{r['kind']:5s} {r['workers']} worker(s): {r['runs']} runs ({r['failed']} failed) in "
+            f"{r['wall_s']:.1f} s = {r['rows_per_s']:.3f} rows/s (load average {r['loadavg_before'][0]:.2f} -> "
+            f"{r['loadavg_after'][0]:.2f}{share}, {os.cpu_count()} CPUs)")
+
+
+def speedups(res: list, kind: str) -> dict:
+    """Median rows/s per worker count of one kind, and the speed-up of the largest over the smallest."""
+    by = {}
+    for r in res:
+        if r["kind"] == kind:
+            by.setdefault(r["workers"], []).append(r["rows_per_s"])
+    med = {w: statistics.median(v) for w, v in sorted(by.items())}
+    if len(med) < 2:
+        return {"median_rows_per_s": med}
+    lo, hi = min(med), max(med)
+    return {"median_rows_per_s": med, "speedup": med[hi] / med[lo], "of": [hi, lo]}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--rounds", type=int, default=1, help="repeat, alternating the order of the sizes")
+    ap.add_argument("--plain", action="store_true", help="also a plain process pool (no Dask) of each size")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    res = [measure(int(w), args.runs) for w in args.workers.split(",")]
-    for r in res:
-        print(f"{r['workers']} worker(s): {r['runs']} runs ({r['failed']} failed) in {r['wall_s']:.1f} s = "
-              f"{r['rows_per_s']:.3f} rows/s (load average {r['loadavg_before'][0]:.2f} -> "
-              f"{r['loadavg_after'][0]:.2f}, {os.cpu_count()} CPUs)")
-    if len(res) > 1:
-        print(f"speed-up {res[-1]['workers']} vs {res[0]['workers']} worker(s): "
-              f"{res[-1]['rows_per_s'] / res[0]['rows_per_s']:.2f}x")
+    sizes = [int(w) for w in args.workers.split(",")]
+    res = []
+    for k in range(args.rounds):
+        for w in (sizes if k % 2 == 0 else sizes[::-1]):
+            res.append(measure(w, args.runs))
+            print(_line(res[-1]), flush=True)
+            if args.plain:
+                res.append(measure_plain(w, args.runs))
+                print(_line(res[-1]), flush=True)
+    summary = {kind: speedups(res, kind) for kind in ("dask", "plain") if any(r["kind"] == kind for r in res)}
+    for kind, s in summary.items():
+        if "speedup" in s:
+            print(f"{kind}: speed-up {s['of'][0]} vs {s['of'][1]} worker(s) (median rows/s): {s['speedup']:.2f}x")
     if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
+        Path(args.json).write_text(json.dumps({"runs": res, "summary": summary}, indent=1) + "\n",
+                                   encoding="utf-8")
     return 0
 
 

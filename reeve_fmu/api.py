@@ -81,11 +81,11 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
     res = Simulator(build_model(sc), method=method, step=step).run(t_end, dt)
     cols = res.as_dict()
     time_ = np.asarray(cols.pop("time"))
-    from .studies.verdicts import scene_verdicts, worst
+    from .studies.verdicts import explain, scene_verdicts, worst
 
     vs = [v.as_dict() for v in scene_verdicts(sc, time_, cols)]
-    return Result(time_, {k: np.asarray(v) for k, v in cols.items()}, {"verdict": worst(vs), "verdicts": vs},
-                  {"scene": sc.name})
+    return Result(time_, {k: np.asarray(v) for k, v in cols.items()},
+                  {"verdict": worst(vs), "verdicts": vs, "findings": explain(vs)}, {"scene": sc.name})
 
 
 def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: float = 3.0,
@@ -108,9 +108,10 @@ def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: f
     case = trip_case(scene, load=load, sequence=landings, dwell=dwell, sets=_overrides(overrides, kw), sis=sis)
     res = run_case(case, step=step)
     s = summarize_case(case, res.time, res.columns, res.info)
-    from .studies.verdicts import worst
+    from .studies.verdicts import explain, worst
 
     s["verdict"] = worst(s["verdicts"])
+    s["findings"] = explain(s["verdicts"], s)
     s["scenario"] = {"scene": case.scene.name, "car_load_kg": case.load, "landings_m": list(case.sequence),
                      "dwell_s": case.dwell, "drive": {k: v for k, v in case.drive_values.items()}}
     return Result(np.asarray(res.time), {k: np.asarray(v) for k, v in res.columns.items()}, s, dict(res.info))

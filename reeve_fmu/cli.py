@@ -80,7 +80,7 @@ def _simulate_extras(args, scene, time_, cols, out):
     traction against EN 81-50): console, verdicts added to DIR/summary.json, DIR/report.md."""
     import json
     from .studies import report
-    from .studies.verdicts import print_verdicts, scene_verdicts, worst
+    from .studies.verdicts import explain, print_verdicts, scene_verdicts, worst
 
     if getattr(args, "output_dt", None) is not None or getattr(args, "parquet", False):
         report.write_tables(out, time_, cols, output_dt=getattr(args, "output_dt", None),
@@ -88,7 +88,7 @@ def _simulate_extras(args, scene, time_, cols, out):
     vs = [v.as_dict() for v in scene_verdicts(scene, time_, cols)]
     p = out / "summary.json"
     summary = json.loads(p.read_text(encoding="utf-8")) if p.is_file() else {}
-    summary.update({"verdict": worst(vs), "verdicts": vs})
+    summary.update({"verdict": worst(vs), "verdicts": vs, "findings": explain(vs)})
     report.write_summary(out, summary)
     report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
                                                            "t_end_s": float(time_[-1])},

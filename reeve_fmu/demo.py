@@ -114,7 +114,7 @@ def cli_demo(args) -> int:
     from .fmu import cosim
     from .studies import report
     from .studies.trip import run_case, summarize_case, traction_limits
-    from .studies.verdicts import levelling_verdicts, print_verdicts, worst
+    from .studies.verdicts import explain, levelling_verdicts, print_verdicts, worst
 
     out = Path(getattr(args, "out", None) or "results")
     step = float(getattr(args, "step", None) or 1e-3)
@@ -204,6 +204,7 @@ def cli_demo(args) -> int:
         **summary,
         "verdict": worst(verdicts),
         "verdicts": verdicts,
+        "findings": explain(verdicts, summary),
         "cosim": {"steps": res.info["steps"], "loop_wall_s": res.info["loop_wall_s"],
                   "real_time_factor": res.info["rtf"], "total_wall_s": time.perf_counter() - t0,
                   "first_step_wall_s": res.info["first_step_wall_s"],
@@ -215,9 +216,10 @@ def cli_demo(args) -> int:
     metrics = [(a, b, u) for a, b, u in _rows(summary)]
     report.write_report(out, f"Trip study: {case.describe()}", {k: v for k, v in scenario.items()
                                                                 if k not in ("drive_sizing",)},
-                        metrics, verdicts, pngs, lev_rows, command="reeve-fmu demo")
+                        metrics, verdicts, pngs, lev_rows, command="reeve-fmu demo",
+                        findings=summary["findings"])
     print_table(summary)
-    print_verdicts(verdicts)
+    print_verdicts(verdicts, summary=summary)
     first = res.info["first_step_wall_s"]
     print(f"co-simulation: {res.info['steps']} steps in {res.info['loop_wall_s']:.2f} s "
           f"({res.info['rtf']:.1f}x real time"

@@ -339,3 +339,49 @@ radius = 0.2
 """
     with pytest.raises(SceneError, match=r"sheaves\[1\]\.center\] sheave 'small' overlaps sheave 'big'"):
         loads_scene(text, "bad.toml")
+
+
+def test_luffing_boom_swings_like_a_compound_double_pendulum():
+    """A boom on a horizontal revolute joint (centre of mass d below the pivot: its weight gives the
+    restoring moment) with a point load on a rope from its tip: the linearised modes against the
+    compound pendulum + point pendulum in series."""
+    m_b, d, L1, I_b, m_p, l = 100.0, 2.0, 4.0, 450.0, 20.0, 1.5
+    text = f"""
+[scene]
+name = "luff"
+model = "planar"
+sheave_contact = "rigid"
+[initial]
+statics = "rope-length"
+[[bodies]]
+name = "boom"
+mass = {m_b}
+inertia = {I_b}
+position = [0.0, 0.0, {-d}]
+joint = {{ kind = "revolute", axis = [0.0, -1.0, 0.0], pivot = [0.0, 0.0, 0.0] }}
+[[bodies]]
+name = "load"
+mass = {m_p}
+position = [0.0, 0.0, {-L1 - l}]
+free = ["x", "z"]
+[[ropes]]
+name = "rope"
+EA = 1e7                       # stiffer: round-off of the tension (EA x 1e-16) spoils K's differences
+rhoA = 1e-6
+length = {l}
+route = [
+  {{ anchor = "boom", at = [0.0, 0.0, {d - L1}] }},
+  {{ anchor = "load", at = [0.0, 0.0, 0.0] }},
+]
+"""
+    m = build_model(loads_scene(text, "luff.toml"))
+    sim = Simulator(m)
+    st = sim.initial_state()
+    Mf, Kf = _linearised(sim, st)
+    w2 = np.sort(np.linalg.eigvals(np.linalg.solve(Mf, Kf)).real)
+    l = -L1 - dict(zip(m.output_names, sim.outputs(st)))["load.position.z"]     # stretched rope
+    Mm = np.array([[I_b + m_p * L1 ** 2, m_p * L1 * l], [m_p * L1 * l, m_p * l * l]])
+    Kk = np.array([[(m_b * d + m_p * L1) * G, 0.0], [0.0, m_p * G * l]])
+    exact = np.sort(np.linalg.eigvals(np.linalg.solve(Mm, Kk)).real)
+    err = np.abs(np.sqrt(w2[:2] / exact) - 1.0)
+    assert np.all(err < 3e-5), err                    # measured 2.0e-6, 6.1e-6 (tension round-off in K)

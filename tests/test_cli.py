@@ -1,4 +1,5 @@
 """`reeve-fmu simulate` writes the documented columns; bad input exits 2 with the file and key."""
+import json
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ from reeve_fmu.core.results import read_csv
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_simulate_writes_csv_and_png(tmp_path):
+def test_simulate_writes_csv_and_png(tmp_path, capsys):
     rc = main(["simulate", str(ROOT / "scenes" / "elevator_2to1.toml"), "--t-end", "1.0", "--dt", "0.01",
                "--out", str(tmp_path)])
     assert rc == 0
@@ -21,6 +22,19 @@ def test_simulate_writes_csv_and_png(tmp_path):
     assert len(cols["time"]) == 101
     assert np.allclose(np.diff(cols["time"]), 0.01)
     assert (tmp_path / "results.png").stat().st_size > 10_000
+    # verdicts with value and limit in summary.json, report.md and on the console
+    s = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
+    vs = {v["check"]: v for v in s["verdicts"]}
+    assert {"slack rope (minimum rope force)", "traction ratio during the trip", "car speed / rated speed",
+            "EN 81-50 car loading (125 % at the lowest landing)", "EN 81-50 emergency braking (0.5 m/s²)",
+            "EN 81-50 car stalled (counterweight on its buffer)"} <= set(vs)
+    tr = vs["traction ratio during the trip"]
+    # results.csv carries 10 significant digits
+    assert abs(tr["value"] - float(np.max(cols["traction.traction_ratio"]))) < 1e-9 * tr["value"]
+    assert abs(tr["limit"] - 1.599) < 1e-3
+    printed = capsys.readouterr().out
+    assert all(f"[{v['status']}] {c}: " in printed for c, v in vs.items()) and f"overall: {s['verdict']}" in printed
+    assert (tmp_path / "report.md").read_text(encoding="utf-8").count("| **") == len(vs)
 
 
 def test_simulate_bad_scene_exit_code(tmp_path, capsys):

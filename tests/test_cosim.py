@@ -94,6 +94,35 @@ def test_demo_writes_results_plots_and_summary(demo):
     assert s["cosim"]["fmu_warnings"] == [] or all("version mismatch" in w for w in s["cosim"]["fmu_warnings"])
 
 
+def test_demo_summary_report_and_console_carry_the_verdicts(demo):
+    """Every verdict with its value and limit in summary.json, report.md and on the console. The R1 trip's
+    traction ratio (measured 1.643) lies between the EN 81-50 emergency-braking limit 1.599 and the loading
+    limit 1.858: WARN, and the findings say that this is the parameter set, not a simulation error."""
+    out = demo["out"]
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    vs = {v["check"]: v for v in s["verdicts"]}
+    for v in vs.values():
+        assert v["status"] in ("PASS", "WARN", "FAIL") and isinstance(v["limit"], float), v
+        assert f"[{v['status']}] {v['check']}: " in demo["stdout"]
+    for check in ("stopping accuracy", "levelling band", "stopping accuracy (with SIS)", "car speed / rated speed",
+                  "traction ratio during the trip", "drive at its torque/power limit", "co-simulation coupling",
+                  "slack rope (minimum rope force)"):
+        assert check in vs, check
+    assert [k for k in vs if k.startswith("EN 81-50")] and [k for k in vs if k.startswith("ride quality")]
+    tr = vs["traction ratio during the trip"]
+    assert tr["status"] == "WARN" and tr["value"] == s["traction_ratio_max"]
+    assert tr["limit"] == s["traction_limit_emergency_braking"] < tr["value"] < s["traction_limit_loading"]
+    assert s["verdict"] in ("WARN", "FAIL") and f"overall: {s['verdict']}" in demo["stdout"]
+    finding = next(f for f in s["findings"] if f.startswith("Traction"))
+    assert f"{tr['value']:.3f}" in finding and "not a simulation error" in finding
+    md = (out / "report.md").read_text(encoding="utf-8")
+    assert "## Findings" in md and finding in md
+    assert "not a simulation error" in " ".join(demo["stdout"].split())     # the console wraps the findings
+    assert md.count("| **") == len(s["verdicts"])
+    for png in ("results.png", "traction.png", "motor.png", "levelling.png"):
+        assert f"]({png})" in md and (out / png).is_file()
+
+
 def test_cosim_error_at_1ms_is_below_a_quarter_millimetre(demo):
     """The demo's co-simulation (1 ms) against the monolithic reference (same models, coupled every
     0.1 ms), car position over the whole round trip."""

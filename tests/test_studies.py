@@ -115,8 +115,9 @@ def test_csv_denormals_and_thinning(tmp_path):
 
 def test_levelling_with_shaft_information_system(tmp_path):
     """The drive levels the car, not the sheave, when the SIS closes the position loop on the approach:
-    both stops within a few mm (measured +0.91 / +0.01 mm; motor encoder only: +26.8 mm at the top, the
-    car-side rope stretch the encoder cannot see). The run's report carries every verdict."""
+    both stops within a few mm (measured -0.18 / +0.77 mm; motor encoder only: +1.17 / -6.01 mm with the
+    rope creeping on the sheave, +26.7 mm at the top on the rigid rim). The run's report carries every
+    verdict."""
     import reeve_fmu
     from reeve_fmu.studies import report
     from reeve_fmu.studies.analysis import traction_limits
@@ -133,28 +134,69 @@ def test_levelling_with_shaft_information_system(tmp_path):
     assert md.count("| **PASS** |") + md.count("| **WARN** |") + md.count("| **FAIL** |") == len(r.summary["verdicts"])
 
 
-def test_sweep_on_a_local_cluster_records_failed_runs(tmp_path):
+def test_sweep_on_a_local_cluster_records_failed_runs(tmp_path, capsys):
+    """`reeve-fmu sweep` on 2 local workers: a run with an invalid value is recorded with the message and
+    the other goes on; the Parquet row carries every verdict with value and limit; summary.json, report.md
+    and the console give the verdict table (per check: counts, value, limit)."""
     pytest.importorskip("dask.distributed")
+    import json
+
     import pandas as pd
 
+    from reeve_fmu.cli import main
     from reeve_fmu.studies import sweep
 
     study = tmp_path / "s.toml"
     study.write_text(f'[study]\nscene = "{R1.as_posix()}"\nmode = "list"\nlandings = [0.0, 3.0]\n'
                      'series = ["car.position"]\n[parameters]\n"rope.EA" = [2.9e6, -1.0]\nload_percent = [50, 50]\n', encoding="utf-8")
-    st = sweep.load_study(study)
-    client = sweep.make_client(workers=2)
-    try:
-        rows = sweep.run_sweep(st, client, progress=False)
-    finally:
-        client.cluster.close()
-        client.close()
-    p = sweep.write_results(rows, tmp_path)
-    df = pd.read_parquet(p)
-    assert df["run"].tolist() == [0, 1]
+    out = tmp_path / "out"
+    assert main(["sweep", str(study), "--workers", "2", "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    df = pd.read_parquet(out / "sweep.parquet")
+    assert df["run"].tolist() == [0, 1] and not any(c.startswith("_") for c in df.columns)
     assert pd.isna(df["error"][0]) and df["load_kg"][0] == 500.0 and len(df["series.car.position"][0]) > 10
     assert df["verdict"][1] == "ERROR" and "[ropes[0].EA] must be > 0, got -1" in df["error"][1]
+    checks = [c[len("verdict."):] for c in df.columns if c.startswith("verdict.")]
+    assert "stopping accuracy" in checks and "traction ratio during the trip" in checks
+    assert all(f"value.{c}" in df.columns and f"limit.{c}" in df.columns for c in checks)
+    assert df["value.traction ratio during the trip"][0] == df["traction_ratio_max"][0]
+    summ = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert summ["counts"]["ERROR"] == 1 and summ["failed_runs"][0]["run"] == 1
+    table = {e["check"]: e for e in summ["verdicts"]}
+    assert sorted(table) == sorted(checks)
+    for c, e in table.items():
+        assert e["PASS"] + e["WARN"] + e["FAIL"] == 1 and e["value_min"] == e["value_max"] == df[f"value.{c}"][0]
+        assert f"] {c}: {e['PASS']} PASS, {e['WARN']} WARN, {e['FAIL']} FAIL" in printed
+    md = (out / "report.md").read_text(encoding="utf-8")
+    assert "## Verdicts" in md and md.count("| **") == len(table) and "run 1: " in md
     bad = tmp_path / "bad.toml"
     bad.write_text(study.read_text(encoding="utf-8").replace('"rope.EA"', '"rope.EAx"'), encoding="utf-8")
     with pytest.raises(sweep.StudyError, match="unknown key 'EAx'"):
         sweep.load_study(bad)
+
+
+def test_sweep_chunks_are_guided():
+    """Every run in exactly one task, in order; big tasks first (at most MAX_CHUNK runs), single runs at
+    the end so that the workers finish together."""
+    from reeve_fmu.studies.sweep import MAX_CHUNK, chunks
+
+    ch = chunks(200, 2)
+    assert [i for c in ch for i in c] == list(range(200))
+    sizes = [len(c) for c in ch]
+    assert sizes[0] == MAX_CHUNK and sizes == sorted(sizes, reverse=True) and sizes[-8:] == [1] * 8
+    assert len(ch) < 60 and chunks(0, 2) == [] and [len(c) for c in chunks(3, 4)] == [1, 1, 1]
+
+
+def test_findings_explain_the_trip_traction_verdict():
+    """R1's limits (1.5990 braking, 1.8582 loading): a trip ratio of 1.643 is a WARN explained as a property
+    of the parameters; above the loading limit it is a FAIL that says the rope may slip."""
+    from reeve_fmu.studies.analysis import traction_limits
+
+    lim = traction_limits(load_scene(R1))
+    warn = vd._trip_traction({"traction_ratio_max": 1.643}, lim)
+    assert warn.status == "WARN"
+    text = vd.explain([warn], {"max_acceleration_m_s2": 0.857})[0]
+    assert "1.643" in text and "1.599" in text and "not a simulation error" in text and "0.86 m/s²" in text
+    fail = vd._trip_traction({"traction_ratio_max": 1.9}, lim)
+    assert fail.status == "FAIL" and "gross rope slip is possible" in vd.explain([fail])[0]
+    assert vd.explain([vd.Verdict("x", "PASS", 1.0, 2.0, "", "")]) == []

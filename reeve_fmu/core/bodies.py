@@ -152,7 +152,7 @@ def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
 
 
 @njit(cache=True)
-def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, f):
+def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, only, f):
     """The nonlinear rows f at q.
     Body b: bq[b] = q indices of (x, y, z, angle, rotation vector) (-1: fixed at b0[b]); bk[b] = 0: reference point
     (x, y, z) turned by the angle about the unit axis bax[b] (planar theta: -y; revolute joint: its
@@ -163,7 +163,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
     component) or (ROW_WRAP, span in, span out, sigma index) with rf[r] = (R, sense relative to the
     span-in end-B axis, s offset, centre point). P, TW, BR (body rotations), ANG (contact angles), AX
-    (two axes) are scratch."""
+    (two axes) are scratch. only >= 0: recompute only the points and spans on body `only` (the others
+    keep their values in P and TW: a Jacobian column of that body's coordinate)."""
     for b in range(bq.shape[0]):
         if bk[b] == 2:   # rotation vector phi: axis phi / |phi|, angle |phi|
             p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
@@ -178,6 +179,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
         BR[b, 3], BR[b, 4] = math.cos(th), math.sin(th)
     for i in range(pb.shape[0]):
         b = pb[i]
+        if only >= 0 and b != only:
+            continue
         if b < 0:
             for k in range(3):
                 P[i, k] = po[i, k]
@@ -197,6 +200,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     aA = AX[0]
     aB = AX[1]
     for k in range(sp.shape[0]):
+        if only >= 0 and pb[sp[k, 0]] != only and pb[sp[k, 1]] != only:
+            continue
         for e in range(2):
             b = pb[sp[k, e]]
             v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
@@ -221,19 +226,25 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
 
 
 @njit(cache=True)
-def rows_jacobian(q, G, cols, f0, fp, fm, qs, J):
+def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
     """f0 = f(q) and J[:, k] = d f / d q[cols[k]] by central differences (step NL_H); G = the
-    geometry arrays of rows_eval (a tuple)."""
-    rows_eval(q, *G, f0)
+    geometry arrays of rows_eval (a tuple); a column re-evaluates only the spans on its body
+    colbody[k] and then restores the points and tangents of q."""
+    P, TW = G[11], G[12]
+    rows_eval(q, *G, -1, f0)
+    P0 = P.copy()
+    TW0 = TW.copy()
     for i in range(q.shape[0]):
         qs[i] = q[i]
     for k in range(cols.shape[0]):
         j = cols[k]
         qs[j] = q[j] + NL_H
-        rows_eval(qs, *G, fp)
+        rows_eval(qs, *G, colbody[k], fp)
         qs[j] = q[j] - NL_H
-        rows_eval(qs, *G, fm)
+        rows_eval(qs, *G, colbody[k], fm)
         qs[j] = q[j]
+        P[:, :] = P0
+        TW[:, :] = TW0
         for r in range(f0.shape[0]):
             J[r, k] = (fp[r] - fm[r]) / (2.0 * NL_H)
 
@@ -246,7 +257,7 @@ def nl_update(K, c, q, v):
     qs = K.nl_qs
     G = (K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_pb, K.nl_po, K.nl_sp, K.nl_sg, K.nl_sa, K.nl_rk, K.nl_rf,
          K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
-    rows_jacobian(q, G, K.nl_cols, f0, fp, fm, qs, J)
+    rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
     acc = K.nl_racc
     nrm = 0.0
     for k in range(K.nl_cols.shape[0]):
@@ -258,11 +269,11 @@ def nl_update(K, c, q, v):
         for k in range(K.nl_cols.shape[0]):
             j = K.nl_cols[k]
             qs[j] = q[j] + NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, fp)
+        rows_eval(qs, *G, -1, fp)
         for k in range(K.nl_cols.shape[0]):
             j = K.nl_cols[k]
             qs[j] = q[j] - NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, fm)
+        rows_eval(qs, *G, -1, fm)
         for k in range(K.nl_cols.shape[0]):
             qs[K.nl_cols[k]] = q[K.nl_cols[k]]
         sc = nrm * nrm / (NL_EPS * NL_EPS)
@@ -325,6 +336,7 @@ def empty_fields() -> dict:
                 nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
                 nl_rf=f2.copy(), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
                 nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
+                nl_colbody=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
                 nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
                 nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)))
@@ -406,6 +418,7 @@ class NonlinearRows:
         rk = np.array([[s[0], s[1], s[2], s[3]] for s in specs], np.int64).reshape(nr, 4)
         rf = np.array([[s[4], s[5], s[6], s[7]] for s in specs], float).reshape(nr, 4)
         col_k = {j: k for k, j in enumerate(cols)}
+        colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib]) for j in cols], np.int64)
         body_cols = {ib: [col_k[int(j)] for j in bq[ib] if j >= 0] for ib in range(len(self.bodies))}
 
         def span_cols(k):
@@ -448,13 +461,13 @@ class NonlinearRows:
         f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_pb=pb, nl_po=po, nl_sp=sp,
                  nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf, nl_P=np.zeros((len(pb), 3)), nl_TW=np.zeros((len(sp), 6)),
                  nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
-                 nl_cols=np.array(cols, np.int64), nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
+                 nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
                  nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
                  nl_ent=ent, nl_acc=np.zeros(el_idx.shape))
         if nr:
             q0 = np.asarray(q0, float)
             G = tuple(f[k] for k in GEOMETRY_FIELDS)
-            rows_jacobian(q0, G, f["nl_cols"], f["nl_f0"], f["nl_fp"], f["nl_fm"], f["nl_qs"], f["nl_J"])
+            rows_jacobian(q0, G, f["nl_cols"], colbody, f["nl_f0"], f["nl_fp"], f["nl_fm"], f["nl_qs"], f["nl_J"])
             for key, r in zip(keys, range(nr)):
                 row = row_of(key)
                 B[row, :] = 0.0

@@ -30,9 +30,10 @@ Kernel = namedtuple("Kernel", [
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
-    # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on = 0: none
+    # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
+    # rows, bit 2: joints or spatial rigid bodies; 0: none of them
     "nl_on", "nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_BR", "nl_ANG", "nl_AX", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa",
-    "nl_rk", "nl_rf", "nl_P", "nl_TW", "nl_cols", "nl_f0", "nl_fp", "nl_fm",
+    "nl_rk", "nl_rf", "nl_P", "nl_TW", "nl_cols", "nl_colbody", "nl_f0", "nl_fp", "nl_fm",
     "nl_J", "nl_qs", "nl_racc", "nl_rw", "nl_ent", "nl_acc",
     # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
     "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
@@ -139,6 +140,7 @@ if JIT:
         ("nl_P", types.float64[:, ::1]),
         ("nl_TW", types.float64[:, ::1]),
         ("nl_cols", types.int64[::1]),
+        ("nl_colbody", types.int64[::1]),
         ("nl_f0", types.float64[::1]),
         ("nl_fp", types.float64[::1]),
         ("nl_fm", types.float64[::1]),
@@ -235,7 +237,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -316,6 +318,7 @@ if JIT:
         k.nl_P = nl_P
         k.nl_TW = nl_TW
         k.nl_cols = nl_cols
+        k.nl_colbody = nl_colbody
         k.nl_f0 = nl_f0
         k.nl_fp = nl_fp
         k.nl_fm = nl_fm

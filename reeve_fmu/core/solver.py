@@ -27,7 +27,7 @@ from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
+                     creep_input_set, creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
                      traction_deflection, traction_slip, workspace)
 
 
@@ -363,6 +363,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     ncrp = K.crp_s.shape[0]
     ue = np.empty(UE_CREEP + UE_STRIDE * ncrp)
     th1 = np.empty(ncrp)      # creep sheave angles at the step start (retry)
+    kr = np.empty((2, ncrp))  # creep sheaves' (kappa, rate) at the last converged step end
     ue[0] = u[0]
     target = 0.0 if u[1] >= 0.5 else 1.0
     t = t0
@@ -408,8 +409,11 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     ue[5] = q[K.trac_s]
                     ue[6] = q[K.trac_th]
                     ue[7] = info[9]
-                if ncrp > 0:
-                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, wfresh)
+                if wfresh:     # computed once at the end of the last step (below)
+                    for k in range(ncrp):
+                        creep_input_set(K, q, info, ue, hs, k, kr[0, k], kr[1, k])
+                elif ncrp > 0:
+                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, False)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -438,10 +442,16 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
                 for k in range(ncrp):   # W holds the converged iterate's element arrays
+                    kap, rate, _ = creep_terms(K, W.QE, W.VE, v, k)
+                    kr[0, k] = kap
+                    kr[1, k] = rate
                     if K.crp_kind[k] == 0:
-                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, creep_terms(K, W.QE, W.VE, v, k)[0])
-            if status != 1:
-                break   # converged (0) or a vanishing span (2): substeps do not help
+                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
+            if status == 0 or status == 4:
+                break
+            # no convergence (1), or an iterate with a span below min_span (2): substeps. A span that
+            # really vanishes does so in the substeps too (then reported); a diverging iterate (a 2 m
+            # span "vanished" in one Newton update, slack ropes snapping) does not
         if status != 0:
             q[:] = q1
             v[:] = v1
@@ -462,7 +472,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         t = t1
         info[1] += 1
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False)
+            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False, kr[0])
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]

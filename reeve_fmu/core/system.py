@@ -13,7 +13,8 @@ import numpy as np
 
 from ._jit import njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
-from .elements.linear import end_tension, linear_element, linear_element_1d_at, linear_element_at
+from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_element_1d_at,
+                              linear_element_at)
 from .bodies import nl_convect, nl_update, rigid_terms
 from .kernel import new_work
 from .profiles import profile_eval
@@ -71,6 +72,8 @@ def end_strain(K, X, ie, end):
         for k in range(nd):
             acc += X[ie, o + k] * X[ie, o + k]
         return math.sqrt(acc) - 1.0
+    if nd == 1:   # no square root on the 1D path (the residual evaluates this per creep sheave)
+        return abs(X[ie, 1] - X[ie, 0]) / (X[ie, 3] - X[ie, 2]) - 1.0
     for k in range(nd):
         dk = X[ie, nd + k] - X[ie, k]
         acc += dk * dk
@@ -89,6 +92,11 @@ def end_strain_rate(K, X, XD, ie, end):
             n2 += X[ie, o + k] * X[ie, o + k]
             dd += X[ie, o + k] * XD[ie, o + k]
         return dd / math.sqrt(n2)
+    if nd == 1:
+        dk = X[ie, 1] - X[ie, 0]
+        l = X[ie, 3] - X[ie, 2]
+        sg = 1.0 if dk >= 0.0 else -1.0
+        return sg * (XD[ie, 1] - XD[ie, 0]) / l - abs(dk) * (XD[ie, 3] - XD[ie, 2]) / (l * l)
     for k in range(nd):
         dk = X[ie, nd + k] - X[ie, k]
         n2 += dk * dk
@@ -99,33 +107,62 @@ def end_strain_rate(K, X, XD, ie, end):
 
 
 @njit(cache=True, inline="always")
+def groove_strain(K, X, XD, ie, end, rate):
+    """(strain, its rate if rate else 0) of the rope of element ie where it meets a sheave (end 0:
+    start, 1: end), as it lies on the groove: the element's strain; for a tension-only rope the
+    strain its tension carries, N / EA of the element's law (linear: the smoothed positive part of
+    axial_law; cubic: max(eps, 0)). A slack rope arrives on the groove unstrained: its chord strain
+    (negative while the span sags or a slack rope piles up) is no strain of the rope."""
+    e = end_strain(K, X, ie, end)
+    ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
+    if K.el_tonly[ie] == 0:
+        return e, ed
+    if K.el_type == 1:
+        return (e, ed) if e > 0.0 else (0.0, 0.0)
+    d = SLACK_STRAIN
+    r = math.sqrt(e * e + d * d)
+    sp = e + r if e >= 0.0 else d * d / (r - e)
+    return 0.5 * sp, 0.5 * (1.0 + e / r) * ed
+
+
+@njit(cache=True, inline="always")
 def creep_terms(K, QE, VE, v, k):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly;
-    kappa = 1 + the arriving strain. The arriving side is the in-span while material runs along the
-    route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg makes a reversal
-    smooth (at rest kappa is the mean of both sides). A drum's only span arrives either way (its
-    stored rope is taken at that span's strain).
+    kappa = 1 + the arriving strain (groove_strain). The arriving side is the in-span while material
+    runs along the route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg
+    makes a reversal smooth (at rest kappa is the mean of both sides). A drum's only span arrives
+    either way (its stored rope is taken at that span's strain).
     The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
     -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
     arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
     ei = K.crp_el_in[k]
     eo = K.crp_el_out[k]
     if ei < 0:
-        return 1.0 + end_strain(K, QE, eo, 0), end_strain_rate(K, QE, VE, eo, 0), 0.0
+        e, ed = groove_strain(K, QE, VE, eo, 0, True)
+        return 1.0 + e, ed, 0.0
     if eo < 0:
-        return 1.0 + end_strain(K, QE, ei, 1), end_strain_rate(K, QE, VE, ei, 1), 0.0
+        e, ed = groove_strain(K, QE, VE, ei, 1, True)
+        return 1.0 + e, ed, 0.0
     x = v[K.crp_s[k]] / K.crp_vreg
     th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
     w = 0.5 * (1.0 - th)
-    e_in = end_strain(K, QE, ei, 1)
-    e_out = end_strain(K, QE, eo, 0)
-    rate = 0.0
-    if w > 0.0:
-        rate += w * end_strain_rate(K, QE, VE, ei, 1)
-    if w < 1.0:
-        rate += (1.0 - w) * end_strain_rate(K, QE, VE, eo, 0)
+    e_in, r_in = groove_strain(K, QE, VE, ei, 1, w > 0.0)
+    e_out, r_out = groove_strain(K, QE, VE, eo, 0, w < 1.0)
     d = e_in - e_out
-    return 1.0 + w * e_in + (1.0 - w) * e_out, rate, -th * 0.5 * K.el_EA[ei] * d * d
+    return (1.0 + w * e_in + (1.0 - w) * e_out, w * r_in + (1.0 - w) * r_out,
+            -th * 0.5 * K.el_EA[ei] * d * d)
+
+
+@njit(cache=True, inline="always")
+def creep_input_set(K, q, info, ue, h, k, kap, rate):
+    """Write the kernel inputs of creep sheave k at the start of a step of size h (creep_inputs) from
+    its kappa and kappa rate there."""
+    i = UE_CREEP + UE_STRIDE * k
+    ue[i] = kap
+    ue[i + 1] = info[INFO_CREEP + k]
+    ue[i + 2] = q[K.crp_s[k]]
+    ue[i + 3] = rate
+    ue[i + 4] = kap + 0.5 * h * rate
 
 
 @njit(cache=True)
@@ -142,12 +179,7 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
             if K.crp_el_out[k] >= 0:
                 gather(K, c, q, v, K.crp_el_out[k], QE, VE)
         kap, rate, _ = creep_terms(K, QE, VE, v, k)
-        i = UE_CREEP + UE_STRIDE * k
-        ue[i] = kap
-        ue[i + 1] = info[INFO_CREEP + k]
-        ue[i + 2] = q[K.crp_s[k]]
-        ue[i + 3] = rate
-        ue[i + 4] = kap + 0.5 * h * rate
+        creep_input_set(K, q, info, ue, h, k, kap, rate)
 
 
 @njit(cache=True, inline="always")
@@ -380,11 +412,12 @@ def q_terms(K, W, q, v, t, u):
             Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
             if k == K.mot_crp:
                 gain *= kap
-    for k in range(K.jt_dof.shape[0]):      # joint torque (force) tables
-        Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
-    for k in range(K.jg_dof.shape[0]):      # gravity moment of a revolute body about its joint
-        x = q[K.jg_dof[k]]
-        Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
+    if K.nl_on & 2:   # joints: torque (force) tables, gravity moments of revolute bodies
+        for k in range(K.jt_dof.shape[0]):
+            Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
+        for k in range(K.jg_dof.shape[0]):
+            x = q[K.jg_dof[k]]
+            Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
     if K.mot_dof >= 0 and K.drive_kind >= 2:
         Q[K.mot_dof] += drive_torque(K, t, u) * gain
     if K.brake_T > 0.0 and K.mot_dof >= 0:
@@ -427,7 +460,8 @@ def assemble_ws(K, W, c, q, v, t, u):
         for j in range(nq):
             M[i, j] = M0[i, j]
     status = 0
-    nl = K.nl_on != 0
+    flags = K.nl_on     # bit 1: nonlinear rows, bit 2: joints or spatial rigid bodies (one read)
+    nl = (flags & 1) != 0
     if nl:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the nonlinear rows
         nl_update(K, c, q, v)
     for ie in range(el_map.shape[0]):
@@ -461,7 +495,7 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     q_terms(K, W, q, v, t, u)
-    if K.rb_q.shape[0] > 0:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
+    if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
     Md = W.Md
     for j in range(nq):
@@ -474,14 +508,16 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
     """Fill y with the outputs listed in K.out_* (see model.py)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, True)
+    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, True, np.empty(K.crp_s.shape[0]))
 
 
 @njit(cache=True)
-def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
+def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
     """outputs() from one assembly pass whose element arrays serve every tension output. With
     fresh = False the workspace of the last Newton residual is used as it is: that residual was
-    evaluated within the Newton tolerance of (q, v), which saves an assembly per output step."""
+    evaluated within the Newton tolerance of (q, v), which saves an assembly per output step, and
+    kaps holds the creep sheaves' kappa there (creep_terms, as the step's end computed it); with
+    fresh = True kaps is filled here."""
     nd = K.nd
     ne = K.el_idx.shape[1]
     ae = np.empty(ne)
@@ -494,9 +530,9 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh):
     MEs = W.MEs
     QEs = W.QEs
     n = K.out_kind.shape[0]
-    kaps = np.empty(K.crp_s.shape[0])
-    for k in range(K.crp_s.shape[0]):
-        kaps[k] = creep_terms(K, QE, VE, v, k)[0]
+    if fresh:
+        for k in range(K.crp_s.shape[0]):
+            kaps[k] = creep_terms(K, QE, VE, v, k)[0]
     for k in range(n):
         kind = K.out_kind[k]
         i = K.out_i[k]
@@ -635,6 +671,8 @@ def energy_u(K, c, q, v, u):
 def set_joints(K, t, q, v, qdd):
     """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
     pose, as the profile at its start): q = x(t)."""
+    if K.nl_on & 2 == 0:
+        return
     for k in range(K.jp_dof.shape[0]):
         j = K.jp_dof[k]
         x, xd, xdd = profile_eval(K.jp_prof[k], t)

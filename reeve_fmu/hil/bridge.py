@@ -269,8 +269,10 @@ class Bridge:
     """Simulated CiA 402 drive + plant on a python-can bus (see the module docstring)."""
 
     def __init__(self, bus, plant, config: BridgeConfig | None = None, injector: Injector | None = None,
-                 drive_node: DriveNode | None = None):
+                 drive_node: DriveNode | None = None, clock=None):
         self.bus = bus
+        # the wall clock of real time and of every bounded wait (a simulated clock makes real time exact in tests)
+        self.clock = clock or time.perf_counter
         self.plant = plant
         self.cfg = config or BridgeConfig()
         self.inj = injector
@@ -435,11 +437,11 @@ class Bridge:
         """Boot-up message, then pre-operational heartbeats until a master sends NMT start (bounded).
         alive(): None while the controller may still come, else the reason why it will not."""
         self._send(COB_HB_DRIVE, bytes([NMT_STATE_BOOT]))
-        t0 = time.perf_counter()
+        t0 = self.clock()
         deadline = t0 + self.cfg.start_timeout
         next_hb = t0
         while self.dn.nmt_state != NMT_STATE_OPERATIONAL:
-            now = time.perf_counter()
+            now = self.clock()
             if now >= deadline:
                 raise HilError(f"no controller started the drive (NMT start to node {self.cfg.node_id}) "
                                f"within {self.cfg.start_timeout:g} s")
@@ -452,7 +454,7 @@ class Bridge:
             msg = self.bus.recv(max(0.0, min(deadline, next_hb, now + 0.05) - now))
             if msg is not None:
                 self._service(msg)
-        return time.perf_counter() - t0
+        return self.clock() - t0
 
     def _heartbeat(self) -> None:
         self._send(COB_HB_DRIVE, bytes([self.dn.nmt_state, self._drive_hb_counter]))
@@ -555,7 +557,7 @@ class Bridge:
         inj = self.inj
         d = self.drive
         dn = self.dn
-        perf = time.perf_counter
+        perf = self.clock
         t_wall0 = perf()
         t_prev_sync = t_wall0
         sync_timeout = cfg.sync_timeout if cfg.sync_timeout is not None else max(20 * dt, 0.05)
@@ -692,11 +694,11 @@ class Bridge:
                 self._service(m)
         poll = self._consec_timeouts >= self.dn.params["watchdog_cycles"]
         timeout = 0.0 if poll else self.cfg.lockstep_timeout
-        deadline = time.perf_counter() + timeout
+        deadline = self.clock() + timeout
         recv = self.bus.recv
         heard = False
         while not self._closed:
-            remaining = deadline - time.perf_counter()
+            remaining = deadline - self.clock()
             if remaining < 0.0:
                 remaining = 0.0
             msg = recv(remaining)
@@ -708,7 +710,7 @@ class Bridge:
             heard = heard or msg.arbitration_id in (COB_RPDO1, COB_RPDO2, COB_HB_CONTROLLER, COB_SDO_RX)
             if inj is not None:
                 cob = msg.arbitration_id
-                m2, consumed = inj.on_frame(msg, k, time.perf_counter())
+                m2, consumed = inj.on_frame(msg, k, self.clock())
                 if m2 is None:
                     if consumed and cob == COB_RPDO1:
                         self._closed = True     # dropped or in flight: no answer for this cycle
@@ -723,7 +725,7 @@ class Bridge:
         after `timeout` s of silence (bounded)."""
         recv = self.bus.recv
         inj = self.inj
-        perf = time.perf_counter
+        perf = self.clock
         deadline = perf() + timeout
         while self._sync_rx is None:
             now = perf()
@@ -749,7 +751,7 @@ class Bridge:
         """Real time: collect frames until the wall-clock instant `until` (and release delayed ones)."""
         recv = self.bus.recv
         inj = self.inj
-        perf = time.perf_counter
+        perf = self.clock
         while True:
             now = perf()
             if inj is not None and not inj.lockstep:

@@ -5,12 +5,13 @@ It does what a lift controller does with a CiA 402 drive: waits for the drive's 
 configures the drive's heartbeat consumer over SDO (0x1016:01 = controller node 0x10, 50 ms), starts the
 node (NMT), and then, on every SYNC, reads TPDO1 (statusword, counter) and TPDO2 (position, velocity),
 steps the ElectricDrive with that sample and answers with RPDO1: controlword (enable sequence, CST),
-target torque, brake release, and the SYNC counter it answers. Every 10 SYNCs it sends its heartbeat
-with a rolling counter. Every wait is bounded; `dies_at` makes it fall silent at a simulated time
+target torque, brake release, and the SYNC counter it answers. Every 10 ms (whole SYNC cycles) it sends
+its heartbeat with a rolling counter. Every wait is bounded; `dies_at` makes it fall silent at a simulated time
 (fault injection: controller-dies-at).
 """
 from __future__ import annotations
 
+import math
 import struct
 import time
 from dataclasses import dataclass, field
@@ -30,10 +31,24 @@ class ControllerConfig:
     dies_at: float | None = None        # s of simulated time: stop sending (dead controller)
     start_timeout: float = 60.0         # s to wait for the drive's boot-up / heartbeat
     sync_timeout: float = 5.0           # s to wait for the next SYNC before giving up
-    heartbeat_every: int = 10           # SYNC cycles between controller heartbeats
-    heartbeat_consumer_ms: int = 50     # written to the drive's 0x1016:01
+    heartbeat_ms: float = 10.0          # controller heartbeat period (rounded to whole SYNC cycles, >= 1); 0: none
+    heartbeat_consumer_ms: int = 50     # written to the drive's 0x1016:01 (raised to 5 heartbeat periods)
     sdo_timeout: float = 1.0
     rt_priority: int = 0                # SCHED_FIFO priority of the controller thread while cycling (0: leave it)
+
+    @property
+    def heartbeat_every(self) -> int:
+        """SYNC cycles between controller heartbeats (0: none)."""
+        return max(1, round(self.heartbeat_ms * 1e-3 / self.dt)) if self.heartbeat_ms else 0
+
+    @property
+    def consumer_ms(self) -> int:
+        """Consumer time for 0x1016:01: at least 5 heartbeat periods, so that a heartbeat held back by a
+        few SYNC cycles of transport delay is not taken for a lost controller (with the period counted in
+        SYNC cycles, a 5 ms SYNC once put the 10th-cycle heartbeat at the 50 ms consumer time itself)."""
+        if not self.heartbeat_consumer_ms or not self.heartbeat_every:
+            return int(self.heartbeat_consumer_ms)
+        return max(int(self.heartbeat_consumer_ms), math.ceil(5 * self.heartbeat_every * self.dt * 1000.0 - 1e-9))
 
 
 @dataclass
@@ -115,8 +130,8 @@ class BuiltinController:
                 raise TimeoutError(f"no drive heartbeat within {self.cfg.start_timeout:g} s")
             if msg.arbitration_id == COB_HB_DRIVE:
                 break
-        if self.cfg.heartbeat_consumer_ms:
-            ok = self._sdo_download(0x1016, 1, (CONTROLLER_NODE_ID << 16) | int(self.cfg.heartbeat_consumer_ms))
+        if self.cfg.consumer_ms:
+            ok = self._sdo_download(0x1016, 1, (CONTROLLER_NODE_ID << 16) | self.cfg.consumer_ms)
             if not ok:
                 raise RuntimeError("SDO download of 0x1016:01 (heartbeat consumer) failed")
         self._send(COB_NMT, bytes([NMT_START, self.node_id]))
@@ -147,6 +162,7 @@ class BuiltinController:
         dec_fb = self.proto.DriveFeedback.decode
         enc_cmd = self.proto.TorqueCmd.encode
         drive = self.drive
+        hb_every = cfg.heartbeat_every
         k = -1
         c_prev = None
         sw = 0
@@ -204,7 +220,7 @@ class BuiltinController:
                         cw = controlword_for(state)
                     tau = min(max(tau, -1000.45), 1000.45)
                     frames = []
-                    if cfg.heartbeat_every and k % cfg.heartbeat_every == 0:
+                    if hb_every and k % hb_every == 0:
                         frames.append(Msg(arbitration_id=COB_HB_CONTROLLER, is_extended_id=False,
                                           data=bytes([NMT_STATE_OPERATIONAL, alive])))
                         alive = (alive + 1) % 256

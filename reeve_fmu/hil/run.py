@@ -320,7 +320,10 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     cols = res.columns() if res.outputs is not None else {}
     summary = _summary(cfg, faults, res, plant, cols, ctl_stats)
     if cols:
+        from .review import add_verdicts
+
         _add_trip_figures(summary, cfg, res.time, cols)
+        add_verdicts(summary, cfg, plant, faults.any, res.time, cols)   # trip, coupling and bench checks
     if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
         _add_reference_comparison(summary, cfg, cols, st.steps)
     if cfg.out:
@@ -470,7 +473,7 @@ def _summary(cfg: HilConfig, faults, res, plant, cols: dict, ctl_stats) -> dict:
 
 
 def _add_trip_figures(summary: dict, cfg: HilConfig, time_, cols: dict):
-    """Car travel and speed, peak tension and torque, and the demo's trip metrics of the record."""
+    """Car travel and speed, peak tension and torque of the record."""
     x = cols.get("car.position")
     v = cols.get("car.velocity")
     if x is not None:
@@ -479,22 +482,6 @@ def _add_trip_figures(summary: dict, cfg: HilConfig, time_, cols: dict):
     if "traction.tension_in" in cols:
         summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
     summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
-    try:   # the demo's trip metrics (stopping error, ride quality, traction) of the same record
-        from ..studies.trip import summarize, traction_limits
-
-        dv = cfg.drive_values or {}
-        lands = [dv[k] for k in ("landing[1]", "landing[2]") if k in dv] or None
-        summary["trip_metrics"] = summarize(time_, cols, traction_limits(), landings=lands)
-        from ..studies.trip import trip_case
-        from ..studies.verdicts import trip_verdicts, worst
-
-        case = trip_case(sequence=lands + lands[:1] if lands else None)
-        case.drive_values.update({k: v for k, v in dv.items() if k in ("torque.max", "torque.power_max")})
-        vs = [v.as_dict() for v in trip_verdicts(case, time_, cols, summary["trip_metrics"],
-                                                 traction_limits(case.scene), {})]
-        summary["verdict"], summary["verdicts"] = worst(vs), vs
-    except Exception as exc:  # a record without a complete trip, or an older demo module
-        summary["trip_metrics"] = {"unavailable": f"{type(exc).__name__}: {exc}"}
 
 
 def _add_reference_comparison(summary: dict, cfg: HilConfig, cols: dict, m: int):
@@ -516,7 +503,8 @@ def _add_reference_comparison(summary: dict, cfg: HilConfig, cols: dict, m: int)
 
 
 def _write_results(out: Path, cfg: HilConfig, summary: dict, time_, cols: dict, st):
-    """results.csv (the record), timing.csv (per-cycle latency) and summary.json."""
+    """results.csv (the record), timing.csv (per-cycle latency), summary.json and (with a record)
+    report.md with the trip plots."""
     from ..core.results import write_csv
 
     out.mkdir(parents=True, exist_ok=True)
@@ -530,6 +518,10 @@ def _write_results(out: Path, cfg: HilConfig, summary: dict, time_, cols: dict, 
         write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
                                        encoding="utf-8")
+    if cols:
+        from .review import write_report
+
+        write_report(out, cfg, summary, time_, cols)
 
 
 def _json_default(o):
@@ -601,7 +593,14 @@ def _print_summary(summary: dict, cfg) -> int:
     for key in ("reference", "vs_demo_scheme"):
         if key in summary:
             print(f"  {key:{w}s}  max |dx_car| = {summary[key]['max_abs_diff_car_position']:.3g} m")
-    print(f"-> {cfg.out}/results.csv, summary.json")
+    if summary.get("verdicts"):
+        from ..studies.verdicts import print_verdicts
+
+        tm = summary.get("trip_metrics")
+        print_verdicts(summary["verdicts"], summary=tm if isinstance(tm, dict) else None)
+    if summary.get("verdicts_note"):
+        print(f"  {summary['verdicts_note']}")
+    print(f"-> {cfg.out}/results.csv, summary.json" + (", report.md" if summary.get("verdicts") else ""))
     return 0 if summary.get("plant_error") is None else 2
 
 

@@ -47,7 +47,10 @@ import numpy as np
 
 from ..core._jit import njit
 from ..core.elements.torsion import LAWS, torsion_span
-from ..core.geometry import GeometryError, _basis, tangent
+from ..core.builder.bodies import world
+from ..core.builder.routes import span_tangents, stop_geometry
+from ..core.builder.state import start
+from ..core.geometry import GeometryError, _basis
 from ..core.scene import Scene, SceneError, _Reader, load_scene, parse_scene
 
 
@@ -505,27 +508,27 @@ class CraneModel:
         return next(r for r in self.scene.ropes if r.name == self.spec.rope).route
 
 
-def _route_geometry(stops, sheaves, spec: CraneSpec, p0, r, rpath) -> list:
-    """Per route stop (world centre, radius, axis, wrap sense, on the block); a sheave or dead end
-    off the ground and off the hook block fails with the key's path."""
-    geo = []   # (world centre, R, axis, sigma, on block)
+def _route_geometry(scene: Scene, stops, spec: CraneSpec, r, rpath) -> list:
+    """Per route stop (world centre, radius, axis, wrap sense, on the block) from the model
+    builder's supports step; a sheave or dead end off the ground and off the hook block fails with
+    the key's path."""
+    bs = start(scene)
+    on_block = []
     for k, st in enumerate(stops):
         if st.sheave is not None:
-            sh = sheaves[st.sheave]
+            sh = bs.sheaves[st.sheave]
             if sh.body not in (None, spec.block):
                 r.fail(f"sheaves.{sh.name}.body", f"the crane model moves only the hook block {spec.block!r}; "
                                                   f"sheave on body {sh.body!r}")
-            on = sh.body == spec.block
-            c = np.asarray(sh.center, float) + (p0 if on else 0.0)
-            geo.append((c, sh.radius, np.asarray(sh.axis, float), 1.0 if st.wrap == "ccw" else -1.0, on))
+            on_block.append(sh.body == spec.block)
         else:
             if st.anchor not in ("ground", spec.block):
                 r.fail(f"{rpath}.route[{k}].anchor", f"the dead end must be on the ground (boom tip) or on "
                                                      f"the hook block {spec.block!r}, got {st.anchor!r}")
-            on = st.anchor == spec.block
-            c = np.asarray(st.at, float) + (p0 if on else 0.0)
-            geo.append((c, 0.0, None, 1.0, on))
-    return geo
+            on_block.append(st.anchor == spec.block)
+    geo = stop_geometry(stops, bs.sheaves, lambda body, offset: world(bs, body, offset))
+    return [(c, R, None if a is None else np.asarray(a, float), sg, on)
+            for (c, R, a, sg), on in zip(geo, on_block)]
 
 
 def _critical_height_estimate(T, falls, sp_i, p0, spec: CraneSpec):
@@ -574,14 +577,11 @@ def build_crane(scene: Scene, spec: CraneSpec | None = None) -> CraneModel:
     block = bodies[spec.block]
     p0 = np.asarray(block.position, float)
 
-    geo = _route_geometry(stops, sheaves, spec, p0, r, rpath)
+    geo = _route_geometry(scene, stops, spec, r, rpath)
     nst = len(stops)
     nsp = nst - 1
-    T = []
     try:
-        for k in range(nsp):
-            (cA, RA, aA, sA, _), (cB, RB, aB, sB, _) = geo[k], geo[k + 1]
-            T.append(tangent(cA, RA, aA, sA, cB, RB, aB, sB))
+        T = span_tangents(scene.source, rope.name, [g[:4] for g in geo])
     except GeometryError as exc:
         raise SceneError(f"{scene.source}: [{rpath}.route] geometry: {exc}") from None
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .verdicts import Verdict, worst
+from .verdicts import Verdict, explain, worst
 
 
 def thin_index(t, output_dt: float | None) -> np.ndarray:
@@ -200,11 +200,14 @@ def _json_default(o):
 
 
 def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts: list, pngs: list,
-                 levelling: list | None = None, command: str = "") -> Path:
-    """DIR/report.md: scenario, verdicts with limits and sources, key figures, levelling, plots."""
+                 levelling: list | None = None, command: str = "", findings: list | None = None) -> Path:
+    """DIR/report.md: scenario, verdicts with limits and sources, findings (what each WARN/FAIL means;
+    default `verdicts.explain`), key figures, levelling, plots."""
     vs = [v if isinstance(v, Verdict) else Verdict(**v) for v in verdicts]
+    bad = [f"{v.status} {v.check}" for v in vs if v.status in ("FAIL", "WARN")]
     lines = [f"# {title}", "",
-             f"Overall verdict: **{worst(vs)}** — generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} "
+             f"Overall verdict: **{worst(vs)}**" + (f" ({'; '.join(bad)}: see Findings)" if bad else "")
+             + f" — generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} "
              f"UTC by reeve_fmu" + (f" (`{command}`)" if command else ""), "", "## Scenario", "",
              "| item | value |", "|---|---|"]
     lines += [f"| {k} | {_cell(v)} |" for k, v in scenario.items()]
@@ -212,6 +215,9 @@ def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts:
     for v in vs:
         lines.append(f"| **{v.status}** | {v.check} | {_num(v.value)} | {_num(v.limit)} | {v.unit} | "
                      f"{v.source}{'; ' + v.note if v.note else ''} |")
+    findings = explain(vs) if findings is None else findings
+    if findings:
+        lines += ["", "## Findings", ""] + [f"- {f}" for f in findings]
     if metrics:
         lines += ["", "## Key figures", "", "| figure | value | unit |", "|---|---|---|"]
         lines += [f"| {a} | {b} | {u} |" for a, b, u in metrics]

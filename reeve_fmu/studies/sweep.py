@@ -141,6 +141,9 @@ def run_one(study: dict, index: int, params: dict) -> dict:
         row["verdict"] = worst(s["verdicts"])
         for v in s["verdicts"]:
             row[f"verdict.{v['check']}"] = v["status"]
+            row[f"value.{v['check']}"] = v["value"]
+            row[f"limit.{v['check']}"] = v["limit"]
+        row["_verdicts"] = s["verdicts"]       # for the sweep's verdict table (not written to Parquet)
         if study["series"]:
             from .report import thin_index
 
@@ -159,51 +162,101 @@ def run_one(study: dict, index: int, params: dict) -> dict:
     return row
 
 
+#: environment of local worker processes: one thread for every numeric library, so that n single-threaded
+#: workers use n cores and do not oversubscribe them (Dask's nanny sets the first three too)
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+              "NUMBA_NUM_THREADS": "1", "NUMEXPR_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1"}
+#: Dask settings of a local cluster: the worker's statistical profiler (it samples the running task every
+#: 10 ms and takes the GIL from it) off, and its bookkeeping polled less often; the runs are long and
+#: CPU-bound, so nothing is lost (the dashboard is off anyway)
+DASK_CONFIG = {"distributed.worker.profile.enabled": False,
+               "distributed.admin.system-monitor.interval": "2s",
+               "distributed.admin.tick.interval": "200ms",
+               "distributed.worker.memory.monitor-interval": "1s"}
+#: a task holds at most this many runs (the progress bar moves at least every MAX_CHUNK runs)
+MAX_CHUNK = 10
+
+
 def make_client(scheduler: str | None = None, workers: int | None = None):
     """A dask.distributed Client: to `scheduler` (address) or to a new local cluster of `workers`
-    single-threaded processes (default: every core)."""
+    single-threaded processes (default: every core), each with one thread per numeric library."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster
     except ImportError:
         raise RuntimeError("sweeps need Dask: pip install -e '.[study]' (dask[distributed], pyarrow)") from None
     if scheduler:
         return Client(scheduler)
-    n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
-    return Client(cluster)
+    n = (os.cpu_count() or 1) if workers is None else workers
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"--workers {n!r}: must be a whole number >= 1")
+    with dask.config.set(DASK_CONFIG):     # the nanny hands its config to the worker process it starts
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               env=dict(WORKER_ENV))
+        return Client(cluster)
 
 
-def run_sweep(study: dict, client, progress: bool = True) -> list:
-    """Run every run of the study on the Dask client; rows in run order."""
+def chunks(n: int, workers: int, max_chunk: int = MAX_CHUNK) -> list:
+    """Runs 0..n-1 grouped into tasks, guided: each task takes 1/(4 workers) of the runs not yet
+    assigned (at least 1, at most `max_chunk`), so that few tasks are scheduled while many runs remain
+    and single runs at the end let the workers finish together."""
+    out, i = [], 0
+    w = max(1, int(workers))
+    while i < n:
+        size = min(max_chunk, max(1, (n - i) // (4 * w)))
+        out.append(range(i, i + size))
+        i += size
+    return out
+
+
+def run_chunk(study: dict, items: list) -> list:
+    """Runs [(index, parameters), ...] of the study in this process (a Dask task): their rows."""
+    return [run_one(study, i, p) for i, p in items]
+
+
+def _lost_row(study: dict, i: int, exc: BaseException) -> dict:
+    return {"run": i, **{f"param.{k}": v for k, v in study["runs"][i].items()}, "verdict": "ERROR",
+            "error": f"{type(exc).__name__}: {exc}"}
+
+
+def run_sweep(study: dict, client, progress: bool = True, max_chunk: int = MAX_CHUNK) -> list:
+    """Run every run of the study on the Dask client, in guided chunks (`chunks`); rows in run order.
+    Rows are gathered as tasks finish and each task's result is released then."""
     from dask.distributed import as_completed
 
-    futures = [client.submit(run_one, study, i, p, pure=False) for i, p in enumerate(study["runs"])]
+    nw = max(1, sum(client.nthreads().values()))
+    base = {k: v for k, v in study.items() if k != "runs"}    # each task carries only its own runs
+    futures = {}
+    for ch in chunks(len(study["runs"]), nw, max_chunk):
+        items = [(i, study["runs"][i]) for i in ch]
+        futures[client.submit(run_chunk, base, items, pure=False)] = ch
     rows = []
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(futures), unit="run")
-    for fut in as_completed(futures):
+        bar = tqdm(total=len(study["runs"]), unit="run")
+    for fut in as_completed(list(futures)):
+        ch = futures.pop(fut)
         try:
-            rows.append(fut.result())
-        except Exception as exc:  # noqa: BLE001 - a worker lost: record it
-            i = futures.index(fut)
-            rows.append({"run": i, **{f"param.{k}": v for k, v in study["runs"][i].items()},
-                         "verdict": "ERROR", "error": f"{type(exc).__name__}: {exc}"})
+            got = fut.result()
+        except Exception as exc:  # noqa: BLE001 - a worker lost: record its runs
+            got = [_lost_row(study, i, exc) for i in ch]
+        fut.release()
+        rows.extend(got)
         if bar is not None:
-            bar.update(1)
+            bar.update(len(got))
     if bar is not None:
         bar.close()
     return sorted(rows, key=lambda r: r["run"])
 
 
 def write_results(rows: list, out: Path) -> Path:
-    """DIR/sweep.parquet: a row per run."""
+    """DIR/sweep.parquet: a row per run (the columns of `run_one` but the internal "_" ones)."""
     import pandas as pd
 
     out.mkdir(parents=True, exist_ok=True)
-    df = pd.DataFrame(rows)
+    df = pd.DataFrame([{k: v for k, v in r.items() if not k.startswith("_")} for r in rows])
     p = out / "sweep.parquet"
     df.to_parquet(p, engine="pyarrow", index=False)
     return p
@@ -246,14 +299,80 @@ def plot_sweep(rows: list, keys: list, out: Path) -> Path | None:
     return p
 
 
+def verdict_table(rows: list) -> list:
+    """Per check over the runs that ran: counts of PASS/WARN/FAIL, the range of the values and of the
+    limits, the unit and the source of the limit."""
+    table = {}
+    for r in rows:
+        if r.get("error") is not None:
+            continue
+        for v in r.get("_verdicts") or ():
+            e = table.setdefault(v["check"], {"check": v["check"], "PASS": 0, "WARN": 0, "FAIL": 0, "INFO": 0,
+                                               "values": [], "limits": [], "unit": v["unit"], "source": v["source"]})
+            e[v["status"]] = e.get(v["status"], 0) + 1
+            for key, x in (("values", v["value"]), ("limits", v["limit"])):
+                if isinstance(x, (int, float)) and math.isfinite(x):
+                    e[key].append(float(x))
+    out = []
+    for e in table.values():
+        vals, lims = e.pop("values"), e.pop("limits")
+        e["value_min"], e["value_max"] = (min(vals), max(vals)) if vals else (None, None)
+        e["limit_min"], e["limit_max"] = (min(lims), max(lims)) if lims else (None, None)
+        e["status"] = "FAIL" if e["FAIL"] else "WARN" if e["WARN"] else "PASS"
+        out.append(e)
+    return out
+
+
+def _range(a, b) -> str:
+    if a is None:
+        return "—"
+    return f"{a:.4g}" if a == b else f"{a:.4g} .. {b:.4g}"
+
+
+def verdict_lines(table: list) -> list:
+    """Console lines of the verdict table: worst status, counts, value and limit ranges."""
+    return [f"[{e['status']}] {e['check']}: {e['PASS']} PASS, {e['WARN']} WARN, {e['FAIL']} FAIL; value "
+            f"{_range(e['value_min'], e['value_max'])} {e['unit']} (limit {_range(e['limit_min'], e['limit_max'])})"
+            for e in table]
+
+
+def write_summary(rows: list, study: dict, out: Path, wall: float, workers: int | None = None) -> Path:
+    """DIR/summary.json: counts per verdict, the verdict table, the failed runs, throughput."""
+    import json
+
+    from .verdicts import worst
+
+    counts = {s: sum(r["verdict"] == s for r in rows) for s in ("PASS", "WARN", "FAIL", "ERROR")}
+    ok = [r for r in rows if r.get("error") is None]
+    ok_verdicts = [{"status": r["verdict"]} for r in ok]
+    summary = {"study": study["file"], "scene": study["scene"], "mode": study["mode"], "keys": study["keys"],
+               "runs": len(rows), "counts": counts,
+               "verdict": worst(ok_verdicts) if ok else "ERROR",
+               "verdicts": verdict_table(rows),
+               "failed_runs": [{"run": r["run"], "error": r["error"]} for r in rows if r.get("error")],
+               "wall_s": wall, "rows_per_s": len(rows) / wall if wall > 0 else None, "workers": workers}
+    p = out / "summary.json"
+    p.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return p
+
+
 def write_report(rows: list, study: dict, out: Path, png: Path | None, wall: float) -> Path:
-    """DIR/report.md: counts per verdict, failed runs with their errors, a row per run (up to 200)."""
+    """DIR/report.md: counts per verdict, the verdict table (per check: counts, values and limits), failed
+    runs with their errors, a row per run (up to 200)."""
     counts = {s: sum(r["verdict"] == s for r in rows) for s in ("PASS", "WARN", "FAIL", "ERROR")}
     keys = [f"param.{k}" for k in study["keys"]]
     mets = [m for m in METRICS if any(m in r for r in rows)]
     lines = [f"# Sweep: {Path(study['file']).name}", "",
              f"{len(rows)} runs ({study['mode']} over {', '.join(study['keys'])}) of `{study['scene']}` in "
              f"{wall:.1f} s: " + ", ".join(f"{v} {k}" for k, v in counts.items()), ""]
+    table = verdict_table(rows)
+    if table:
+        lines += ["## Verdicts", "", "| worst | check | PASS | WARN | FAIL | value (min .. max) | limit | unit | source |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"| **{e['status']}** | {e['check']} | {e['PASS']} | {e['WARN']} | {e['FAIL']} | "
+                  f"{_range(e['value_min'], e['value_max'])} | {_range(e['limit_min'], e['limit_max'])} | "
+                  f"{e['unit']} | {e['source']} |" for e in table]
+        lines += [""]
     failed = [r for r in rows if r.get("error")]
     if failed:
         lines += ["## Failed runs", ""] + [f"- run {r['run']}: {r['error'].splitlines()[0]}" for r in failed] + [""]
@@ -278,8 +397,9 @@ def cli_sweep(args) -> int:
     print(f"{study['file']}: {n} runs ({study['mode']} over {', '.join(study['keys'])}) of {study['scene']}")
     t0 = time.perf_counter()
     client = make_client(args.scheduler, args.workers)
+    nw = None
     try:
-        nw = len(client.scheduler_info().get("workers", {}))
+        nw = len(client.nthreads())
         print(f"Dask: {client.scheduler.address} with {nw} workers")
         rows = run_sweep(study, client, progress=not args.no_progress)
     finally:
@@ -291,10 +411,13 @@ def cli_sweep(args) -> int:
     p = write_results(rows, out)
     png = plot_sweep(rows, study["keys"], out)
     write_report(rows, study, out, png, wall)
+    write_summary(rows, study, out, wall, nw)
     counts = {s: sum(r["verdict"] == s for r in rows) for s in ("PASS", "WARN", "FAIL", "ERROR")}
     print(f"{n} runs in {wall:.1f} s ({n / wall:.2f} runs/s): " + ", ".join(f"{v} {k}" for k, v in counts.items()))
+    for line in verdict_lines(verdict_table(rows)):
+        print("  " + line)
     for r in rows:
         if r["error"]:
             print(f"  run {r['run']} failed: {r['error'].splitlines()[0]}")
-    print(f"-> {p}" + (f", {png}" if png else "") + f", {out / 'report.md'}")
+    print(f"-> {p}" + (f", {png}" if png else "") + f", {out / 'report.md'}, {out / 'summary.json'}")
     return 0

@@ -240,24 +240,114 @@ def trip_verdicts(case, t, c, s, limits, info: dict) -> list:
     return out
 
 
+def record_verdicts(case, t, c, info: dict | None = None) -> list:
+    """The checks of a record that need no complete trip (a run stopped early): drive at its torque/power
+    limit, overspeed, slack rope, buffer contact, co-simulation coupling."""
+    return [_saturation(case, t, c), _overspeed(case, c)] + generic_verdicts(t, c, info)
+
+
 def levelling_verdicts(errors_mm: dict, label: str) -> list:
     """Stopping accuracy and levelling band of a set of stops (label e.g. ' (SIS)')."""
     return _levelling(errors_mm, label)
 
 
-def print_verdicts(verdicts, file=None) -> None:
+def print_verdicts(verdicts, file=None, findings: bool = True, summary: dict | None = None) -> None:
+    """One line per verdict, the overall verdict and (`findings`) what each WARN/FAIL means (`summary`:
+    the run's trip metrics, for figures the explanations quote)."""
     import sys
+    import textwrap
 
     f = file or sys.stdout
     for v in verdicts:
         v = v if isinstance(v, Verdict) else Verdict(**v)
         print("  " + v.line(), file=f)
     print(f"  overall: {worst(verdicts)}", file=f)
+    for text in (explain(verdicts, summary) if findings else []):
+        print(textwrap.fill(text, 110, initial_indent="  * ", subsequent_indent="    "), file=f)
+
+
+def _as_verdicts(verdicts) -> list:
+    return [v if isinstance(v, Verdict) else Verdict(**v) for v in verdicts]
+
+
+def _find(vs, prefix):
+    return next((v for v in vs if v.check.startswith(prefix)), None)
+
+
+def _explain_traction(v: Verdict, vs: list, summary: dict) -> str:
+    """The trip's traction ratio above the emergency-braking limit: what it means and what it is not."""
+    static = _find(vs, "EN 81-50 emergency braking")
+    text = (f"Traction: the rope-force ratio T1/T2 on the traction sheave reached {v.value:.3f} during the trip. "
+            f"EN 81-50 evaluates emergency braking with a friction coefficient reduced for the rope speed; with "
+            f"it the groove holds up to e^(fα) = {v.limit:.3f}, so the trip uses more friction than that case "
+            f"allows. ")
+    if v.status == WARN:
+        text += ("It stays below the limit of the loading case (friction μ = 0.1, the WARN/FAIL boundary), so the "
+                 "rope does not slip in this run. ")
+    else:
+        text += "It is above the loading-case limit too (μ = 0.1): gross rope slip is possible. "
+    acc = summary.get("max_acceleration_m_s2")
+    acc = "" if acc is None else f" (up to {acc:.2f} m/s² in this run, against the {BRAKING_DECELERATION} m/s² of " \
+        "the EN 81-50 braking case)"
+    text += ("This follows from the scene's parameters — groove shape and wrap angle (which set e^(fα)), car, "
+             f"load and counterweight masses, and the drive's acceleration{acc} — and is not a simulation "
+             "error. ")
+    if static is not None:
+        text += (f"The static EN 81-50 emergency-braking case of this scene gives {static.value:.3f} against "
+                 f"{static.limit:.3f} ({static.status}); ")
+    text += ("a scene with little margin there, as the shipped R1 2:1 reference set by design, exceeds the braking "
+             "limit while the full car accelerates. More margin: a deeper groove undercut, a larger wrap angle, a "
+             "counterweight balance closer to the mean load, or a lower acceleration.")
+    return text
+
+
+def _explain_one(v: Verdict, vs: list, summary: dict) -> str:
+    c = v.check
+    if c == "traction ratio during the trip":
+        return _explain_traction(v, vs, summary)
+    if c.startswith("stopping accuracy"):
+        return (f"Levelling{c[len('stopping accuracy'):]}: the worst stop was {v.value:+.1f} mm off the landing "
+                f"({v.note.replace('worst stop: ', '')}); EN 81-20 asks for ±{v.limit:g} mm. A drive that "
+                "positions the motor from its encoder does not see the rope stretch between sheave and car; a "
+                "shaft information system (car-position feedback on the approach) removes it.")
+    if c.startswith("levelling band"):
+        return f"Levelling{c[len('levelling band'):]}: beyond ±{v.limit:g} mm the car must re-level ({v.note})."
+    if c == "drive at its torque/power limit":
+        return (f"Drive: it held its {v.note or 'torque/power limit'} for {v.value:.2f} s ({v.source}); the car "
+                "then lags its speed reference (longer trip, overspeed or stopping error possible): the load or "
+                "the trip needs more torque or power than the drive has.")
+    if c == "car speed / rated speed":
+        return (f"Speed: the car reached {v.value:.1f} % of the rated speed ({v.note}); the overspeed governor "
+                f"trips at {v.limit:g} %.")
+    if c.startswith("slack rope"):
+        return f"Ropes: a rope force fell to {v.value:.4g} N ({v.note}): a slack rope."
+    if c.startswith("buffer contact"):
+        return f"Buffers: a buffer force of {v.value:.4g} N: a buffer was reached, which normal operation never does."
+    if c == "co-simulation coupling":
+        return (f"Coupling: {v.note or 'the coupling monitor detected an instability'}. The torque exchanged "
+                "between drive and plant alternated from step to step, or the coupling created energy: values in "
+                "that episode are not reliable. A known case is the brake drop with one step of delay at 1 ms "
+                "(Jacobi coupling, as on the HIL bench): the speed loop chatters on the brake's stick spring for up "
+                "to 0.2 s while the brake holds the car (docs/hard-cases.md, 'Large communication steps').")
+    if c.startswith("ride quality"):
+        return (f"Ride quality: {c[len('ride quality: '):]} {v.value:.3g} {v.unit} above the typical target "
+                f"{v.limit:g} {v.unit} (a contract value, not a standard).")
+    return f"{c}: {v.status}, {v.value:.4g} {v.unit} against {v.limit:.4g} ({v.source}{'; ' + v.note if v.note else ''})."
+
+
+def explain(verdicts, summary: dict | None = None) -> list:
+    """Plain sentences for each WARN/FAIL verdict: what was found, what it means, whether it is a
+    property of the scene's parameters. `summary`: the run's trip metrics (max_acceleration_m_s2)."""
+    vs = _as_verdicts(verdicts)
+    return [_explain_one(v, vs, summary or {}) for v in vs if v.status in (WARN, FAIL)]
 
 
 def scene_verdicts(scene, t, c) -> list:
     """Verdicts of a `reeve-fmu simulate` run of any scene: slack rope, buffer contact and, for a traction
-    sheave, the traction ratio against the EN 81-50 limits of its groove."""
+    sheave, the traction ratio against the EN 81-50 limits of its groove; an elevator scene ([elevator])
+    adds the static EN 81-50 traction cases and the car speed against the [drive] rated speed."""
+    from types import SimpleNamespace
+
     out = generic_verdicts(t, c)
     for sh in scene.sheaves:
         name = f"{sh.name}.traction_ratio"
@@ -268,4 +358,8 @@ def scene_verdicts(scene, t, c) -> list:
         lim = traction_limits(scene, sh.name)
         r = float(np.nanmax(c[name]))
         out.append(_trip_traction({"traction_ratio_max": r}, lim))
+        if "elevator" in scene.extra:
+            out += en81_verdicts(scene, lim)
+            if "car.velocity" in c:
+                out.append(_overspeed(SimpleNamespace(drive_values={}, scene=scene), c))
     return out

@@ -67,8 +67,18 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
         mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
-        **arr.nl, **d.joints, **rigid_fields(scene, bs.body_dofs),
+        **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs)), **d.joints,
+        **rigid_fields(scene, bs.body_dofs),
     )
+
+
+def _flagged(nl: dict, joints: dict, rigid: dict) -> dict:
+    """The nonlinear-row fields with nl_on's bit 2 set when the model has joints or spatial rigid
+    bodies: the 1D and translating models then read one flag per residual and skip all of it."""
+    nl = dict(nl)
+    if any(len(joints[k]) for k in ("jp_dof", "jt_dof", "jg_dof")) or len(rigid["rb_q"]):
+        nl["nl_on"] = int(nl["nl_on"]) | 2
+    return nl
 
 
 def _traction_fields(bs: BuildState) -> dict:
