@@ -5,8 +5,9 @@ Cases: the R1 2:1 elevator (scenes/elevator_2to1.toml) in the planar model with 
 model, linear elements, 65 t on the block released at rest, drum hoisting on an S-curve) at 2-64
 elements per span.
 Per case: statics, a 10-step warm-up (first Newton matrix), then the best of three consecutive
-`--window` s of generalized-alpha steps (h = 1 ms), Newton-matrix rebuilds in them included. The dense
-path is timed up to `--dense-max` elements per span. Ratios come from one run, with the load average.
+`--window` s of generalized-alpha steps (h = 1 ms), Newton-matrix rebuilds in them included; banded
+cases twice: Newton matrix from element Jacobians (the default) and from coloured differences. The
+dense path is timed up to `--dense-max` elements per span. Ratios come from one run, with the load average.
 Writes DIR/scaling.json and the log-log plot DIR/scaling.png.
 
     python benchmarks/scaling.py --out docs/img          # full (docs/performance.md), ~10 min
@@ -48,9 +49,9 @@ def crane(eps):
     return sc.with_overrides(ropes=ropes, bodies=(block,), drive=drive, model="spatial", statics="none")
 
 
-def time_case(scene, sparse, window, repeat=3):
+def time_case(scene, sparse, window, repeat=3, jacobian="analytic"):
     m = build_model(scene)
-    sim = Simulator(m, sparse=sparse, step=1e-3)
+    sim = Simulator(m, sparse=sparse, step=1e-3, jacobian=jacobian)
     t0 = time.perf_counter()
     st = sim.initial_state()
     statics = time.perf_counter() - t0
@@ -181,11 +182,16 @@ def main(argv=None):
                 if sparse is False and r["path"] == "dense" and rows and rows[-1]["path"] == "dense" \
                         and rows[-1]["nq"] == r["nq"]:
                     continue    # the automatic choice was dense already
+                if r["path"] == "banded":      # the same case with the coloured-difference Newton matrix
+                    rc = time_case(make(eps), sparse, a.window, jacobian="coloured")
+                    r.update(us_per_step_coloured=rc["us_per_step"], jac_builds_coloured=rc["jac_builds"],
+                             iter_per_step_coloured=rc["iter_per_step"])
                 r.update(case=case, elements_per_span=eps, load=os.getloadavg()[0])
                 rows.append(r)
                 print(f"{case:28s} {eps:4d} el/span nq {r['nq']:5d} {r['path']:6s} "
                       f"band ({r['kl']}, {r['ku']}) groups {r['groups']}  {r['us_per_step']:10.0f} us/step "
                       f"({r['iter_per_step']:.2f} it/step, {r['us_per_iter']:.0f} us/it, jac builds {r['jac_builds']}/{r['steps']})  statics {r['statics_s']:.2f} s  "
+                      f"{'coloured: %.0f us/step, %.2f it/step  ' % (r['us_per_step_coloured'], r['iter_per_step_coloured']) if 'us_per_step_coloured' in r else ''}"
                       f"load {r['load']:.1f}", flush=True)
     for case in ("elevator 2:1 planar cubic", "crane 8-fall spatial"):
         sp = [r for r in rows if r["case"] == case and r["path"] == "banded"]

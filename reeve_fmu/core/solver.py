@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from ._jit import njit
+from .jacobian import jacobian_analytic
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
@@ -221,11 +222,20 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
     return 1
 
 
+@njit(cache=True, inline="always")
+def _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic):
+    """The factorised banded Newton matrix: element Jacobians (core/jacobian.py) or coloured
+    differences (core/sparse.py)."""
+    if analytic:
+        return jacobian_analytic(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R0, bq, gv)
+    return jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+
+
 @njit(cache=True)
 def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, R,
-                        R0, rb, am, af, beta, gamma, tol, maxit):
-    """_newton_step with the banded Newton matrix of core/sparse.py (coloured differences, band LU)
-    and the element-wise residual; same iteration, retries and return codes."""
+                        R0, rb, am, af, beta, gamma, tol, maxit, analytic):
+    """_newton_step with the banded Newton matrix (element Jacobians or coloured differences, band
+    LU) and the element-wise residual; same iteration, retries and return codes."""
     n = SP.n
     perm = SP.perm
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
@@ -242,7 +252,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
                 qdd[K.free[fi]] = qddo[K.free[fi]]
             _update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
         if info[0] != h or attempt > 0:
-            ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+            ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
             info[3] += 1
             if ok < 0:
                 info[7] = -ok - 1
@@ -253,7 +263,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
             info[0] = h
         for it in range(maxit):
             if attempt > 0 and it > 0:
-                ok = jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+                ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
                 info[3] += 1
                 if ok <= 0:
                     info[0] = 0.0
@@ -326,6 +336,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     gamma = params[3]
     tol = params[4]
     maxit = int(params[5])
+    analytic = params.shape[0] > 6 and params[6] != 0.0
     nq = K.nq
     nf = K.free.shape[0]
     if SP is None:
@@ -413,7 +424,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 else:
                     status = _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs,
                                                  ue, jac, piv, info, r, r0, rb, am, af, beta, gamma, tol,
-                                                 maxit)
+                                                 maxit, analytic)
                 wfresh = status == 0
                 for k in range(K.drum_dof.shape[0]):
                     if status == 0 and q[K.drum_dof[k]] <= 0.0:
@@ -558,9 +569,11 @@ class Simulator:
 
     def __init__(self, model: Model, method: str | None = None, step: float | None = None,
                  rho_inf: float | None = None, newton_tol: float | None = None, max_iter: int = 12,
-                 sparse: bool | None = None):
+                 sparse: bool | None = None, jacobian: str = "analytic"):
         """sparse: banded Newton matrix (True), dense (False) or by size (None: banded from
-        SPARSE_MIN_FREE free coordinates on, when the ordered band is narrower than the matrix)."""
+        SPARSE_MIN_FREE free coordinates on, when the ordered band is narrower than the matrix).
+        jacobian: how the banded matrix is built: "analytic" (element Jacobians, core/jacobian.py) or
+        "coloured" (coloured finite differences, core/sparse.py)."""
         sv = model.scene.solver
         self.model = model
         self.method = method or sv.method
@@ -573,7 +586,10 @@ class Simulator:
         if not 0.0 <= self.rho_inf <= 1.0:
             raise ValueError(f"rho_inf must be in [0, 1], got {self.rho_inf}")
         self.tol = float(newton_tol or sv.newton_tol)
-        self.params = np.array([*gen_alpha_params(self.rho_inf), self.tol, max_iter], float)
+        if jacobian not in ("analytic", "coloured"):
+            raise ValueError(f"jacobian must be 'analytic' or 'coloured', got {jacobian!r}")
+        self.params = np.array([*gen_alpha_params(self.rho_inf), self.tol, max_iter,
+                                1.0 if jacobian == "analytic" else 0.0], float)
         self._fast_integrate = None
         self._stepbuf = None
         self.sparse = sparse

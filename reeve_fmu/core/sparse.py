@@ -71,6 +71,14 @@ def newton_pattern(K, elements=True):
         for r in (K.trac_s, K.trac_th):
             rows.append(np.full(len(qs), r))
             cols.append(qs)
+    for k in range(K.crp_s.shape[0]):
+        # creep sheave: kappa (rim inertia, the drive's gain) and the creep force follow the end
+        # strains of the spans at the sheave
+        qs = np.unique(np.concatenate([_element_q(K, e) for e in (K.crp_el_in[k], K.crp_el_out[k]) if e >= 0]
+                                      + [np.array([K.crp_s[k]])]))
+        for r in [K.crp_s[k]] + ([K.mot_dof] if k == K.mot_crp and K.mot_dof >= 0 else []):
+            rows.append(np.full(len(qs), r))
+            cols.append(qs)
     r = np.concatenate(rows)
     c = np.concatenate(cols)
     P = sp.csr_matrix((np.ones(len(r), bool), (r, c)), shape=(nq, nq))
@@ -313,14 +321,13 @@ def bordered_factor(J, piv, n, nb, kl, ku):
         band_solve(J, piv, n1, kl, ku, tmp)
         for i in range(n1):
             J[i, wb + m] = tmp[i]
-    for p in range(nb):
-        for m in range(nb):
-            s = J[n1 + p, m]
-            for i in range(n1):
-                cip = J[i, wb + nb + p]
-                if cip != 0.0:
-                    s -= cip * J[i, wb + m]
-            J[n1 + p, m] = s
+    # S = D - C Z, row by row of J (contiguous memory; see docs/performance.md "Cost per doubling")
+    for i in range(n1):
+        for p in range(nb):
+            cip = J[i, wb + nb + p]
+            if cip != 0.0:
+                for m in range(nb):
+                    J[n1 + p, m] -= cip * J[i, wb + m]
     # dense LU with partial pivoting of S in place
     for k in range(nb):
         p = k
@@ -355,13 +362,11 @@ def bordered_solve(J, piv, n, nb, kl, ku, b):
     band_solve(J, piv, n1, kl, ku, b)          # y = A^-1 b1
     if nb == 0:
         return
-    for p in range(nb):                        # b2 - C y
-        s = b[n1 + p]
-        for i in range(n1):
-            cip = J[i, wb + nb + p]
-            if cip != 0.0:
-                s -= cip * b[i]
-        b[n1 + p] = s
+    for i in range(n1):                        # b2 - C y, row by row of J
+        yi = b[i]
+        if yi != 0.0:
+            for p in range(nb):
+                b[n1 + p] -= J[i, wb + nb + p] * yi
     for k in range(nb):                        # x2 = S^-1 (b2 - C y)
         p = piv[n1 + k]
         if p != k:
