@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ._jit import njit
+from ._jit import entry_point, njit
 from .jacobian import jacobian_analytic
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
@@ -504,19 +504,6 @@ def gen_alpha_params(rho_inf: float):
     return am, af, beta, gamma
 
 
-def _entry_point(dispatcher):
-    """The compiled specialization's entry point: calling it skips numba's per-call argument typing,
-    which costs ~1.5-2 us per StructRef argument (7 us of a 14 us co-simulation step). Falls back to
-    the dispatcher when there is not exactly one compiled signature (or no numba)."""
-    try:
-        sigs = dispatcher.signatures
-        if len(sigs) == 1:
-            return dispatcher.overloads[sigs[0]].entry_point
-    except AttributeError:
-        pass
-    return dispatcher
-
-
 # --------------------------------------------------------------------------------- statics helpers
 RCOND = 1e-12   # singular values below RCOND x the largest are zero (round-off of a ~1e16 condition)
 
@@ -963,7 +950,7 @@ class Simulator:
             self._steprow = buf[0, 1:]      # the returned view, made once
             status, t, done = self._integrate(st, t0, h, n, buf, n)
             self._sp_state = st
-            self._fast_integrate = _entry_point(integrate if self._sp is None else integrate_sparse)
+            self._fast_integrate = entry_point(integrate if self._sp is None else integrate_sparse)
         else:
             if st is not self._sp_state:
                 self._newton_path(st)
