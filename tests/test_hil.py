@@ -300,15 +300,16 @@ def test_realtime_late_commands_are_stale_and_trip_the_watchdog():
     without a fresh command trip the watchdog (brake applied, fault 0x8250)."""
     r = _run(realtime=True, inject=["delay=5@1.0"], t_end=2.0)
     assert r["mode"] == "real-time"
-    if r["brake_engaged_at"] is not None and r["brake_engaged_at"] < 1.0 and r["deadline_misses"] > 0:
-        # the premise (a controller answering within each 1 ms cycle of wall time) needs a machine that
-        # keeps real time; a heavily loaded one misses deadlines before the injection starts
-        pytest.skip(f"this machine did not keep real time ({r['deadline_misses']} deadline misses; the "
-                    f"watchdog tripped at {r['brake_engaged_at']:.3f} s, before the injected delay)")
-    assert r["frames_injected"]["delayed"] > 900
-    assert r["frames_rejected_detail"]["stale"] > 900                   # measured 994
     assert r["watchdog_trips"] == 1 and r["fault"]["code"] == "0x8250"
     assert r["fault"]["reason"].startswith("command watchdog")
+    if r["brake_engaged_at"] < 1.0:
+        # a machine that misses 1 ms deadlines of wall time before the injection (heavy load) must still
+        # end in the same safe state, by the same watchdog, from the missed cycles themselves; the exact
+        # timing is tested on a simulated clock (test_realtime_watchdog_on_a_simulated_clock)
+        assert r["deadline_misses"] > 0 and r["final_state"] == "FAULT"
+        return
+    assert r["frames_injected"]["delayed"] > 900
+    assert r["frames_rejected_detail"]["stale"] > 900                   # measured 994
     assert 1.0 < r["brake_engaged_at"] < 1.01                           # measured 1.003 s
 
 
