@@ -7,6 +7,8 @@
   equal to geometry.tangent of the current poses, rope material conserved, energy balanced.
 """
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +17,9 @@ from reeve_fmu.core.geometry import tangent, wrap_angle
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import SceneError, loads_scene
 from reeve_fmu.core.solver import Simulator
-from reeve_fmu.core.system import assemble
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from linearise import linearised  # noqa: E402
 
 G = 9.81
 M_BOX, A_BOX, H_BOX = 2500.0, 1.0, 0.8            # kg, m (width in x), m (height in z)
@@ -52,23 +56,7 @@ route = [
 
 def _linearised(sim, st):
     """(M, K) on the free coordinates at rest: K = -dQ/dq by central differences."""
-    m = sim.model
-    f = m.K.free
-    nq = m.nq
-    M, Q = np.empty((nq, nq)), np.empty(nq)
-    u = sim.kernel_inputs(st)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, u, M, Q)
-    Mf = M[np.ix_(f, f)].copy()
-    Kf = np.empty((len(f), len(f)))
-    for k, j in enumerate(f):
-        cols = []
-        for sgn in (1.0, -1.0):
-            q = st.q.copy()
-            q[j] += sgn * 1e-5
-            assemble(m.KJ, st.c, q, st.v, st.t, u, M, Q)
-            cols.append(Q[f].copy())
-        Kf[:, k] = -(cols[0] - cols[1]) / 2e-5
-    return Mf, Kf
+    return linearised(sim, st)
 
 
 def _double_pendulum(l, d, m_rope):

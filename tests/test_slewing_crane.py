@@ -2,6 +2,8 @@
 tension M g, the first axial frequency against beta tan beta = rho A L / M, the payload's swing and
 rocking frequencies against the rope + rigid block double pendulum, and a short slew-and-hoist run."""
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,7 +11,9 @@ import pytest
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import load_scene
 from reeve_fmu.core.solver import Simulator
-from reeve_fmu.core.system import assemble
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from linearise import linearised  # noqa: E402
 
 G = 9.81
 M, I_SWING, D = 2500.0, 2500.0 * (1.0 + 0.64) / 12.0, 0.4   # box 1.0 x 1.0 x 0.8 m, anchor 0.4 m above
@@ -24,22 +28,7 @@ def crane():
 
 def _modes(sim, st):
     """omega^2 of the linearised free coordinates at rest (K = -dQ/dq, central differences)."""
-    m = sim.model
-    f = m.K.free
-    M_, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
-    u = sim.kernel_inputs(st)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, u, M_, Q)
-    Mf = M_[np.ix_(f, f)].copy()
-    Kf = np.empty((len(f), len(f)))
-    for k, j in enumerate(f):
-        cols = []
-        for sgn in (1.0, -1.0):
-            q = st.q.copy()
-            q[j] += sgn * 1e-5
-            assemble(m.KJ, st.c, q, st.v, st.t, u, M_, Q)
-            cols.append(Q[f].copy())
-        Kf[:, k] = -(cols[0] - cols[1]) / 2e-5
-    assemble(m.KJ, st.c, st.q, st.v, st.t, u, M_, Q)   # leave c and the maps at the state
+    Mf, Kf = linearised(sim, st)
     return np.sort(np.linalg.eigvals(np.linalg.solve(Mf, Kf)).real)
 
 
