@@ -7,7 +7,8 @@ revolute joint (the slewing jib) and a hoist rope that ends on a free rigid body
   slew input, a torque or a speed of the jib's joint (chosen when the plant is built);
 * outputs: the engine's outputs of the scene (payload position and velocity, rotation vector, jib
   angle/speed/joint torque, rope forces `<sheave>.tension_in/out`, ...) without `motor.torque`, plus
-  three derived angles (`DERIVED`):
+  three derived angles (`DERIVED`). The plant starts at rest with the holding torque applied
+  (`holding_torque()`), and `motor.angle`/`motor.speed` are positive when hoisting;
 
   - `payload.swing_radial`, `payload.swing_tangential` [rad]: the direction of the line from the
     suspension point S to the payload's centre of mass, as angles from the downward vertical measured
@@ -81,7 +82,13 @@ class CranePlant:
         self.slew_input = slew_input
         self.plant = Plant(with_joint_input(scene, parts["slew"], slew_input), **params)
         self.warnings = self.plant.warnings
+        # the hoist convention: positive torque and speed hoist (the engine's sign follows the reeving)
+        hold = self.plant.holding_torque()
+        self.hoist_sign = 1.0 if hold >= 0.0 else -1.0
+        self._hold = abs(hold)
+        self.plant.start_with_torque(hold)
         names = list(self.plant.output_names)
+        self._flip = [names.index(n) for n in ("motor.angle", "motor.speed") if n in names]
         self._keep = [i for i, n in enumerate(names) if n != "motor.torque"]
         self.output_names = tuple(names[i] for i in self._keep) + DERIVED
         self._setup_geometry(self.plant.scene, names)
@@ -112,6 +119,8 @@ class CranePlant:
                              f"the radial swing direction is undefined")
 
     def _outputs(self, y) -> np.ndarray:
+        y = y.copy()
+        y[self._flip] *= self.hoist_sign
         ez = self._ez
         rot = _rotation(self._axis, float(y[self._i_ang]))
         S = self._pivot + rot @ self._S0
@@ -139,7 +148,7 @@ class CranePlant:
         """Advance by dt with the hoist motor torque [N m] (positive hoists) and the slew torque
         [N m] or speed [rad/s] held; returns the outputs. ValueError for bad inputs, SolverError
         if the solver stops (state left at the last good step)."""
-        y = self.plant.step(dt, hoist_torque, 0.0, (slew,))
+        y = self.plant.step(dt, self.hoist_sign * hoist_torque, 0.0, (slew,))
         self._y = self._outputs(y)
         return self._y
 
@@ -153,12 +162,9 @@ class CranePlant:
         return float(self._y[self.output_names.index(name)])
 
     def holding_torque(self) -> float:
-        """Hoist motor torque [N m] that holds the payload at rest in the initial state: the rope
-        force leaving the reel times its radius, in the motor's sign."""
-        reel = self.parts["reel"]
-        out = dict(zip(self.plant.output_names, self.plant._y.tolist()))
-        R = next(s.radius for s in self.plant.scene.sheaves if s.name == reel)
-        return -self.plant.model.K.mot_gain * R * R * out[f"{reel}.tension_out"]
+        """Hoist motor torque [N m] that holds the payload at rest in the initial state (the plant
+        starts with it applied)."""
+        return self._hold
 
     def get_state(self) -> dict:
         return {"plant": self.plant.get_state(), "y": self._y.tolist()}

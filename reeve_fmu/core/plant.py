@@ -16,6 +16,7 @@ from .model import State, build_model
 from .plausibility import check_or_raise
 from .scene import Body, Rope, Scene, SceneError, load_scene
 from .solver import SolverError, Simulator
+from .system import assemble
 
 # plant parameters a user may tune (name -> (unit, description)); all change the compiled model
 PARAMETERS = {
@@ -149,6 +150,24 @@ class Plant:
             if not math.isfinite(x):
                 raise ValueError(f"{name} must be finite, got {x}")
             ji.set(st, dt, x)
+
+    def holding_torque(self) -> float:
+        """Motor torque [N m] that balances the driven coordinate in the current state (at rest:
+        the torque that holds the load)."""
+        m, st = self.model, self.state
+        ue = self.sim._kernel_inputs_at(st)
+        ue[0] = 0.0
+        M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
+        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
+        return float(-Q[m.K.mot_dof] / m.K.mot_gain)
+
+    def start_with_torque(self, torque: float) -> None:
+        """Before the first step: the motor torque acts from t0 on (accelerations and outputs made
+        consistent with it), e.g. the holding torque, so that a held load starts at rest."""
+        st = self.state
+        st.u[0] = float(torque)
+        self.sim._consistent_acceleration(st)
+        self._y = self.sim.outputs(st).copy()
 
     def warm_up(self) -> None:
         """Load (or compile) the step kernels now with a throw-away step on a copy of the state, so that
