@@ -109,17 +109,26 @@ def test_crane_fmu_static_tension_and_honest_state(fmus):
 
 def test_crane_fmu_centripetal_swing_angle(fmus):
     """A steady slew at w: the load hangs outwards at tan(phi) = w^2 r / g (point load on a long
-    rope). Averaged over the last 16 s (two swing periods) after a 12 s S-curve ramp."""
-    w = 0.25
-    r = job("centripetal", fmus["plant"], fmus["drive"], w, 12.0, 40.0)
+    rope). After a 16 s S-curve ramp the load still swings about that angle in the two modes of the
+    rotating frame (about w_p -+ w, w_p = 0.8 rad/s the pendulum frequency); the mean of
+    tan(phi) / (w^2 r / g) is fitted together with both sinusoids over the last 9.5 s."""
+    from scipy.optimize import curve_fit
+
+    w = 0.2
+    r = job("centripetal", fmus["plant"], fmus["drive"], w, 16.0, 26.0)
     t = np.array(r["t"])
-    last = t > t[-1] - 16.0
-    assert np.allclose(np.array(r["w"])[last], w, rtol=1e-3)
-    phi = np.array(r["radial"])[last]
-    expected = w * w * np.array(r["r"])[last] / G
-    rel = abs(np.mean(np.tan(phi)) / np.mean(expected) - 1.0)
-    assert rel < 0.02, rel
-    assert abs(np.mean(np.array(r["tangential"])[last])) < 0.02 * np.mean(phi)
+    last = t > 16.5
+    assert np.allclose(np.array(r["w"])[last], w, rtol=1e-9)
+    ratio = np.tan(np.array(r["radial"])[last]) / (w * w * np.array(r["r"])[last] / G)
+
+    def model(t, c, a1, b1, w1, a2, b2, w2):
+        return c + a1 * np.cos(w1 * t) + b1 * np.sin(w1 * t) + a2 * np.cos(w2 * t) + b2 * np.sin(w2 * t)
+    wp = math.sqrt(G / 15.6)
+    p, _ = curve_fit(model, t[last], ratio, p0=[1.0, 0.1, 0.1, wp - w, 0.1, 0.1, wp + w])
+    assert np.std(ratio - model(t[last], *p)) < 2e-4          # the fit explains the swing (measured 2.4e-5)
+    # measured 1.0032: the rope's own mass (0.7 % of the load), the box and the rope leaving the
+    # tip sheave at the swing angle are not in the point-mass formula
+    assert abs(p[0] - 1.0) < 0.01, p
 
 
 def test_crane_fmu_solver_failure_is_logged_and_discarded(fmus):
