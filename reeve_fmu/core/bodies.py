@@ -93,6 +93,29 @@ def _rotate(R, b, v0, v1, v2):
             v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
 
 
+@njit(cache=True, inline="always")
+def _rot_coefs(p0, p1, p2):
+    """Coefficients of the rotation vector phi (angle th = |phi|): R = I + s1 P + a P^2 (Rodrigues),
+    T = I + a P + b P^2 (phi_dot -> world angular velocity), with P = phi^, and ca = a'(th) / th,
+    cb = b'(th) / th (for dT/dt). Series below th = 1e-2 (truncation < 1e-12 relative)."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    if th2 < 1e-4:
+        a = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
+        b = 1.0 / 6.0 - th2 / 120.0 + th2 * th2 / 5040.0
+        s1 = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
+        ca = -1.0 / 12.0 + th2 / 180.0 - th2 * th2 / 6720.0
+        cb = -1.0 / 60.0 + th2 / 1260.0 - th2 * th2 / 60480.0
+    else:
+        th = math.sqrt(th2)
+        sn, cs = math.sin(th), math.cos(th)
+        a = (1.0 - cs) / th2
+        b = (th - sn) / (th2 * th)
+        s1 = sn / th
+        ca = (th * sn - 2.0 * (1.0 - cs)) / (th2 * th2)
+        cb = ((1.0 - cs) * th - 3.0 * (th - sn)) / (th2 * th2 * th)
+    return a, b, s1, ca, cb
+
+
 @njit(cache=True)
 def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
     """Touching points of a span between circles with any axes (world aA, aB; a point has R = 0):
@@ -226,8 +249,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
 
 
 @njit(cache=True)
-def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
-    """f0 = f(q) and J[:, k] = d f / d q[cols[k]] by central differences (step NL_H); G = the
+def rows_jacobian_fd(q, G, cols, colbody, f0, fp, fm, qs, J):
+    """rows_jacobian by central differences (step NL_H; the tests' reference). G = the
     geometry arrays of rows_eval (a tuple); a column re-evaluates only the spans on its body
     colbody[k] and then restores the points and tangents of q."""
     P, TW = G[11], G[12]
@@ -247,6 +270,149 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
         TW[:, :] = TW0
         for r in range(f0.shape[0]):
             J[r, k] = (fp[r] - fm[r]) / (2.0 * NL_H)
+
+
+@njit(cache=True, inline="always")
+def _twist(q, bq, b0, bk, bax, BR, b, j):
+    """The motion of body b per unit change of its coordinate q[j]: (v, omega, O) with every point P of
+    the body moving by v + omega x (P - O) and every axis a turning by omega x a."""
+    v0 = v1 = v2 = w0 = w1 = w2 = 0.0
+    if bk[b] == 1:                      # prismatic: slides along its axis
+        return bax[b, 0], bax[b, 1], bax[b, 2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    O0 = q[bq[b, 0]] if bq[b, 0] >= 0 else b0[b, 0]
+    O1 = q[bq[b, 1]] if bq[b, 1] >= 0 else b0[b, 1]
+    O2 = q[bq[b, 2]] if bq[b, 2] >= 0 else b0[b, 2]
+    if bq[b, 0] == j:
+        v0 = 1.0
+    elif bq[b, 1] == j:
+        v1 = 1.0
+    elif bq[b, 2] == j:
+        v2 = 1.0
+    elif bq[b, 3] == j:                 # planar theta / revolute angle: about the body's axis
+        w0, w1, w2 = bax[b, 0], bax[b, 1], bax[b, 2]
+    else:                               # rotation vector: omega = T(phi)[:, c]
+        c = 0 if bq[b, 4] == j else (1 if bq[b, 5] == j else 2)
+        p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
+        a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+        ph = (p0, p1, p2)
+        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        w0 = (1.0 if c == 0 else 0.0) + a * P[0][c] + bb * (ph[0] * ph[c] - (th2 if c == 0 else 0.0))
+        w1 = (1.0 if c == 1 else 0.0) + a * P[1][c] + bb * (ph[1] * ph[c] - (th2 if c == 1 else 0.0))
+        w2 = (1.0 if c == 2 else 0.0) + a * P[2][c] + bb * (ph[2] * ph[c] - (th2 if c == 2 else 0.0))
+    return v0, v1, v2, w0, w1, w2, O0, O1, O2
+
+
+@njit(cache=True, inline="always")
+def _moved(P, i, on, v0, v1, v2, w0, w1, w2, O0, O1, O2):
+    """dP[i] under the twist (zero when the point is not on the moving body)."""
+    if not on:
+        return 0.0, 0.0, 0.0
+    r0, r1, r2 = P[i, 0] - O0, P[i, 1] - O1, P[i, 2] - O2
+    return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
+
+
+@njit(cache=True)
+def _tangent_rate(P, iA, iB, RA, RB, aA, aB, onA, onB, tw, T, dT):
+    """dT = d(TA, TB) of a span whose stops move by the twist tw (stops on the moving body: onA,
+    onB), by implicit differentiation of the tangency conditions (TB - TA) . n = 0 at both touching
+    points (n: unit radius, t = a x n); the same 2 x 2 matrix as tangent_spatial's Newton step."""
+    v0, v1, v2, w0, w1, w2, O0, O1, O2 = tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8]
+    dA0, dA1, dA2 = _moved(P, iA, onA, v0, v1, v2, w0, w1, w2, O0, O1, O2)
+    dB0, dB1, dB2 = _moved(P, iB, onB, v0, v1, v2, w0, w1, w2, O0, O1, O2)
+    d0, d1, d2 = T[3] - T[0], T[4] - T[1], T[5] - T[2]
+    # radius directions, their turn with the body (omega x n), tangents t = a x n
+    nA0 = nA1 = nA2 = tA0 = tA1 = tA2 = rA0 = rA1 = rA2 = 0.0
+    nB0 = nB1 = nB2 = tB0 = tB1 = tB2 = rB0 = rB1 = rB2 = 0.0
+    if RA > 0.0:
+        nA0, nA1, nA2 = (T[0] - P[iA, 0]) / RA, (T[1] - P[iA, 1]) / RA, (T[2] - P[iA, 2]) / RA
+        tA0, tA1, tA2 = aA[1] * nA2 - aA[2] * nA1, aA[2] * nA0 - aA[0] * nA2, aA[0] * nA1 - aA[1] * nA0
+        if onA:
+            rA0, rA1, rA2 = w1 * nA2 - w2 * nA1, w2 * nA0 - w0 * nA2, w0 * nA1 - w1 * nA0
+    if RB > 0.0:
+        nB0, nB1, nB2 = (T[3] - P[iB, 0]) / RB, (T[4] - P[iB, 1]) / RB, (T[5] - P[iB, 2]) / RB
+        tB0, tB1, tB2 = aB[1] * nB2 - aB[2] * nB1, aB[2] * nB0 - aB[0] * nB2, aB[0] * nB1 - aB[1] * nB0
+        if onB:
+            rB0, rB1, rB2 = w1 * nB2 - w2 * nB1, w2 * nB0 - w0 * nB2, w0 * nB1 - w1 * nB0
+    # d(TB - TA) without the contact-angle changes
+    e0 = dB0 + RB * rB0 - dA0 - RA * rA0
+    e1 = dB1 + RB * rB1 - dA1 - RA * rA1
+    e2 = dB2 + RB * rB2 - dA2 - RA * rA2
+    gA = -(e0 * nA0 + e1 * nA1 + e2 * nA2 + d0 * rA0 + d1 * rA1 + d2 * rA2)
+    gB = -(e0 * nB0 + e1 * nB1 + e2 * nB2 + d0 * rB0 + d1 * rB1 + d2 * rB2)
+    jAA = d0 * tA0 + d1 * tA1 + d2 * tA2
+    jAB = RB * (tB0 * nA0 + tB1 * nA1 + tB2 * nA2)
+    jBA = -RA * (tA0 * nB0 + tA1 * nB1 + tA2 * nB2)
+    jBB = d0 * tB0 + d1 * tB1 + d2 * tB2
+    if RA > 0.0 and RB > 0.0:
+        det = jAA * jBB - jAB * jBA
+        xA = (gA * jBB - jAB * gB) / det
+        xB = (jAA * gB - jBA * gA) / det
+    elif RA > 0.0:
+        xA, xB = gA / jAA, 0.0
+    elif RB > 0.0:
+        xA, xB = 0.0, gB / jBB
+    else:
+        xA, xB = 0.0, 0.0
+    dT[0] = dA0 + RA * (rA0 + tA0 * xA)
+    dT[1] = dA1 + RA * (rA1 + tA1 * xA)
+    dT[2] = dA2 + RA * (rA2 + tA2 * xA)
+    dT[3] = dB0 + RB * (rB0 + tB0 * xB)
+    dT[4] = dB1 + RB * (rB1 + tB1 * xB)
+    dT[5] = dB2 + RB * (rB2 + tB2 * xB)
+
+
+@njit(cache=True, inline="always")
+def _world_axis(sa, k, e, pb, bk, BR, b):
+    v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
+    if b >= 0 and bk[b] != 1:
+        v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+    return v0, v1, v2
+
+
+@njit(cache=True)
+def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
+    """f0 = f(q) and J[:, k] = d f / d q[cols[k]] in closed form: each body coordinate moves its body
+    rigidly (_twist); tangent points follow by implicit differentiation of the tangency conditions
+    (_tangent_rate); a W1 wrap's s by R d(wrap angle), with d(angle of x about n) = (n x x) . dx / |x|^2.
+    (rows_jacobian_fd: the same by central differences.)"""
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    rows_eval(q, *G, -1, f0)
+    nsp = sp.shape[0]
+    dTW = np.zeros((nsp, 6))
+    tw = np.empty(9)
+    aA = np.empty(3)
+    aB = np.empty(3)
+    for k in range(cols.shape[0]):
+        b = colbody[k]
+        tw[:] = _twist(q, bq, b0, bk, bax, BR, b, cols[k])
+        for s in range(nsp):
+            iA, iB = sp[s, 0], sp[s, 1]
+            onA, onB = pb[iA] == b, pb[iB] == b
+            if not (onA or onB):
+                for m in range(6):
+                    dTW[s, m] = 0.0
+                continue
+            aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
+            aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+            _tangent_rate(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, onA, onB, tw, TW[s], dTW[s])
+        for r in range(rk.shape[0]):
+            if rk[r, 0] == ROW_TANGENT:
+                J[r, k] = dTW[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+                continue
+            k_in, k_out = rk[r, 1], rk[r, 2]
+            ip = int(rf[r, 3])
+            n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+            sgn = rf[r, 1]
+            n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
+            c0, c1, c2 = _moved(P, ip, pb[ip] == b, tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8])
+            x0, x1, x2 = TW[k_out, 0] - P[ip, 0], TW[k_out, 1] - P[ip, 1], TW[k_out, 2] - P[ip, 2]
+            g = ((n1 * x2 - n2 * x1) * (dTW[k_out, 0] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_out, 1] - c1)
+                 + (n0 * x1 - n1 * x0) * (dTW[k_out, 2] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
+            x0, x1, x2 = TW[k_in, 3] - P[ip, 0], TW[k_in, 4] - P[ip, 1], TW[k_in, 5] - P[ip, 2]
+            g -= ((n1 * x2 - n2 * x1) * (dTW[k_in, 3] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_in, 4] - c1)
+                  + (n0 * x1 - n1 * x0) * (dTW[k_in, 5] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
+            J[r, k] = rf[r, 0] * g
 
 
 @njit(cache=True)
@@ -339,7 +505,7 @@ def empty_fields() -> dict:
                 nl_colbody=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
                 nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
-                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)))
+                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64))
 
 
 class NonlinearRows:
@@ -463,7 +629,7 @@ class NonlinearRows:
                  nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
                  nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
                  nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
-                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape))
+                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64))
         if nr:
             q0 = np.asarray(q0, float)
             G = tuple(f[k] for k in GEOMETRY_FIELDS)
@@ -523,10 +689,10 @@ def _rot_mass(p0, p1, p2, J, out):
 
 
 @njit(cache=True)
-def rigid_terms(K, q, v, M, Q):
-    """Rotational inertia of the spatial rigid bodies: M[phi, phi] += M_r(phi) and the
-    quadratic-velocity force -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2), both by central
-    differences of M_r (step RB_H)."""
+def rigid_terms_fd(K, q, v, M, Q):
+    """rigid_terms from the Lagrangian by central differences of M_r (step RB_H; the tests'
+    reference): M[phi, phi] += M_r(phi) and the quadratic-velocity force
+    -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2)."""
     Mr = np.empty((3, 3))
     Mp = np.empty((3, 3))
     Mm = np.empty((3, 3))
@@ -561,6 +727,65 @@ def rigid_terms(K, q, v, M, Q):
             Q[K.rb_q[k, c]] += dT
         for a in range(3):
             Q[K.rb_q[k, a]] -= dMw[a]
+
+
+@njit(cache=True)
+def rigid_terms(K, q, v, M, Q):
+    """Rotational inertia of the spatial rigid bodies in closed form. With the world angular velocity
+    w = T phi_dot and the world inertia J_w = R J R^T, the Euler equations
+    J_w (T phi_ddot + dT/dt phi_dot) + w x J_w w = torque, projected by T^T (virtual work), give
+    M[phi, phi] += T^T J_w T and Q[phi] -= T^T (J_w dT/dt phi_dot + w x J_w w), where
+    dT/dt phi_dot = (phi . phi_dot) (ca phi x phi_dot + cb phi x (phi x phi_dot)) + b phi_dot x (phi x phi_dot)."""
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    Jw = np.empty((3, 3))
+    g = np.empty(3)
+    for k in range(K.rb_q.shape[0]):
+        i0, i1, i2 = K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2]
+        p0, p1, p2 = q[i0], q[i1], q[i2]
+        a, b, s1, ca, cb = _rot_coefs(p0, p1, p2)
+        ph = (p0, p1, p2)
+        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        for i in range(3):
+            for m in range(3):
+                p2im = ph[i] * ph[m] - (th2 if i == m else 0.0)
+                e = 1.0 if i == m else 0.0
+                T[i, m] = e + a * P[i][m] + b * p2im
+                R[i, m] = e + s1 * P[i][m] + a * p2im
+        J = K.rb_J[k]
+        for i in range(3):
+            for m in range(3):
+                acc = 0.0
+                for r in range(3):
+                    for c in range(3):
+                        acc += R[i, r] * J[r, c] * R[m, c]
+                Jw[i, m] = acc
+        d0, d1, d2 = v[i0], v[i1], v[i2]
+        w0 = T[0, 0] * d0 + T[0, 1] * d1 + T[0, 2] * d2
+        w1 = T[1, 0] * d0 + T[1, 1] * d1 + T[1, 2] * d2
+        w2 = T[2, 0] * d0 + T[2, 1] * d1 + T[2, 2] * d2
+        x0, x1, x2 = p1 * d2 - p2 * d1, p2 * d0 - p0 * d2, p0 * d1 - p1 * d0       # phi x phi_dot
+        y0, y1, y2 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2, p0 * x1 - p1 * x0       # phi x (phi x phi_dot)
+        z0, z1, z2 = d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0       # phi_dot x (phi x phi_dot)
+        pd = p0 * d0 + p1 * d1 + p2 * d2
+        t0 = pd * (ca * x0 + cb * y0) + b * z0
+        t1 = pd * (ca * x1 + cb * y1) + b * z1
+        t2 = pd * (ca * x2 + cb * y2) + b * z2
+        h0 = Jw[0, 0] * w0 + Jw[0, 1] * w1 + Jw[0, 2] * w2
+        h1 = Jw[1, 0] * w0 + Jw[1, 1] * w1 + Jw[1, 2] * w2
+        h2 = Jw[2, 0] * w0 + Jw[2, 1] * w1 + Jw[2, 2] * w2
+        g[0] = Jw[0, 0] * t0 + Jw[0, 1] * t1 + Jw[0, 2] * t2 + w1 * h2 - w2 * h1
+        g[1] = Jw[1, 0] * t0 + Jw[1, 1] * t1 + Jw[1, 2] * t2 + w2 * h0 - w0 * h2
+        g[2] = Jw[2, 0] * t0 + Jw[2, 1] * t1 + Jw[2, 2] * t2 + w0 * h1 - w1 * h0
+        for m in range(3):
+            Q[K.rb_q[k, m]] -= T[0, m] * g[0] + T[1, m] * g[1] + T[2, m] * g[2]
+            for n in range(3):
+                acc = 0.0
+                for i in range(3):
+                    for r in range(3):
+                        acc += T[i, m] * Jw[i, r] * T[r, n]
+                M[K.rb_q[k, m], K.rb_q[k, n]] += acc
 
 
 def rigid_fields(scene, body_dofs) -> dict:
