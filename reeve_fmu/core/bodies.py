@@ -312,6 +312,19 @@ def _moved(P, i, on, v0, v1, v2, w0, w1, w2, O0, O1, O2):
     return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
 
 
+@njit(cache=True, inline="always")
+def _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB):
+    """The contact-angle changes from the 2 x 2 tangency system (a point stop, R = 0, has none)."""
+    if RA > 0.0 and RB > 0.0:
+        det = jAA * jBB - jAB * jBA
+        return (gA * jBB - jAB * gB) / det, (jAA * gB - jBA * gA) / det
+    if RA > 0.0:
+        return gA / jAA, 0.0
+    if RB > 0.0:
+        return 0.0, gB / jBB
+    return 0.0, 0.0
+
+
 @njit(cache=True)
 def _tangent_rate(P, iA, iB, RA, RB, aA, aB, onA, onB, tw, T, dT):
     """dT = d(TA, TB) of a span whose stops move by the twist tw (stops on the moving body: onA,
@@ -344,16 +357,7 @@ def _tangent_rate(P, iA, iB, RA, RB, aA, aB, onA, onB, tw, T, dT):
     jAB = RB * (tB0 * nA0 + tB1 * nA1 + tB2 * nA2)
     jBA = -RA * (tA0 * nB0 + tA1 * nB1 + tA2 * nB2)
     jBB = d0 * tB0 + d1 * tB1 + d2 * tB2
-    if RA > 0.0 and RB > 0.0:
-        det = jAA * jBB - jAB * jBA
-        xA = (gA * jBB - jAB * gB) / det
-        xB = (jAA * gB - jBA * gA) / det
-    elif RA > 0.0:
-        xA, xB = gA / jAA, 0.0
-    elif RB > 0.0:
-        xA, xB = 0.0, gB / jBB
-    else:
-        xA, xB = 0.0, 0.0
+    xA, xB = _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB)
     dT[0] = dA0 + RA * (rA0 + tA0 * xA)
     dT[1] = dA1 + RA * (rA1 + tA1 * xA)
     dT[2] = dA2 + RA * (rA2 + tA2 * xA)
@@ -415,6 +419,212 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
             J[r, k] = rf[r, 0] * g
 
 
+@njit(cache=True, inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _body_motion(q, v, bq, b0, bk, bax, b, out):
+    """Rigid motion of body b at velocities v: out = (reference point O, its velocity, omega, the
+    part of d omega / dt that is not from accelerations); a point P moves with velocity
+    u_O + omega x (P - O) and, at zero coordinate accelerations, acceleration
+    domega x (P - O) + omega x (omega x (P - O))."""
+    for m in range(12):
+        out[m] = 0.0
+    if b < 0:
+        return
+    if bk[b] == 1:
+        for m in range(3):
+            out[3 + m] = bax[b, m] * v[bq[b, 0]]
+        return
+    for m in range(3):
+        j = bq[b, m]
+        out[m] = q[j] if j >= 0 else b0[b, m]
+        out[3 + m] = v[j] if j >= 0 else 0.0
+    if bk[b] == 0:
+        w = v[bq[b, 3]] if bq[b, 3] >= 0 else 0.0
+        for m in range(3):
+            out[6 + m] = bax[b, m] * w
+        return
+    i0, i1, i2 = bq[b, 4], bq[b, 5], bq[b, 6]
+    p0, p1, p2 = q[i0], q[i1], q[i2]
+    d0, d1, d2 = v[i0], v[i1], v[i2]
+    a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+    x0, x1, x2 = _cross(p0, p1, p2, d0, d1, d2)               # phi x phi_dot
+    y0, y1, y2 = _cross(p0, p1, p2, x0, x1, x2)
+    z0, z1, z2 = _cross(d0, d1, d2, x0, x1, x2)
+    out[6], out[7], out[8] = d0 + a * x0 + bb * y0, d1 + a * x1 + bb * y1, d2 + a * x2 + bb * y2   # T phi_dot
+    pd = p0 * d0 + p1 * d1 + p2 * d2
+    out[9] = pd * (ca * x0 + cb * y0) + bb * z0                                                 # dT/dt phi_dot
+    out[10] = pd * (ca * x1 + cb * y1) + bb * z1
+    out[11] = pd * (ca * x2 + cb * y2) + bb * z2
+
+
+@njit(cache=True, inline="always")
+def _point_motion(P, i, mo):
+    """(velocity, convective acceleration) of point P[i] on a body with motion mo (_body_motion)."""
+    r0, r1, r2 = P[i, 0] - mo[0], P[i, 1] - mo[1], P[i, 2] - mo[2]
+    c0, c1, c2 = _cross(mo[6], mo[7], mo[8], r0, r1, r2)
+    e0, e1, e2 = _cross(mo[6], mo[7], mo[8], c0, c1, c2)
+    f0, f1, f2 = _cross(mo[9], mo[10], mo[11], r0, r1, r2)
+    return mo[3] + c0, mo[4] + c1, mo[5] + c2, e0 + f0, e1 + f1, e2 + f2
+
+
+@njit(cache=True)
+def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
+    """Velocities VT and convective accelerations AT (zero coordinate accelerations) of the touching
+    points T of a span whose stops move with mA, mB (_body_motion): the tangency conditions
+    (TB - TA) . n = 0 differentiated once and twice (same 2 x 2 matrix as _tangent_rate)."""
+    uA0, uA1, uA2, gA0, gA1, gA2 = _point_motion(P, iA, mA)
+    uB0, uB1, uB2, gB0, gB1, gB2 = _point_motion(P, iB, mB)
+    d0, d1, d2 = T[3] - T[0], T[4] - T[1], T[5] - T[2]
+    n = np.zeros((2, 3))
+    t = np.zeros((2, 3))
+    wn = np.zeros((2, 3))      # omega x n
+    for e in range(2):
+        R = RA if e == 0 else RB
+        if R > 0.0:
+            ip = iA if e == 0 else iB
+            ax = aA if e == 0 else aB
+            mo = mA if e == 0 else mB
+            for m in range(3):
+                n[e, m] = (T[3 * e + m] - P[ip, m]) / R
+            t[e, 0], t[e, 1], t[e, 2] = _cross(ax[0], ax[1], ax[2], n[e, 0], n[e, 1], n[e, 2])
+            wn[e, 0], wn[e, 1], wn[e, 2] = _cross(mo[6], mo[7], mo[8], n[e, 0], n[e, 1], n[e, 2])
+    jAA = d0 * t[0, 0] + d1 * t[0, 1] + d2 * t[0, 2]
+    jAB = RB * (t[1, 0] * n[0, 0] + t[1, 1] * n[0, 1] + t[1, 2] * n[0, 2])
+    jBA = -RA * (t[0, 0] * n[1, 0] + t[0, 1] * n[1, 1] + t[0, 2] * n[1, 2])
+    jBB = d0 * t[1, 0] + d1 * t[1, 1] + d2 * t[1, 2]
+    # first order: n_dot = omega x n + t alpha_dot
+    e0 = uB0 + RB * wn[1, 0] - uA0 - RA * wn[0, 0]
+    e1 = uB1 + RB * wn[1, 1] - uA1 - RA * wn[0, 1]
+    e2 = uB2 + RB * wn[1, 2] - uA2 - RA * wn[0, 2]
+    gA = -(e0 * n[0, 0] + e1 * n[0, 1] + e2 * n[0, 2] + d0 * wn[0, 0] + d1 * wn[0, 1] + d2 * wn[0, 2])
+    gB = -(e0 * n[1, 0] + e1 * n[1, 1] + e2 * n[1, 2] + d0 * wn[1, 0] + d1 * wn[1, 1] + d2 * wn[1, 2])
+    xA, xB = _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB)
+    nd = np.empty((2, 3))
+    for m in range(3):
+        nd[0, m] = wn[0, m] + t[0, m] * xA
+        nd[1, m] = wn[1, m] + t[1, m] * xB
+    VT[0], VT[1], VT[2] = uA0 + RA * nd[0, 0], uA1 + RA * nd[0, 1], uA2 + RA * nd[0, 2]
+    VT[3], VT[4], VT[5] = uB0 + RB * nd[1, 0], uB1 + RB * nd[1, 1], uB2 + RB * nd[1, 2]
+    # second order at zero alpha_ddot: n_ddot0 = domega x n + omega x n_dot + t_dot alpha_dot,
+    # t_dot = (omega x a) x n + a x n_dot
+    nn = np.zeros((2, 3))
+    for e in range(2):
+        R = RA if e == 0 else RB
+        if R == 0.0:
+            continue
+        ax = aA if e == 0 else aB
+        mo = mA if e == 0 else mB
+        al = xA if e == 0 else xB
+        h0, h1, h2 = _cross(mo[9], mo[10], mo[11], n[e, 0], n[e, 1], n[e, 2])
+        k0, k1, k2 = _cross(mo[6], mo[7], mo[8], nd[e, 0], nd[e, 1], nd[e, 2])
+        w0, w1, w2 = _cross(mo[6], mo[7], mo[8], ax[0], ax[1], ax[2])
+        s0, s1, s2 = _cross(w0, w1, w2, n[e, 0], n[e, 1], n[e, 2])
+        r0, r1, r2 = _cross(ax[0], ax[1], ax[2], nd[e, 0], nd[e, 1], nd[e, 2])
+        nn[e, 0] = h0 + k0 + (s0 + r0) * al
+        nn[e, 1] = h1 + k1 + (s1 + r1) * al
+        nn[e, 2] = h2 + k2 + (s2 + r2) * al
+    dd0, dd1, dd2 = VT[3] - VT[0], VT[4] - VT[1], VT[5] - VT[2]
+    f0 = gB0 + RB * nn[1, 0] - gA0 - RA * nn[0, 0]
+    f1 = gB1 + RB * nn[1, 1] - gA1 - RA * nn[0, 1]
+    f2 = gB2 + RB * nn[1, 2] - gA2 - RA * nn[0, 2]
+    hA = -(f0 * n[0, 0] + f1 * n[0, 1] + f2 * n[0, 2] + 2.0 * (dd0 * nd[0, 0] + dd1 * nd[0, 1] + dd2 * nd[0, 2])
+           + d0 * nn[0, 0] + d1 * nn[0, 1] + d2 * nn[0, 2])
+    hB = -(f0 * n[1, 0] + f1 * n[1, 1] + f2 * n[1, 2] + 2.0 * (dd0 * nd[1, 0] + dd1 * nd[1, 1] + dd2 * nd[1, 2])
+           + d0 * nn[1, 0] + d1 * nn[1, 1] + d2 * nn[1, 2])
+    yA, yB = _solve2(RA, RB, jAA, jAB, jBA, jBB, hA, hB)
+    AT[0], AT[1], AT[2] = gA0 + RA * (nn[0, 0] + t[0, 0] * yA), gA1 + RA * (nn[0, 1] + t[0, 1] * yA), gA2 + RA * (nn[0, 2] + t[0, 2] * yA)
+    AT[3], AT[4], AT[5] = gB0 + RB * (nn[1, 0] + t[1, 0] * yB), gB1 + RB * (nn[1, 1] + t[1, 1] * yB), gB2 + RB * (nn[1, 2] + t[1, 2] * yB)
+
+
+@njit(cache=True)
+def rows_accel(q, v, G, acc):
+    """acc = (dB/dt) v of the rows (their acceleration at zero coordinate accelerations), in closed
+    form at the poses of the last rows_eval: body motions (_body_motion), touching points by
+    differentiating the tangency conditions twice (_tangent_accel), a W1 wrap's s by R times the
+    second derivative of the wrap angle in the sheave's frame.
+    (rows_accel_fd: the same by a second difference along v.)"""
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    nb = bq.shape[0]
+    mo = np.empty((nb, 12))
+    for b in range(nb):
+        _body_motion(q, v, bq, b0, bk, bax, b, mo[b])
+    zero = np.zeros(12)
+    nsp = sp.shape[0]
+    VT = np.empty((nsp, 6))
+    AT = np.empty((nsp, 6))
+    aA = np.empty(3)
+    aB = np.empty(3)
+    for s in range(nsp):
+        iA, iB = sp[s, 0], sp[s, 1]
+        aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
+        aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+        _tangent_accel(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, mo[pb[iA]] if pb[iA] >= 0 else zero,
+                       mo[pb[iB]] if pb[iB] >= 0 else zero, TW[s], VT[s], AT[s])
+    for r in range(rk.shape[0]):
+        if rk[r, 0] == ROW_TANGENT:
+            acc[r] = AT[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+            continue
+        k_in, k_out = rk[r, 1], rk[r, 2]
+        ip = int(rf[r, 3])
+        m = mo[pb[ip]] if pb[ip] >= 0 else zero
+        n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+        sgn = rf[r, 1]
+        n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
+        uc0, uc1, uc2, ac0, ac1, ac2 = _point_motion(P, ip, m)
+        tot = 0.0
+        for e in range(2):
+            k, o = (k_out, 0) if e == 0 else (k_in, 3)
+            x0, x1, x2 = TW[k, o] - P[ip, 0], TW[k, o + 1] - P[ip, 1], TW[k, o + 2] - P[ip, 2]
+            # velocity and acceleration relative to the sheave's frame (omega = m[6:9])
+            w0, w1, w2 = _cross(m[6], m[7], m[8], x0, x1, x2)
+            y0, y1, y2 = VT[k, o] - uc0 - w0, VT[k, o + 1] - uc1 - w1, VT[k, o + 2] - uc2 - w2
+            ux0, ux1, ux2 = VT[k, o] - uc0, VT[k, o + 1] - uc1, VT[k, o + 2] - uc2
+            c0, c1, c2 = _cross(m[9], m[10], m[11], x0, x1, x2)
+            d0, d1, d2 = _cross(m[6], m[7], m[8], ux0, ux1, ux2)
+            h0, h1, h2 = _cross(m[6], m[7], m[8], w0, w1, w2)
+            z0 = AT[k, o] - ac0 - c0 - 2.0 * d0 + h0
+            z1 = AT[k, o + 1] - ac1 - c1 - 2.0 * d1 + h1
+            z2 = AT[k, o + 2] - ac2 - c2 - 2.0 * d2 + h2
+            nx0, nx1, nx2 = _cross(n0, n1, n2, x0, x1, x2)
+            xx = x0 * x0 + x1 * x1 + x2 * x2
+            th = ((nx0 * z0 + nx1 * z1 + nx2 * z2) / xx
+                  - 2.0 * (nx0 * y0 + nx1 * y1 + nx2 * y2) * (x0 * y0 + x1 * y1 + x2 * y2) / (xx * xx))
+            tot += th if e == 0 else -th
+        acc[r] = rf[r, 0] * tot
+
+
+@njit(cache=True)
+def rows_accel_fd(q, v, G, cols, f0, fp, fm, qs, acc):
+    """rows_accel by the second central difference of the rows along the body velocities (step
+    NL_EPS; the tests' reference); f0 = f(q)."""
+    nrm = 0.0
+    for k in range(cols.shape[0]):
+        x = abs(v[cols[k]])
+        if x > nrm:
+            nrm = x
+    if nrm == 0.0:
+        acc[:] = 0.0
+        return
+    for i in range(q.shape[0]):
+        qs[i] = q[i]
+    for k in range(cols.shape[0]):
+        j = cols[k]
+        qs[j] = q[j] + NL_EPS * v[j] / nrm
+    rows_eval(qs, *G, -1, fp)
+    for k in range(cols.shape[0]):
+        j = cols[k]
+        qs[j] = q[j] - NL_EPS * v[j] / nrm
+    rows_eval(qs, *G, -1, fm)
+    sc = nrm * nrm / (NL_EPS * NL_EPS)
+    for r in range(f0.shape[0]):
+        acc[r] = (fp[r] - 2.0 * f0[r] + fm[r]) * sc
+    rows_eval(q, *G, -1, fp)     # the points, tangents and contact angles of q again
+
+
 @njit(cache=True)
 def nl_update(K, c, q, v):
     """Nonlinear rows at (q, v): element maps el_coef <- B(q), c <- f(q) - B(q) q, K.nl_acc <- dB/dt v
@@ -425,29 +635,7 @@ def nl_update(K, c, q, v):
          K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
     acc = K.nl_racc
-    nrm = 0.0
-    for k in range(K.nl_cols.shape[0]):
-        x = abs(v[K.nl_cols[k]])
-        if x > nrm:
-            nrm = x
-    if nrm > 0.0:
-        # second derivative of f along the body velocities (sigma enters linearly)
-        for k in range(K.nl_cols.shape[0]):
-            j = K.nl_cols[k]
-            qs[j] = q[j] + NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, -1, fp)
-        for k in range(K.nl_cols.shape[0]):
-            j = K.nl_cols[k]
-            qs[j] = q[j] - NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, -1, fm)
-        for k in range(K.nl_cols.shape[0]):
-            qs[K.nl_cols[k]] = q[K.nl_cols[k]]
-        sc = nrm * nrm / (NL_EPS * NL_EPS)
-        for r in range(f0.shape[0]):
-            acc[r] = (fp[r] - 2.0 * f0[r] + fm[r]) * sc
-    else:
-        for r in range(f0.shape[0]):
-            acc[r] = 0.0
+    rows_accel(q, v, G, acc)
     el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, K.el_coef, K.nl_ent, K.nl_rw
     for ie in range(ent.shape[0]):
         for a in range(ent.shape[1]):
