@@ -702,6 +702,9 @@ class Simulator:
             locked = set(range(nq)) - set(m.statics_equations)
             unknowns = [("q", j) for j in range(nq) if j not in locked]
         eqs = list(m.statics_equations)
+        if not torsion:   # the twist coordinates have no stiffness without the torsion terms
+            eqs = [j for j in eqs if m.q_kind[j] != "twist"]
+            unknowns = [(k, i) for k, i in unknowns if k != "q" or m.q_kind[i] != "twist"]
         par = m.par0.copy()
         from .kernel import compiled_kernel
         KB = m.K if torsion else m.K._replace(nl_on=m.K.nl_on & 3)

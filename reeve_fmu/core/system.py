@@ -639,6 +639,8 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
                 if K.jt_dof[m] == j:
                     r += _interp(K.jt_tab[m], t)
             y[k] = r
+        elif kind == 14:   # torsion span: rope torque [N m] (j = 0) or twist [rad/m] (j = 1)
+            y[k] = K.tq_out[K.out_i[k], K.out_j[k]]
 
 
 @njit(cache=True)
