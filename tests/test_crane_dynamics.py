@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from reeve_fmu.core.model import build_model
+from reeve_fmu.core.model import build_model, new_state
 from reeve_fmu.core.scene import SceneError, load_scene, parse_scene
 from reeve_fmu.core.solver import Simulator
 from reeve_fmu.core.system import assemble, energy
@@ -23,18 +23,33 @@ def _fall_length(z_cm):
 
 
 def test_lowering_follows_the_quasi_static_yaw():
+    """Lowering the block 10 m (h = 5.1 -> 15.1 m) in dynamics: the yaw stays within 1 % of its range
+    of the same model's static equilibrium at the same drum position, and that equilibrium is the
+    closed form sin(psi) = 4 k d h / (a b)."""
     m = build_model(load_scene(SCENE))
-    res = Simulator(m).run()
-    psi = res["block.rotation.z"]
-    h = _fall_length(res["block.position.z"])
-    ref = np.arcsin(K_D_AB * h)
-    span = ref.max() - ref.min()
-    assert h[0] < 5.2 and h[-1] > 15.0                   # lowered 10 m
-    assert abs(psi[0] - ref[0]) < 1e-3 * span            # initial statics; measured PLACEHOLDER
-    err = np.max(np.abs(psi - ref)) / span
-    assert err < 0.01                                     # measured PLACEHOLDER of the yaw range
+    sim = Simulator(m)
+    res = sim.run()
+    st0 = sim.initial_state()
+    jd = m.sheave_dof["drum"]
+    psi_dyn, psi_qs, psi_cf = [], [], []
+    for t in (0.0, 10.0, 20.0, 30.0, 40.0, 50.0):
+        i = int(np.argmin(np.abs(res.time - t)))
+        q = st0.q.copy()
+        q[jd] += res["motor.angle"][i] / m.K.mot_gain      # the drum where the run has it
+        st = sim._statics(new_state(m, q=q), "rope-length")
+        psi_dyn.append(res["block.rotation.z"][i])
+        psi_qs.append(st.q[m.body_dofs["block"]["rz"]])
+        psi_cf.append(math.asin(K_D_AB * _fall_length(st.q[m.body_dofs["block"]["z"]])))
+    psi_dyn, psi_qs, psi_cf = map(np.array, (psi_dyn, psi_qs, psi_cf))
+    span = np.ptp(psi_qs)
+    assert span > 0.29                                             # lowered 10 m: 0.144 -> 0.438 rad
+    assert np.max(np.abs(psi_dyn - psi_qs)) < 0.01 * span          # measured 0.71 % (lag while moving)
+    # the equilibrium against the closed form: measured -0.24 % (h = 5.1 m) to -0.58 % (15.1 m) of
+    # the yaw; the torsion moment is 2 k d S to 4e-5, the rest is the W1 wraps' bookkeeping (their
+    # rope counted unstretched and its weight lumped at t = 0: docs/crane.md)
+    assert np.max(np.abs(psi_qs / psi_cf - 1.0)) < 1e-2
     tilt = np.max(np.abs(res["block.rotation.x"])) + np.max(np.abs(res["block.rotation.y"]))
-    assert tilt < 1e-2
+    assert tilt < 1e-5                                             # measured 1.2e-6
 
 
 def test_torsion_forces_are_the_energy_gradient():
@@ -66,12 +81,12 @@ def test_torsion_forces_are_the_energy_gradient():
         b[j] -= dx
         g[j] = (V(a) - V(b)) / (2.0 * dx)
     scale = np.abs(Q).max()
-    assert np.max(np.abs(Q + g)) < 1e-6 * scale            # measured PLACEHOLDER
+    assert np.max(np.abs(Q + g)) < 1e-6 * scale            # measured 1.4e-7 (central differences)
 
 
 def test_costello_needs_a_positive_definite_energy():
     text = open(SCENE).read().replace('law = "torque-factor", diameter = 0.022, k0 = 0.08',
-                                      'law = "costello", diameter = 0.022, k0 = 0.08, GJ0 = 100.0')
+                                      'law = "costello", diameter = 0.022, k0 = 0.08, GJ0 = 50.0')
     import tomllib
     with pytest.raises(SceneError, match=r"ropes\[0\].torsion.GJ0\] the costello law needs GJ0 EA"):
-        parse_scene(tomllib.loads(text), "crane.toml")
+        parse_scene(tomllib.loads(text), "crane.toml")   # needs GJ0 > 70.6 N m^2
