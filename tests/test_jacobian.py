@@ -158,4 +158,5 @@ def test_newton_matrix_equals_differences(name, contact):
     A1, A2 = ref
     err = np.max(np.abs(unpack_dense(J, SP) - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2))
     print(name, contact, err)
-    assert err <= 1e-6, err
+    # measured 1.2e-13 (spatial crane) ... 1.06e-10 (1-D elevator), beyond the references' own difference
+    assert err <= 1e-9, err
