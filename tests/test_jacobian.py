@@ -119,6 +119,8 @@ def test_element_jacobians(name):
             err = np.max((np.abs(B - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2)))
             worst = max(worst, (err, ie, part))
     print(name, worst)
+    # measured 1.3e-9 (1-D) ... 1.4e-7 (planar slack span: the smoothed tension-only law), beyond the
+    # references' own difference
     assert worst[0] <= 1e-6, worst
 
 
