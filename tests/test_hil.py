@@ -119,7 +119,7 @@ def test_frame_codec_equals_cantools():
             assert codec.decode(data) == [msg.decode(data, decode_choices=False)[n] for n in codec.names]
     tc = proto.TorqueCmd
     with pytest.raises(P.CodecError):
-        tc.encode([15, 1001.0, 10, 1, 1])                       # beyond the DBC range (1820 > 1819)
+        tc.encode([15, 18100.0, 10, 1, 1])                      # beyond the DBC (int16) range
     with pytest.raises(P.CodecError):
         tc.decode_raw(b"\x00" * 6)                              # wrong length
 
@@ -716,6 +716,29 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert all(f"[{v['status']}] {c}: " in printed for c, v in vs.items())
     assert f"overall: {r['verdict']}" in printed and "report.md" in printed
+
+
+def test_hil_drive_is_sized_from_the_scene_and_its_torque_limit_reaches_the_bench():
+    """`hil` runs the demo's drive sized from the scene (torque and power limits, inertia, speed-loop gain),
+    not the drive's 1000 N m / 20 kW defaults; the built-in controller writes the model's torque limit
+    into the drive's 0x6072 (rounded up to whole per mille of 550 N m) and clamps its commands there: a
+    pre-torque of 1050 N m with torque.max 1100 N m reaches the plant (the old fixed clamp was
+    1000.45 N m) and no command is rejected."""
+    from reeve_fmu.hil.controller import make_electric_drive, max_torque_permille
+    from reeve_fmu.hil.run import _with_defaults
+    from reeve_fmu.studies.trip import sized_drive, trip_case
+
+    cfg, _ = _with_defaults(HilConfig())
+    sized = sized_drive(trip_case(None).scene)
+    for k in ("torque.max", "torque.power_max", "control.Kp", "control.J_ff"):
+        assert cfg.drive_values[k] == sized[k], k
+    assert cfg.drive_values["torque.max"] != 1000.0 and cfg.drive_values["control.Kp"] != 970.0
+    assert max_torque_permille(make_electric_drive({"torque.max": 1100.0})) == 2000      # 1100 / 0.55
+    assert max_torque_permille(make_electric_drive({"torque.max": 1100.1})) == 2001
+    dv = dict(SHORT, **{"torque.max": 1100.0, "pretorque[1]": 1050.0})
+    r = _run(t_end=0.8, drive_values=dv)          # pre-torque ramp 0.5 .. 0.7 s with the brake applied
+    assert r["frames_rejected"] == 0 and r["watchdog_trips"] == 0
+    assert r["motor_torque_peak_Nm"] == pytest.approx(1050.0, abs=0.275)      # CAN quantum 0.55 N m
 
 
 def test_hil_coupling_check_flags_an_alternating_torque():
