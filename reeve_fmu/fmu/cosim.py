@@ -728,7 +728,6 @@ class CouplingMonitor:
                 "coupling_energy_residual_J": float(self.residual_J),
                 "transmitted_energy_J": float(self.transmitted_J),
                 "torque_chatter_max": float(self.chatter_max),
-                "torque_chatter_limit": float(self.chatter_limit),
                 "energy_residual_max_ratio": float(self.energy_ratio_max),
                 "monitor_torque_scale_Nm": float(self.torque_scale or self._tau_max)}
 

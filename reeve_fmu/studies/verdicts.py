@@ -26,6 +26,8 @@ OVERSPEED_WARN = 1.05
 BRAKING_DECELERATION = 0.5
 #: time at the torque/power limit: WARN above 0, FAIL above this (s)
 SATURATION_FAIL = 0.5
+#: the coupling monitor's torque-chatter threshold (fmu.cosim.CouplingMonitor, fraction of torque.max)
+CHATTER_LIMIT = 0.05
 #: typical contract targets (practice, not a standard): good mid-rise values
 RIDE_TARGETS = {"max_acceleration_m_s2": (1.0, "m/s²", "max acceleration/deceleration (10 Hz)"),
                 "max_jerk_m_s3": (2.0, "m/s³", "max jerk (10 Hz)"),
@@ -89,7 +91,7 @@ def _coupling_verdict(info: dict) -> Verdict:
     when it detected an episode (a non-finite exchanged value gives inf)."""
     ok = bool(info["coupling_stable"])
     first = info.get("instability") or {}
-    lim = info.get("torque_chatter_limit", 0.05)
+    lim = CHATTER_LIMIT
     chat, en = info.get("torque_chatter_max"), info.get("energy_residual_max_ratio")
     if chat is None or en is None:                 # a record without the monitor's figures
         return Verdict("co-simulation coupling", PASS if ok else FAIL, 0.0 if ok else 1.0, 0.0, "detections",
