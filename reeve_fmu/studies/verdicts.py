@@ -53,7 +53,8 @@ class Verdict:
             else f"{self.value:.4g}"
         lim = "" if self.limit is None else f" (limit {self.limit:.4g})"
         note = f" — {self.note}" if self.note else ""
-        return f"[{self.status}] {self.check}: {v} {self.unit}{lim}{note}"
+        unit = f" {self.unit}" if self.unit else ""
+        return f"[{self.status}] {self.check}: {v}{unit}{lim}{note}"
 
 
 def worst(verdicts) -> str:
@@ -314,10 +315,13 @@ def _explain_traction(v: Verdict, vs: list, summary: dict) -> str:
              "error. ")
     if static is not None:
         text += (f"The static EN 81-50 emergency-braking case of this scene gives {static.value:.3f} against "
-                 f"{static.limit:.3f} ({static.status}); ")
-    text += ("a scene with little margin there, as the shipped R1 2:1 reference set by design, exceeds the braking "
-             "limit while the full car accelerates. More margin: a deeper groove undercut, a larger wrap angle, a "
-             "counterweight balance closer to the mean load, or a lower acceleration.")
+                 f"{static.limit:.3f} ({static.status}, {100 * (1 - static.value / static.limit):.1f} % margin): ")
+        text += ("with little margin there, the trip's accelerations at full load exceed the braking limit. "
+                 if static.value > 0.97 * static.limit else
+                 "the static case holds with margin; the trip's accelerations and rope dynamics take the ratio "
+                 "above the braking limit. ")
+    text += ("More margin: a deeper groove undercut, a larger wrap angle, a counterweight balance closer to the "
+             "mean load, or a lower acceleration.")
     return text
 
 
@@ -326,10 +330,14 @@ def _explain_one(v: Verdict, vs: list, summary: dict) -> str:
     if c == "traction ratio during the trip":
         return _explain_traction(v, vs, summary)
     if c.startswith("stopping accuracy"):
-        return (f"Levelling{c[len('stopping accuracy'):]}: the worst stop was {v.value:+.1f} mm off the landing "
+        text = (f"Levelling{c[len('stopping accuracy'):]}: the worst stop was {v.value:+.1f} mm off the landing "
                 f"({v.note.replace('worst stop: ', '')}); EN 81-20 asks for ±{v.limit:g} mm. A drive that "
                 "positions the motor from its encoder does not see the rope stretch between sheave and car; a "
-                "shaft information system (car-position feedback on the approach) removes it.")
+                "shaft information system (car-position feedback on the approach) removes it")
+        sis = _find(vs, "stopping accuracy (with SIS)")
+        if sis is not None and sis is not v:
+            text += f": with it the worst stop of this trip was {sis.value:+.1f} mm ({sis.status})"
+        return text + "."
     if c.startswith("levelling band"):
         return f"Levelling{c[len('levelling band'):]}: beyond ±{v.limit:g} mm the car must re-level ({v.note})."
     if c == "drive at its torque/power limit":
