@@ -94,10 +94,51 @@ def _cache_dir():
     return str(target)
 
 
+def _install_package_locator(cache_dir: str) -> None:
+    """Cache this package's kernels at `cache_dir/<directory inside the package>`, stamped by file
+    content. numba's own locator names the cache subdirectory after the source file's absolute path,
+    so every copy of the same sources (the checkout, an FMU's vendored copy, a second worktree)
+    compiled everything again into its own subdirectory; `cache_dir` is already keyed by the hash of
+    those sources, so the copies can share one set of compiled kernels. Without the numba internals
+    this relies on, numba's default locator stays in use."""
+    from pathlib import Path
+    try:
+        from numba.core import caching
+        from numba.core.caching import UserProvidedCacheLocator
+    except ImportError:  # pragma: no cover - numba moved its internals
+        return
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # numba >= 0.61 / older
+    pkg = Path(__file__).resolve().parents[1]
+
+    class PackageCacheLocator(UserProvidedCacheLocator):
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            rel = Path(py_file).resolve().parent.relative_to(pkg)
+            self._cache_path = os.path.join(cache_dir, "pkg", *rel.parts)
+
+        def get_source_stamp(self):
+            import hashlib
+            with open(self._py_file, "rb") as f:
+                return hashlib.sha256(f.read()).hexdigest()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                Path(py_file).resolve().relative_to(pkg)
+            except (ValueError, OSError):
+                return None      # not a file of this copy of the package: numba's locators
+            return super().from_function(py_func, py_file)
+
+    classes = getattr(impl, "_locator_classes", None)
+    if isinstance(classes, list):
+        classes.insert(0, PackageCacheLocator)
+
+
 if _numba is not None and not os.environ.get("NUMBA_CACHE_DIR"):
     _dir = _cache_dir()
     if _dir is not None:
         _numba.config.CACHE_DIR = _dir
+        _install_package_locator(_dir)
 
 
 def njit(*args, **kwargs):
