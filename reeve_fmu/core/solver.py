@@ -419,7 +419,10 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     for k in range(ncrp):
                         creep_input_set(K, q, info, ue, hs, k, kr[0, k], kr[1, k])
                 elif ncrp > 0:
-                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, False)
+                    # fresh = False as a runtime bool (ncrp > 0 here), not the literal False: numba
+                    # then compiles one creep_inputs for this call and the Python callers' (a
+                    # literal argument is a signature of its own, compiled again)
+                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -478,7 +481,8 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         t = t1
         info[1] += 1
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False, kr[0])
+            # fresh = False as a runtime bool, not a literal: one compiled outputs_ws with outputs()
+            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, step < 0, kr[0])
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]
