@@ -11,12 +11,13 @@ straight into the banded layout of core/sparse.py:
   * linear element, axial force (elastic, Kelvin-Voigt damping, smoothed tension-only law, with the
     material-length dependence through l = s2 - s1 and the Eshelby force on the s rows) and gravity:
     closed form (`linear_stiffness`);
-  * linear element, inertia terms (d(M_e a_e)/dq_e and the quadratic-velocity vector): element-local
-    central differences of the kernel with stiffness and gravity switched off (2 ne kernel calls per
-    element; exact in v, where these terms are quadratic, second order in q, on the element's scale);
+  * linear element, inertia terms (d(M_e a_e)/dq_e and the quadratic-velocity vector): closed form
+    (elements/linear_jac.py);
   * cubic element: axial and bending stiffness (with the ALE dependence on l = s2 - s1), Kelvin-Voigt
     damping and gravity in closed form (elements/cubic_jac.py); inertia terms by element-local central
-    differences of its mass matrix and quadratic-velocity vector, as for the linear element;
+    differences of its mass matrix and quadratic-velocity vector (2 ne calls per element; exact in v,
+    where these terms are quadratic, second order in q on the element's scale): their q-derivative
+    in closed form would differentiate the 4-point Gauss sums of N^T N-dot products a second time;
   * q-level terms: hitch springs and dampers, buffers, stored drum rope, brake and the groove friction's
     spring law in closed form (`qlevel_closed`); what couples a q-level row to element strains (a creep
     sheave's kappa and creep force, the groove friction's capacity from the end tensions) by central
@@ -32,6 +33,7 @@ from ._jit import njit
 from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
 from .elements.cubic_jac import cubic_stiffness, gravity_jac
 from .elements.linear import SLACK_STRAIN, linear_element_at
+from .elements.linear_jac import linear_inertia
 from .sparse import bordered_factor, residual_sparse
 from .system import UE_CREEP, _static_end_tension, creep_kappa, creep_terms, element_eval, q_terms
 
@@ -179,7 +181,10 @@ def element_block(K, ie, QE, VE, MEs, QEs, ae, ba, bq, gv, JE, X, XD, G1, MEt, Q
     else:
         linear_stiffness(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g, QE, VE, ie,
                          bq, gv, JE, S)
-    # central differences: exact for the quadratic-velocity terms (quadratic in v), second order in q
+        linear_inertia(nd, K.el_rhoA[ie], QE, VE, ie, ae, bq, gv, JE)
+        return
+    # cubic inertia, central differences: exact for the quadratic-velocity terms (quadratic in v),
+    # second order in q
     for b in range(ne):
         hq = FD_STEP * (1.0 + abs(QE[ie, b]))
         dx = hq / bq
