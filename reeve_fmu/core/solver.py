@@ -151,6 +151,11 @@ def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
     if st < 0:
         return st
+    # the nonlinear rows (core/bodies.py) keep B(q), c and dB/dt qdot of the unperturbed iterate:
+    # p = B q + c is then their exact linearisation; what is left out (tension x curvature of the
+    # tangent-point map, ~1e-5 of the mass and axial terms) slows the modified Newton contraction
+    # at most, it does not change the solution
+    K.nl_frz[0] = 1
     for fj in range(nf):
         j = K.free[fj]
         dq = 1e-10 * (1.0 + abs(q[j]))   # small: the velocity change must stay inside stiff bands
@@ -164,6 +169,7 @@ def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
         qdd[j] -= dx
         q[j] -= bq * dx
         v[j] -= gv * dx
+    K.nl_frz[0] = 0
     return 1 if lu_factor(jac, piv) else 0
 
 
@@ -706,23 +712,32 @@ class Simulator:
         else:
             st.info[8] = float(-f_needed / k) if k > 0 else 0.0
 
-    def _statics(self, st: State, mode: str) -> State:
+    def _statics(self, st: State, mode: str, torsion: bool = True) -> State:
         m = self.model
         K = m.K
         nq = m.nq
+        if torsion and K.nl_on & 4:
+            # a rope's torque grows with its tension, which the geometric guess does not have: from
+            # there the block's yaw has no stiffness and Newton may land on the unstable branch. The
+            # equilibrium without the torsion terms is the start instead.
+            st = self._statics(st, mode, torsion=False)
         if mode == "positions":
             unknowns = list(m.statics_unknowns)
         else:
             locked = set(range(nq)) - set(m.statics_equations)
             unknowns = [("q", j) for j in range(nq) if j not in locked]
         eqs = list(m.statics_equations)
+        if not torsion:   # the twist coordinates have no stiffness without the torsion terms
+            eqs = [j for j in eqs if m.q_kind[j] != "twist"]
+            unknowns = [(k, i) for k, i in unknowns if k != "q" or m.q_kind[i] != "twist"]
         par = m.par0.copy()
-        KS = m.KJ
+        from .kernel import compiled_kernel
+        KB = m.K if torsion else m.K._replace(nl_on=m.K.nl_on & 3)
+        KS = m.KJ if KB is m.K else compiled_kernel(KB)
         if np.any(m.K.el_tonly):
             # tension-only ropes have a kink at zero strain, where the geometric guess starts: solve the
             # statics with the bilateral law and check below that every span ends up in tension
-            from .kernel import compiled_kernel
-            KS = compiled_kernel(m.K._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
+            KS = compiled_kernel(KB._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
         q = st.q.copy()
         M = np.empty((nq, nq))
         Q = np.empty(nq)
