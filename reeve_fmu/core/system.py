@@ -463,8 +463,8 @@ def assemble_ws(K, W, c, q, v, t, u):
     status = 0
     flags = K.nl_on     # bit 1: nonlinear rows, bit 2: joints or spatial rigid bodies (one read)
     nl = (flags & 1) != 0
-    if nl:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the nonlinear rows
-        nl_update(K, c, q, v)
+    if nl and K.nl_frz[0] == 0:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the
+        nl_update(K, c, q, v)     # nonlinear rows (nl_frz: kept from the last update, solver)
     for ie in range(el_map.shape[0]):
         # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
         # this loop cost ~30 % of the 1D step
