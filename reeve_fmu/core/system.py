@@ -113,8 +113,18 @@ def groove_strain(K, X, XD, ie, end, rate):
     strain its tension carries, N / EA of the element's law (linear: the smoothed positive part of
     axial_law; cubic: max(eps, 0)). A slack rope arrives on the groove unstrained: its chord strain
     (negative while the span sags or a slack rope piles up) is no strain of the rope."""
-    e = end_strain(K, X, ie, end)
-    ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
+    if K.nd == 1 and K.el_type != 1:   # the 1D path: strain and rate with one division
+        dk = X[ie, 1] - X[ie, 0]
+        il = 1.0 / (X[ie, 3] - X[ie, 2])
+        ad = abs(dk)
+        e = ad * il - 1.0
+        ed = 0.0
+        if rate:
+            sg = 1.0 if dk >= 0.0 else -1.0
+            ed = (sg * (XD[ie, 1] - XD[ie, 0]) - ad * (XD[ie, 3] - XD[ie, 2]) * il) * il
+    else:
+        e = end_strain(K, X, ie, end)
+        ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
     if K.el_tonly[ie] == 0:
         return e, ed
     if K.el_type == 1:
