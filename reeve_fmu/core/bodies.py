@@ -93,6 +93,29 @@ def _rotate(R, b, v0, v1, v2):
             v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
 
 
+@njit(cache=True, inline="always")
+def _rot_coefs(p0, p1, p2):
+    """Coefficients of the rotation vector phi (angle th = |phi|): R = I + s1 P + a P^2 (Rodrigues),
+    T = I + a P + b P^2 (phi_dot -> world angular velocity), with P = phi^, and ca = a'(th) / th,
+    cb = b'(th) / th (for dT/dt). Series below th = 1e-2 (truncation < 1e-12 relative)."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    if th2 < 1e-4:
+        a = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
+        b = 1.0 / 6.0 - th2 / 120.0 + th2 * th2 / 5040.0
+        s1 = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
+        ca = -1.0 / 12.0 + th2 / 180.0 - th2 * th2 / 6720.0
+        cb = -1.0 / 60.0 + th2 / 1260.0 - th2 * th2 / 60480.0
+    else:
+        th = math.sqrt(th2)
+        sn, cs = math.sin(th), math.cos(th)
+        a = (1.0 - cs) / th2
+        b = (th - sn) / (th2 * th)
+        s1 = sn / th
+        ca = (th * sn - 2.0 * (1.0 - cs)) / (th2 * th2)
+        cb = ((1.0 - cs) * th - 3.0 * (th - sn)) / (th2 * th2 * th)
+    return a, b, s1, ca, cb
+
+
 @njit(cache=True)
 def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
     """Touching points of a span between circles with any axes (world aA, aB; a point has R = 0):
@@ -226,8 +249,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
 
 
 @njit(cache=True)
-def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
-    """f0 = f(q) and J[:, k] = d f / d q[cols[k]] by central differences (step NL_H); G = the
+def rows_jacobian_fd(q, G, cols, colbody, f0, fp, fm, qs, J):
+    """rows_jacobian by central differences (step NL_H; the tests' reference). G = the
     geometry arrays of rows_eval (a tuple); a column re-evaluates only the spans on its body
     colbody[k] and then restores the points and tangents of q."""
     P, TW = G[11], G[12]
@@ -249,6 +272,359 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
             J[r, k] = (fp[r] - fm[r]) / (2.0 * NL_H)
 
 
+@njit(cache=True, inline="always")
+def _twist(q, bq, b0, bk, bax, BR, b, j):
+    """The motion of body b per unit change of its coordinate q[j]: (v, omega, O) with every point P of
+    the body moving by v + omega x (P - O) and every axis a turning by omega x a."""
+    v0 = v1 = v2 = w0 = w1 = w2 = 0.0
+    if bk[b] == 1:                      # prismatic: slides along its axis
+        return bax[b, 0], bax[b, 1], bax[b, 2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    O0 = q[bq[b, 0]] if bq[b, 0] >= 0 else b0[b, 0]
+    O1 = q[bq[b, 1]] if bq[b, 1] >= 0 else b0[b, 1]
+    O2 = q[bq[b, 2]] if bq[b, 2] >= 0 else b0[b, 2]
+    if bq[b, 0] == j:
+        v0 = 1.0
+    elif bq[b, 1] == j:
+        v1 = 1.0
+    elif bq[b, 2] == j:
+        v2 = 1.0
+    elif bq[b, 3] == j:                 # planar theta / revolute angle: about the body's axis
+        w0, w1, w2 = bax[b, 0], bax[b, 1], bax[b, 2]
+    else:                               # rotation vector: omega = T(phi)[:, c]
+        c = 0 if bq[b, 4] == j else (1 if bq[b, 5] == j else 2)
+        p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
+        a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+        ph = (p0, p1, p2)
+        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        w0 = (1.0 if c == 0 else 0.0) + a * P[0][c] + bb * (ph[0] * ph[c] - (th2 if c == 0 else 0.0))
+        w1 = (1.0 if c == 1 else 0.0) + a * P[1][c] + bb * (ph[1] * ph[c] - (th2 if c == 1 else 0.0))
+        w2 = (1.0 if c == 2 else 0.0) + a * P[2][c] + bb * (ph[2] * ph[c] - (th2 if c == 2 else 0.0))
+    return v0, v1, v2, w0, w1, w2, O0, O1, O2
+
+
+@njit(cache=True, inline="always")
+def _moved(P, i, on, v0, v1, v2, w0, w1, w2, O0, O1, O2):
+    """dP[i] under the twist (zero when the point is not on the moving body)."""
+    if not on:
+        return 0.0, 0.0, 0.0
+    r0, r1, r2 = P[i, 0] - O0, P[i, 1] - O1, P[i, 2] - O2
+    return v0 + w1 * r2 - w2 * r1, v1 + w2 * r0 - w0 * r2, v2 + w0 * r1 - w1 * r0
+
+
+@njit(cache=True, inline="always")
+def _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB):
+    """The contact-angle changes from the 2 x 2 tangency system (a point stop, R = 0, has none)."""
+    if RA > 0.0 and RB > 0.0:
+        det = jAA * jBB - jAB * jBA
+        return (gA * jBB - jAB * gB) / det, (jAA * gB - jBA * gA) / det
+    if RA > 0.0:
+        return gA / jAA, 0.0
+    if RB > 0.0:
+        return 0.0, gB / jBB
+    return 0.0, 0.0
+
+
+@njit(cache=True)
+def _tangent_rate(P, iA, iB, RA, RB, aA, aB, onA, onB, tw, T, dT):
+    """dT = d(TA, TB) of a span whose stops move by the twist tw (stops on the moving body: onA,
+    onB), by implicit differentiation of the tangency conditions (TB - TA) . n = 0 at both touching
+    points (n: unit radius, t = a x n); the same 2 x 2 matrix as tangent_spatial's Newton step."""
+    v0, v1, v2, w0, w1, w2, O0, O1, O2 = tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8]
+    dA0, dA1, dA2 = _moved(P, iA, onA, v0, v1, v2, w0, w1, w2, O0, O1, O2)
+    dB0, dB1, dB2 = _moved(P, iB, onB, v0, v1, v2, w0, w1, w2, O0, O1, O2)
+    d0, d1, d2 = T[3] - T[0], T[4] - T[1], T[5] - T[2]
+    # radius directions, their turn with the body (omega x n), tangents t = a x n
+    nA0 = nA1 = nA2 = tA0 = tA1 = tA2 = rA0 = rA1 = rA2 = 0.0
+    nB0 = nB1 = nB2 = tB0 = tB1 = tB2 = rB0 = rB1 = rB2 = 0.0
+    if RA > 0.0:
+        nA0, nA1, nA2 = (T[0] - P[iA, 0]) / RA, (T[1] - P[iA, 1]) / RA, (T[2] - P[iA, 2]) / RA
+        tA0, tA1, tA2 = aA[1] * nA2 - aA[2] * nA1, aA[2] * nA0 - aA[0] * nA2, aA[0] * nA1 - aA[1] * nA0
+        if onA:
+            rA0, rA1, rA2 = w1 * nA2 - w2 * nA1, w2 * nA0 - w0 * nA2, w0 * nA1 - w1 * nA0
+    if RB > 0.0:
+        nB0, nB1, nB2 = (T[3] - P[iB, 0]) / RB, (T[4] - P[iB, 1]) / RB, (T[5] - P[iB, 2]) / RB
+        tB0, tB1, tB2 = aB[1] * nB2 - aB[2] * nB1, aB[2] * nB0 - aB[0] * nB2, aB[0] * nB1 - aB[1] * nB0
+        if onB:
+            rB0, rB1, rB2 = w1 * nB2 - w2 * nB1, w2 * nB0 - w0 * nB2, w0 * nB1 - w1 * nB0
+    # d(TB - TA) without the contact-angle changes
+    e0 = dB0 + RB * rB0 - dA0 - RA * rA0
+    e1 = dB1 + RB * rB1 - dA1 - RA * rA1
+    e2 = dB2 + RB * rB2 - dA2 - RA * rA2
+    gA = -(e0 * nA0 + e1 * nA1 + e2 * nA2 + d0 * rA0 + d1 * rA1 + d2 * rA2)
+    gB = -(e0 * nB0 + e1 * nB1 + e2 * nB2 + d0 * rB0 + d1 * rB1 + d2 * rB2)
+    jAA = d0 * tA0 + d1 * tA1 + d2 * tA2
+    jAB = RB * (tB0 * nA0 + tB1 * nA1 + tB2 * nA2)
+    jBA = -RA * (tA0 * nB0 + tA1 * nB1 + tA2 * nB2)
+    jBB = d0 * tB0 + d1 * tB1 + d2 * tB2
+    xA, xB = _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB)
+    dT[0] = dA0 + RA * (rA0 + tA0 * xA)
+    dT[1] = dA1 + RA * (rA1 + tA1 * xA)
+    dT[2] = dA2 + RA * (rA2 + tA2 * xA)
+    dT[3] = dB0 + RB * (rB0 + tB0 * xB)
+    dT[4] = dB1 + RB * (rB1 + tB1 * xB)
+    dT[5] = dB2 + RB * (rB2 + tB2 * xB)
+
+
+@njit(cache=True, inline="always")
+def _world_axis(sa, k, e, pb, bk, BR, b):
+    v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
+    if b >= 0 and bk[b] != 1:
+        v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+    return v0, v1, v2
+
+
+@njit(cache=True)
+def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
+    """f0 = f(q) and J[:, k] = d f / d q[cols[k]] in closed form: each body coordinate moves its body
+    rigidly (_twist); tangent points follow by implicit differentiation of the tangency conditions
+    (_tangent_rate); a W1 wrap's s by R d(wrap angle), with d(angle of x about n) = (n x x) . dx / |x|^2.
+    (rows_jacobian_fd: the same by central differences.)"""
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    rows_eval(q, *G, -1, f0)
+    nsp = sp.shape[0]
+    dTW = np.zeros((nsp, 6))
+    tw = np.empty(9)
+    aA = np.empty(3)
+    aB = np.empty(3)
+    for k in range(cols.shape[0]):
+        b = colbody[k]
+        tw[:] = _twist(q, bq, b0, bk, bax, BR, b, cols[k])
+        for s in range(nsp):
+            iA, iB = sp[s, 0], sp[s, 1]
+            onA, onB = pb[iA] == b, pb[iB] == b
+            if not (onA or onB):
+                for m in range(6):
+                    dTW[s, m] = 0.0
+                continue
+            aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
+            aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+            _tangent_rate(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, onA, onB, tw, TW[s], dTW[s])
+        for r in range(rk.shape[0]):
+            if rk[r, 0] == ROW_TANGENT:
+                J[r, k] = dTW[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+                continue
+            k_in, k_out = rk[r, 1], rk[r, 2]
+            ip = int(rf[r, 3])
+            n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+            sgn = rf[r, 1]
+            n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
+            c0, c1, c2 = _moved(P, ip, pb[ip] == b, tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8])
+            x0, x1, x2 = TW[k_out, 0] - P[ip, 0], TW[k_out, 1] - P[ip, 1], TW[k_out, 2] - P[ip, 2]
+            g = ((n1 * x2 - n2 * x1) * (dTW[k_out, 0] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_out, 1] - c1)
+                 + (n0 * x1 - n1 * x0) * (dTW[k_out, 2] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
+            x0, x1, x2 = TW[k_in, 3] - P[ip, 0], TW[k_in, 4] - P[ip, 1], TW[k_in, 5] - P[ip, 2]
+            g -= ((n1 * x2 - n2 * x1) * (dTW[k_in, 3] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_in, 4] - c1)
+                  + (n0 * x1 - n1 * x0) * (dTW[k_in, 5] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
+            J[r, k] = rf[r, 0] * g
+
+
+@njit(cache=True, inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
+def _body_motion(q, v, bq, b0, bk, bax, b, out):
+    """Rigid motion of body b at velocities v: out = (reference point O, its velocity, omega, the
+    part of d omega / dt that is not from accelerations); a point P moves with velocity
+    u_O + omega x (P - O) and, at zero coordinate accelerations, acceleration
+    domega x (P - O) + omega x (omega x (P - O))."""
+    for m in range(12):
+        out[m] = 0.0
+    if b < 0:
+        return
+    if bk[b] == 1:
+        for m in range(3):
+            out[3 + m] = bax[b, m] * v[bq[b, 0]]
+        return
+    for m in range(3):
+        j = bq[b, m]
+        out[m] = q[j] if j >= 0 else b0[b, m]
+        out[3 + m] = v[j] if j >= 0 else 0.0
+    if bk[b] == 0:
+        w = v[bq[b, 3]] if bq[b, 3] >= 0 else 0.0
+        for m in range(3):
+            out[6 + m] = bax[b, m] * w
+        return
+    i0, i1, i2 = bq[b, 4], bq[b, 5], bq[b, 6]
+    p0, p1, p2 = q[i0], q[i1], q[i2]
+    d0, d1, d2 = v[i0], v[i1], v[i2]
+    a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+    x0, x1, x2 = _cross(p0, p1, p2, d0, d1, d2)               # phi x phi_dot
+    y0, y1, y2 = _cross(p0, p1, p2, x0, x1, x2)
+    z0, z1, z2 = _cross(d0, d1, d2, x0, x1, x2)
+    out[6], out[7], out[8] = d0 + a * x0 + bb * y0, d1 + a * x1 + bb * y1, d2 + a * x2 + bb * y2   # T phi_dot
+    pd = p0 * d0 + p1 * d1 + p2 * d2
+    out[9] = pd * (ca * x0 + cb * y0) + bb * z0                                                 # dT/dt phi_dot
+    out[10] = pd * (ca * x1 + cb * y1) + bb * z1
+    out[11] = pd * (ca * x2 + cb * y2) + bb * z2
+
+
+@njit(cache=True, inline="always")
+def _point_motion(P, i, mo):
+    """(velocity, convective acceleration) of point P[i] on a body with motion mo (_body_motion)."""
+    r0, r1, r2 = P[i, 0] - mo[0], P[i, 1] - mo[1], P[i, 2] - mo[2]
+    c0, c1, c2 = _cross(mo[6], mo[7], mo[8], r0, r1, r2)
+    e0, e1, e2 = _cross(mo[6], mo[7], mo[8], c0, c1, c2)
+    f0, f1, f2 = _cross(mo[9], mo[10], mo[11], r0, r1, r2)
+    return mo[3] + c0, mo[4] + c1, mo[5] + c2, e0 + f0, e1 + f1, e2 + f2
+
+
+@njit(cache=True)
+def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
+    """Velocities VT and convective accelerations AT (zero coordinate accelerations) of the touching
+    points T of a span whose stops move with mA, mB (_body_motion): the tangency conditions
+    (TB - TA) . n = 0 differentiated once and twice (same 2 x 2 matrix as _tangent_rate)."""
+    uA0, uA1, uA2, gA0, gA1, gA2 = _point_motion(P, iA, mA)
+    uB0, uB1, uB2, gB0, gB1, gB2 = _point_motion(P, iB, mB)
+    d0, d1, d2 = T[3] - T[0], T[4] - T[1], T[5] - T[2]
+    n = np.zeros((2, 3))
+    t = np.zeros((2, 3))
+    wn = np.zeros((2, 3))      # omega x n
+    for e in range(2):
+        R = RA if e == 0 else RB
+        if R > 0.0:
+            ip = iA if e == 0 else iB
+            ax = aA if e == 0 else aB
+            mo = mA if e == 0 else mB
+            for m in range(3):
+                n[e, m] = (T[3 * e + m] - P[ip, m]) / R
+            t[e, 0], t[e, 1], t[e, 2] = _cross(ax[0], ax[1], ax[2], n[e, 0], n[e, 1], n[e, 2])
+            wn[e, 0], wn[e, 1], wn[e, 2] = _cross(mo[6], mo[7], mo[8], n[e, 0], n[e, 1], n[e, 2])
+    jAA = d0 * t[0, 0] + d1 * t[0, 1] + d2 * t[0, 2]
+    jAB = RB * (t[1, 0] * n[0, 0] + t[1, 1] * n[0, 1] + t[1, 2] * n[0, 2])
+    jBA = -RA * (t[0, 0] * n[1, 0] + t[0, 1] * n[1, 1] + t[0, 2] * n[1, 2])
+    jBB = d0 * t[1, 0] + d1 * t[1, 1] + d2 * t[1, 2]
+    # first order: n_dot = omega x n + t alpha_dot
+    e0 = uB0 + RB * wn[1, 0] - uA0 - RA * wn[0, 0]
+    e1 = uB1 + RB * wn[1, 1] - uA1 - RA * wn[0, 1]
+    e2 = uB2 + RB * wn[1, 2] - uA2 - RA * wn[0, 2]
+    gA = -(e0 * n[0, 0] + e1 * n[0, 1] + e2 * n[0, 2] + d0 * wn[0, 0] + d1 * wn[0, 1] + d2 * wn[0, 2])
+    gB = -(e0 * n[1, 0] + e1 * n[1, 1] + e2 * n[1, 2] + d0 * wn[1, 0] + d1 * wn[1, 1] + d2 * wn[1, 2])
+    xA, xB = _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB)
+    nd = np.empty((2, 3))
+    for m in range(3):
+        nd[0, m] = wn[0, m] + t[0, m] * xA
+        nd[1, m] = wn[1, m] + t[1, m] * xB
+    VT[0], VT[1], VT[2] = uA0 + RA * nd[0, 0], uA1 + RA * nd[0, 1], uA2 + RA * nd[0, 2]
+    VT[3], VT[4], VT[5] = uB0 + RB * nd[1, 0], uB1 + RB * nd[1, 1], uB2 + RB * nd[1, 2]
+    # second order at zero alpha_ddot: n_ddot0 = domega x n + omega x n_dot + t_dot alpha_dot,
+    # t_dot = (omega x a) x n + a x n_dot
+    nn = np.zeros((2, 3))
+    for e in range(2):
+        R = RA if e == 0 else RB
+        if R == 0.0:
+            continue
+        ax = aA if e == 0 else aB
+        mo = mA if e == 0 else mB
+        al = xA if e == 0 else xB
+        h0, h1, h2 = _cross(mo[9], mo[10], mo[11], n[e, 0], n[e, 1], n[e, 2])
+        k0, k1, k2 = _cross(mo[6], mo[7], mo[8], nd[e, 0], nd[e, 1], nd[e, 2])
+        w0, w1, w2 = _cross(mo[6], mo[7], mo[8], ax[0], ax[1], ax[2])
+        s0, s1, s2 = _cross(w0, w1, w2, n[e, 0], n[e, 1], n[e, 2])
+        r0, r1, r2 = _cross(ax[0], ax[1], ax[2], nd[e, 0], nd[e, 1], nd[e, 2])
+        nn[e, 0] = h0 + k0 + (s0 + r0) * al
+        nn[e, 1] = h1 + k1 + (s1 + r1) * al
+        nn[e, 2] = h2 + k2 + (s2 + r2) * al
+    dd0, dd1, dd2 = VT[3] - VT[0], VT[4] - VT[1], VT[5] - VT[2]
+    f0 = gB0 + RB * nn[1, 0] - gA0 - RA * nn[0, 0]
+    f1 = gB1 + RB * nn[1, 1] - gA1 - RA * nn[0, 1]
+    f2 = gB2 + RB * nn[1, 2] - gA2 - RA * nn[0, 2]
+    hA = -(f0 * n[0, 0] + f1 * n[0, 1] + f2 * n[0, 2] + 2.0 * (dd0 * nd[0, 0] + dd1 * nd[0, 1] + dd2 * nd[0, 2])
+           + d0 * nn[0, 0] + d1 * nn[0, 1] + d2 * nn[0, 2])
+    hB = -(f0 * n[1, 0] + f1 * n[1, 1] + f2 * n[1, 2] + 2.0 * (dd0 * nd[1, 0] + dd1 * nd[1, 1] + dd2 * nd[1, 2])
+           + d0 * nn[1, 0] + d1 * nn[1, 1] + d2 * nn[1, 2])
+    yA, yB = _solve2(RA, RB, jAA, jAB, jBA, jBB, hA, hB)
+    AT[0], AT[1], AT[2] = gA0 + RA * (nn[0, 0] + t[0, 0] * yA), gA1 + RA * (nn[0, 1] + t[0, 1] * yA), gA2 + RA * (nn[0, 2] + t[0, 2] * yA)
+    AT[3], AT[4], AT[5] = gB0 + RB * (nn[1, 0] + t[1, 0] * yB), gB1 + RB * (nn[1, 1] + t[1, 1] * yB), gB2 + RB * (nn[1, 2] + t[1, 2] * yB)
+
+
+@njit(cache=True)
+def rows_accel(q, v, G, acc):
+    """acc = (dB/dt) v of the rows (their acceleration at zero coordinate accelerations), in closed
+    form at the poses of the last rows_eval: body motions (_body_motion), touching points by
+    differentiating the tangency conditions twice (_tangent_accel), a W1 wrap's s by R times the
+    second derivative of the wrap angle in the sheave's frame.
+    (rows_accel_fd: the same by a second difference along v.)"""
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    nb = bq.shape[0]
+    mo = np.empty((nb, 12))
+    for b in range(nb):
+        _body_motion(q, v, bq, b0, bk, bax, b, mo[b])
+    zero = np.zeros(12)
+    nsp = sp.shape[0]
+    VT = np.empty((nsp, 6))
+    AT = np.empty((nsp, 6))
+    aA = np.empty(3)
+    aB = np.empty(3)
+    for s in range(nsp):
+        iA, iB = sp[s, 0], sp[s, 1]
+        aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
+        aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+        _tangent_accel(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, mo[pb[iA]] if pb[iA] >= 0 else zero,
+                       mo[pb[iB]] if pb[iB] >= 0 else zero, TW[s], VT[s], AT[s])
+    for r in range(rk.shape[0]):
+        if rk[r, 0] == ROW_TANGENT:
+            acc[r] = AT[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+            continue
+        k_in, k_out = rk[r, 1], rk[r, 2]
+        ip = int(rf[r, 3])
+        m = mo[pb[ip]] if pb[ip] >= 0 else zero
+        n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+        sgn = rf[r, 1]
+        n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
+        uc0, uc1, uc2, ac0, ac1, ac2 = _point_motion(P, ip, m)
+        tot = 0.0
+        for e in range(2):
+            k, o = (k_out, 0) if e == 0 else (k_in, 3)
+            x0, x1, x2 = TW[k, o] - P[ip, 0], TW[k, o + 1] - P[ip, 1], TW[k, o + 2] - P[ip, 2]
+            # velocity and acceleration relative to the sheave's frame (omega = m[6:9])
+            w0, w1, w2 = _cross(m[6], m[7], m[8], x0, x1, x2)
+            y0, y1, y2 = VT[k, o] - uc0 - w0, VT[k, o + 1] - uc1 - w1, VT[k, o + 2] - uc2 - w2
+            ux0, ux1, ux2 = VT[k, o] - uc0, VT[k, o + 1] - uc1, VT[k, o + 2] - uc2
+            c0, c1, c2 = _cross(m[9], m[10], m[11], x0, x1, x2)
+            d0, d1, d2 = _cross(m[6], m[7], m[8], ux0, ux1, ux2)
+            h0, h1, h2 = _cross(m[6], m[7], m[8], w0, w1, w2)
+            z0 = AT[k, o] - ac0 - c0 - 2.0 * d0 + h0
+            z1 = AT[k, o + 1] - ac1 - c1 - 2.0 * d1 + h1
+            z2 = AT[k, o + 2] - ac2 - c2 - 2.0 * d2 + h2
+            nx0, nx1, nx2 = _cross(n0, n1, n2, x0, x1, x2)
+            xx = x0 * x0 + x1 * x1 + x2 * x2
+            th = ((nx0 * z0 + nx1 * z1 + nx2 * z2) / xx
+                  - 2.0 * (nx0 * y0 + nx1 * y1 + nx2 * y2) * (x0 * y0 + x1 * y1 + x2 * y2) / (xx * xx))
+            tot += th if e == 0 else -th
+        acc[r] = rf[r, 0] * tot
+
+
+@njit(cache=True)
+def rows_accel_fd(q, v, G, cols, f0, fp, fm, qs, acc):
+    """rows_accel by the second central difference of the rows along the body velocities (step
+    NL_EPS; the tests' reference); f0 = f(q)."""
+    nrm = 0.0
+    for k in range(cols.shape[0]):
+        x = abs(v[cols[k]])
+        if x > nrm:
+            nrm = x
+    if nrm == 0.0:
+        acc[:] = 0.0
+        return
+    for i in range(q.shape[0]):
+        qs[i] = q[i]
+    for k in range(cols.shape[0]):
+        j = cols[k]
+        qs[j] = q[j] + NL_EPS * v[j] / nrm
+    rows_eval(qs, *G, -1, fp)
+    for k in range(cols.shape[0]):
+        j = cols[k]
+        qs[j] = q[j] - NL_EPS * v[j] / nrm
+    rows_eval(qs, *G, -1, fm)
+    sc = nrm * nrm / (NL_EPS * NL_EPS)
+    for r in range(f0.shape[0]):
+        acc[r] = (fp[r] - 2.0 * f0[r] + fm[r]) * sc
+    rows_eval(q, *G, -1, fp)     # the points, tangents and contact angles of q again
+
+
 @njit(cache=True)
 def nl_update(K, c, q, v):
     """Nonlinear rows at (q, v): element maps el_coef <- B(q), c <- f(q) - B(q) q, K.nl_acc <- dB/dt v
@@ -259,29 +635,7 @@ def nl_update(K, c, q, v):
          K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
     acc = K.nl_racc
-    nrm = 0.0
-    for k in range(K.nl_cols.shape[0]):
-        x = abs(v[K.nl_cols[k]])
-        if x > nrm:
-            nrm = x
-    if nrm > 0.0:
-        # second derivative of f along the body velocities (sigma enters linearly)
-        for k in range(K.nl_cols.shape[0]):
-            j = K.nl_cols[k]
-            qs[j] = q[j] + NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, -1, fp)
-        for k in range(K.nl_cols.shape[0]):
-            j = K.nl_cols[k]
-            qs[j] = q[j] - NL_EPS * v[j] / nrm
-        rows_eval(qs, *G, -1, fm)
-        for k in range(K.nl_cols.shape[0]):
-            qs[K.nl_cols[k]] = q[K.nl_cols[k]]
-        sc = nrm * nrm / (NL_EPS * NL_EPS)
-        for r in range(f0.shape[0]):
-            acc[r] = (fp[r] - 2.0 * f0[r] + fm[r]) * sc
-    else:
-        for r in range(f0.shape[0]):
-            acc[r] = 0.0
+    rows_accel(q, v, G, acc)
     el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, K.el_coef, K.nl_ent, K.nl_rw
     for ie in range(ent.shape[0]):
         for a in range(ent.shape[1]):
@@ -339,7 +693,7 @@ def empty_fields() -> dict:
                 nl_colbody=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
                 nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
-                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)))
+                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64))
 
 
 class NonlinearRows:
@@ -463,7 +817,7 @@ class NonlinearRows:
                  nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
                  nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
                  nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
-                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape))
+                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64))
         if nr:
             q0 = np.asarray(q0, float)
             G = tuple(f[k] for k in GEOMETRY_FIELDS)
@@ -523,10 +877,10 @@ def _rot_mass(p0, p1, p2, J, out):
 
 
 @njit(cache=True)
-def rigid_terms(K, q, v, M, Q):
-    """Rotational inertia of the spatial rigid bodies: M[phi, phi] += M_r(phi) and the
-    quadratic-velocity force -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2), both by central
-    differences of M_r (step RB_H)."""
+def rigid_terms_fd(K, q, v, M, Q):
+    """rigid_terms from the Lagrangian by central differences of M_r (step RB_H; the tests'
+    reference): M[phi, phi] += M_r(phi) and the quadratic-velocity force
+    -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2)."""
     Mr = np.empty((3, 3))
     Mp = np.empty((3, 3))
     Mm = np.empty((3, 3))
@@ -561,6 +915,65 @@ def rigid_terms(K, q, v, M, Q):
             Q[K.rb_q[k, c]] += dT
         for a in range(3):
             Q[K.rb_q[k, a]] -= dMw[a]
+
+
+@njit(cache=True)
+def rigid_terms(K, q, v, M, Q):
+    """Rotational inertia of the spatial rigid bodies in closed form. With the world angular velocity
+    w = T phi_dot and the world inertia J_w = R J R^T, the Euler equations
+    J_w (T phi_ddot + dT/dt phi_dot) + w x J_w w = torque, projected by T^T (virtual work), give
+    M[phi, phi] += T^T J_w T and Q[phi] -= T^T (J_w dT/dt phi_dot + w x J_w w), where
+    dT/dt phi_dot = (phi . phi_dot) (ca phi x phi_dot + cb phi x (phi x phi_dot)) + b phi_dot x (phi x phi_dot)."""
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    Jw = np.empty((3, 3))
+    g = np.empty(3)
+    for k in range(K.rb_q.shape[0]):
+        i0, i1, i2 = K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2]
+        p0, p1, p2 = q[i0], q[i1], q[i2]
+        a, b, s1, ca, cb = _rot_coefs(p0, p1, p2)
+        ph = (p0, p1, p2)
+        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        for i in range(3):
+            for m in range(3):
+                p2im = ph[i] * ph[m] - (th2 if i == m else 0.0)
+                e = 1.0 if i == m else 0.0
+                T[i, m] = e + a * P[i][m] + b * p2im
+                R[i, m] = e + s1 * P[i][m] + a * p2im
+        J = K.rb_J[k]
+        for i in range(3):
+            for m in range(3):
+                acc = 0.0
+                for r in range(3):
+                    for c in range(3):
+                        acc += R[i, r] * J[r, c] * R[m, c]
+                Jw[i, m] = acc
+        d0, d1, d2 = v[i0], v[i1], v[i2]
+        w0 = T[0, 0] * d0 + T[0, 1] * d1 + T[0, 2] * d2
+        w1 = T[1, 0] * d0 + T[1, 1] * d1 + T[1, 2] * d2
+        w2 = T[2, 0] * d0 + T[2, 1] * d1 + T[2, 2] * d2
+        x0, x1, x2 = p1 * d2 - p2 * d1, p2 * d0 - p0 * d2, p0 * d1 - p1 * d0       # phi x phi_dot
+        y0, y1, y2 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2, p0 * x1 - p1 * x0       # phi x (phi x phi_dot)
+        z0, z1, z2 = d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0       # phi_dot x (phi x phi_dot)
+        pd = p0 * d0 + p1 * d1 + p2 * d2
+        t0 = pd * (ca * x0 + cb * y0) + b * z0
+        t1 = pd * (ca * x1 + cb * y1) + b * z1
+        t2 = pd * (ca * x2 + cb * y2) + b * z2
+        h0 = Jw[0, 0] * w0 + Jw[0, 1] * w1 + Jw[0, 2] * w2
+        h1 = Jw[1, 0] * w0 + Jw[1, 1] * w1 + Jw[1, 2] * w2
+        h2 = Jw[2, 0] * w0 + Jw[2, 1] * w1 + Jw[2, 2] * w2
+        g[0] = Jw[0, 0] * t0 + Jw[0, 1] * t1 + Jw[0, 2] * t2 + w1 * h2 - w2 * h1
+        g[1] = Jw[1, 0] * t0 + Jw[1, 1] * t1 + Jw[1, 2] * t2 + w2 * h0 - w0 * h2
+        g[2] = Jw[2, 0] * t0 + Jw[2, 1] * t1 + Jw[2, 2] * t2 + w0 * h1 - w1 * h0
+        for m in range(3):
+            Q[K.rb_q[k, m]] -= T[0, m] * g[0] + T[1, m] * g[1] + T[2, m] * g[2]
+            for n in range(3):
+                acc = 0.0
+                for i in range(3):
+                    for r in range(3):
+                        acc += T[i, m] * Jw[i, r] * T[r, n]
+                M[K.rb_q[k, m], K.rb_q[k, n]] += acc
 
 
 def rigid_fields(scene, body_dofs) -> dict:
