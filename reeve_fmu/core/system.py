@@ -532,7 +532,9 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
     """Fill y with the outputs listed in K.out_* (see model.py)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, True, np.empty(K.crp_s.shape[0]))
+    # fresh = True as a runtime bool, not a literal: numba compiles outputs_ws once for this and the
+    # stepping loop's call (a literal argument is a signature of its own)
+    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, n_el >= 0, np.empty(K.crp_s.shape[0]))
 
 
 @njit(cache=True)
