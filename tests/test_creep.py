@@ -221,7 +221,7 @@ def test_energy_balance_with_drive_work_and_creep_dissipation():
     """Work of the drive torque = change of kinetic + gravity + strain energy + creep dissipation
     (no damping; generalized-alpha rho_inf = 1, h = 1e-3, the dissipation integrated by the trapezoid
     rule per step). Over 5 s (the rope runs ~7 m over the pulley, tensions differ by up to ~100 N at
-    EA = 2e4 N) the balance closes to <= 1e-6 of the largest kinetic energy (measured 6e-9 with a
+    EA = 2e4 N) the balance closes to <= 3e-7 of the largest kinetic energy (measured 5.4e-8 with a
     creep dissipation of 0.07 J; second order: h / 2 divides it by 4): the rim kinematics, its inertia
     and the creep force are energy-consistent."""
     tau, h, t_end = 3.0, 1e-3, 5.0
@@ -241,7 +241,7 @@ def test_energy_balance_with_drive_work_and_creep_dissipation():
         err = max(err, abs(T + Vg + U + D - W - E0))
         Tmax = max(Tmax, T)
     assert D > 0.05 and Tmax > 10.0
-    assert err <= 1e-6 * Tmax
+    assert err <= 3e-7 * Tmax          # measured 5.4e-8 (1e-6 before)
 
 
 def test_infinitely_stiff_rope_recovers_the_rigid_rim():
