@@ -45,11 +45,15 @@ class Body:
     motion: "Motion | None" = None   # how the joint coordinate moves
 
 
+MOTION_KINDS = ("free", "profile", "torque", "speed-input", "torque-input")
+
+
 @dataclass(frozen=True)
 class Motion:
     """A joint's motion: free (with viscous damping), a jerk-limited S-curve profile of the joint
-    coordinate, or a torque (force) table acting on the joint's inertia."""
-    kind: str = "free"               # free | profile | torque
+    coordinate, a torque (force) table acting on the joint's inertia, or an input of the Plant
+    (speed-input: the joint rate follows it; torque-input: it acts on the joint's inertia)."""
+    kind: str = "free"               # free | profile | torque | speed-input | torque-input
     distance: float = 0.0            # rad (revolute) or m (prismatic), S-curve travel
     v_max: float = 0.1
     a_max: float = 0.1
@@ -468,7 +472,7 @@ def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
                                   f"[kg m^2] (including m d^2 of the centre of mass), got {inertia:g}")
     mo = r.table(b.get("motion", {}), f"{path}.motion", SCHEMA_KEYS["motion"])
     mp = f"{path}.motion"
-    motion = Motion(kind=r.string(mo, mp, "kind", "free", ("free", "profile", "torque")),
+    motion = Motion(kind=r.string(mo, mp, "kind", "free", MOTION_KINDS),
                     distance=r.number(mo, mp, "distance", 0.0), v_max=r.number(mo, mp, "v_max", 0.1, positive=True),
                     a_max=r.number(mo, mp, "a_max", 0.1, positive=True),
                     jerk=r.number(mo, mp, "jerk", 0.2, positive=True),

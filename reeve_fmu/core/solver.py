@@ -102,6 +102,21 @@ def lu_solve(LU, piv, b):
 # path is faster (measured in benchmarks/scaling.py, docs/performance.md).
 SPARSE_MIN_FREE = 40
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
+# A Newton tolerance at or below TOL_ROUNDOFF asks for convergence to round-off: the round-off exit
+# (position change <= 1e-14 (1 + |q|)) then also waits until the correction stops shrinking, since
+# at that exit accelerations may still move by ~1e-14 |q| / (h^2 beta), ~1e-6 m/s^2 at h = 1 ms.
+TOL_ROUNDOFF = 1e-10
+
+
+@njit(cache=True, inline="always")
+def _converged(dmax, dprev, amax, qmax, bq, tol, last):
+    """Newton exit test on the last correction dmax (the one before: dprev)."""
+    if dmax <= tol * (1.0 + amax):
+        return True
+    if dmax * bq > 1e-14 * (1.0 + qmax):
+        return False
+    return tol > TOL_ROUNDOFF or dmax > 0.5 * dprev or last
+
 
 @njit(cache=True, inline="always")
 def _residual(K, W, c, q, v, qdd, t, u, r):
@@ -191,6 +206,7 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
                 info[0] = 0.0
                 continue
             info[0] = h
+        dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
                 ok = _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
@@ -221,10 +237,11 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
                 break
             # converged: relative acceleration change below tol, or the position change it
             # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
-            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+            if _converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
                     info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
                 return 0
+            dprev = dmax
     return 1
 
 
@@ -267,6 +284,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
                 info[0] = 0.0
                 continue
             info[0] = h
+        dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
                 ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
@@ -297,10 +315,11 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
             info[2] += 1
             if not (dmax == dmax) or dmax > 1e300:
                 break
-            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+            if _converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
                     info[0] = 0.0
                 return 0
+            dprev = dmax
     return 1
 
 
