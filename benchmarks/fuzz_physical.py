@@ -208,14 +208,15 @@ def _run(case):
 
 
 def warm_up():
-    """Load (or compile) the numba kernels outside any case's time limit: a timeout inside a compile
-    leaves numba's library half-built for the rest of the process."""
-    for case in (dict(scene="scenes/hanging_rope.toml", kind="scale", path=["bodies", 0, "mass"], arg=1.0,
-                      label="warm-up"),
-                 dict(scene="scenes/crane_two_fall.toml", kind="scale", path=["bodies", 0, "mass"], arg=1.0,
-                      label="warm-up"),
-                 dict(scene="scenes/elevator_2to1.toml", kind="scale", path=["bodies", 0, "mass"], arg=1.0,
-                      label="warm-up")):
+    """Load (or compile) the numba kernels outside any case's time limit: one unchanged run of every
+    scene the cases use (dense and banded Newton paths, cranes). A timeout inside a compile leaves
+    numba's library half-built for the rest of the process, and a cold compile of a path no warm-up
+    run took (e.g. the banded one of a 64-element scene) takes minutes on a loaded machine."""
+    first = {}
+    for c in cases():
+        if c["kind"] == "scale":
+            first.setdefault(c["scene"], dict(c, arg=1.0, label="warm-up"))   # a key of it x 1: unchanged
+    for case in first.values():
         run_case(case, timeout=0)
 
 

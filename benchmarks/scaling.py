@@ -13,6 +13,7 @@ Writes DIR/scaling.json and the log-log plot DIR/scaling.png.
     python benchmarks/scaling.py --out docs/img          # full (docs/performance.md), ~10 min
     python benchmarks/scaling.py --quick --out /tmp/sc    # 1-32 elements per span, ~1 min
     python benchmarks/scaling.py --baseline ../main --trip-only   # 1D trip against another checkout
+    python benchmarks/scaling.py --rest-or-moving     # 8-32 el/span: window at rest vs during the trip
 """
 from __future__ import annotations
 
@@ -49,13 +50,13 @@ def crane(eps):
     return sc.with_overrides(ropes=ropes, bodies=(block,), drive=drive, model="spatial", statics="none")
 
 
-def time_case(scene, sparse, window, repeat=3, jacobian="analytic"):
+def time_case(scene, sparse, window, repeat=3, jacobian="analytic", skip=0.01):
     m = build_model(scene)
     sim = Simulator(m, sparse=sparse, step=1e-3, jacobian=jacobian)
     t0 = time.perf_counter()
     st = sim.initial_state()
     statics = time.perf_counter() - t0
-    sim.advance(st, st.t + 0.01)
+    sim.advance(st, st.t + skip)
     wall = float("inf")
     for _ in range(repeat):     # best of `repeat` consecutive windows (the machine is shared)
         n0, j0, i0 = st.info[1], st.info[3], st.info[2]
@@ -134,6 +135,18 @@ def trip_1d(baseline, rounds=3):
     return best
 
 
+def at_rest_or_moving(epss=(8, 16, 32), window=0.1):
+    """The elevator's per-step cost right after the statics (ropes at rest, as in the scaling table)
+    against a window during the trip (from t = 2 s, car moving): is a mesh's outlier a state at rest?"""
+    for eps in epss:
+        r0 = time_case(elevator(eps), None, window)
+        r1 = time_case(elevator(eps), None, window, skip=2.0)
+        print(f"elevator {eps:3d} el/span nq {r0['nq']:5d}: at rest {r0['us_per_step']:7.0f} us/step "
+              f"({r0['iter_per_step']:.2f} it/step, {r0['us_per_iter']:.0f} us/it), moving {r1['us_per_step']:7.0f} "
+              f"us/step ({r1['iter_per_step']:.2f} it/step, {r1['us_per_iter']:.0f} us/it), "
+              f"load {os.getloadavg()[0]:.1f}", flush=True)
+
+
 def plot(rows, path):
     import matplotlib
     matplotlib.use("Agg")
@@ -160,7 +173,11 @@ def main(argv=None):
     ap.add_argument("--dense-max", type=int, default=None, help="largest elements/span timed dense")
     ap.add_argument("--baseline", default=None, help="another checkout: compare the 1D 2:1 trip speed with it")
     ap.add_argument("--trip-only", action="store_true", help="only the 1D trip comparison (--baseline)")
+    ap.add_argument("--rest-or-moving", action="store_true", help="only the at-rest/moving windows at 8-32 el/span")
     a = ap.parse_args(argv)
+    if a.rest_or_moving:
+        at_rest_or_moving()
+        return
     if a.baseline:
         trip_1d(a.baseline)
         if a.trip_only:

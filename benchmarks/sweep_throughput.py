@@ -8,7 +8,10 @@ Each cluster first runs one warm-up task per worker (numba kernels load from the
 --rounds R repeats the measurement in the order 1,2 | 2,1 | 1,2 ... so that a drift of the machine's
 background load falls on both sizes; the speed-up is that of the median rows/s per size. --plain also
 runs the same runs on a plain process pool (no Dask) of each size: the ceiling the hardware gives.
-The workers' CPU share (CPU seconds / (wall x workers)) tells whether they got whole cores.
+The workers' CPU share (CPU seconds / (wall x workers)) tells whether they got whole cores; the CPU time
+per run (median over the runs) and the speed-up it allows (workers x CPU per run of 1 worker / CPU per
+run of n) are the figures that hold on a loaded machine; the main process (client, scheduler, nannies)
+CPU share tells what the Dask machinery costs beside the workers.
 """
 from __future__ import annotations
 
@@ -41,9 +44,13 @@ def _cpu_seconds() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _record(kind, n_workers, runs, failed, wall, cpu, load0, load1) -> dict:
+def _record(kind, n_workers, runs, failed, wall, cpu, load0, load1, run_cpu, main_cpu) -> dict:
+    """`run_cpu`: CPU seconds of each run (its worker process during the run); `main_cpu`: CPU seconds of
+    this process (client, scheduler and nannies of a local Dask cluster) during the sweep."""
     return {"kind": kind, "workers": n_workers, "runs": runs, "failed": failed, "wall_s": wall,
             "rows_per_s": runs / wall, "worker_cpu_s": cpu, "cpu_share": cpu / (wall * n_workers),
+            "run_cpu_median_s": statistics.median(run_cpu), "run_cpu_mean_s": statistics.fmean(run_cpu),
+            "main_cpu_s": main_cpu, "main_cpu_share": main_cpu / wall,
             "loadavg_before": load0, "loadavg_after": load1}
 
 
@@ -57,9 +64,11 @@ def measure(n_workers: int, runs: int) -> dict:
         del warm
         cpu0 = sum(client.run(_cpu_seconds).values())
         load0 = os.getloadavg()
+        m0 = time.process_time()
         t0 = time.perf_counter()
         rows = sweep.run_sweep(st, client, progress=False)
         wall = time.perf_counter() - t0
+        main_cpu = time.process_time() - m0
         load1 = os.getloadavg()
         cpu = sum(client.run(_cpu_seconds).values()) - cpu0
     finally:
@@ -67,7 +76,7 @@ def measure(n_workers: int, runs: int) -> dict:
         client.close()
         cluster.close()
     failed = sum(r["verdict"] == "ERROR" for r in rows)
-    return _record("dask", n_workers, runs, failed, wall, cpu, load0, load1)
+    return _record("dask", n_workers, runs, failed, wall, cpu, load0, load1, [r["cpu_s"] for r in rows], main_cpu)
 
 
 def _plain_init():
@@ -78,7 +87,8 @@ def _plain_init():
 
 def _plain_run(args):
     st, i, p = args
-    return sweep.run_one(st, i, p)["verdict"]
+    r = sweep.run_one(st, i, p)
+    return r["verdict"], r["cpu_s"]
 
 
 def measure_plain(n_workers: int, runs: int) -> dict:
@@ -92,12 +102,15 @@ def measure_plain(n_workers: int, runs: int) -> dict:
     with ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_plain_init) as ex:
         list(ex.map(_hold, range(n_workers)))    # every process started and warm
         load0 = os.getloadavg()
+        m0 = time.process_time()
         t0 = time.perf_counter()
         out = list(ex.map(_plain_run, [(base, i, p) for i, p in enumerate(st["runs"])]))
         wall = time.perf_counter() - t0
+        main_cpu = time.process_time() - m0
         load1 = os.getloadavg()
-    failed = sum(v == "ERROR" for v in out)
-    return _record("plain", n_workers, runs, failed, wall, float("nan"), load0, load1)
+    failed = sum(v == "ERROR" for v, _ in out)
+    return _record("plain", n_workers, runs, failed, wall, float("nan"), load0, load1, [c for _, c in out],
+                   main_cpu)
 
 
 def _hold(_):
@@ -109,7 +122,8 @@ def _line(r: dict) -> str:
         f", worker CPU share {r['cpu_share']:.2f}, worker CPU per run {r['worker_cpu_s'] / r['runs']:.3f} s"
     return (f"{r['kind']:5s} {r['workers']} worker(s): {r['runs']} runs ({r['failed']} failed) in "
             f"{r['wall_s']:.1f} s = {r['rows_per_s']:.3f} rows/s (load average {r['loadavg_before'][0]:.2f} -> "
-            f"{r['loadavg_after'][0]:.2f}{share}, {os.cpu_count()} CPUs)")
+            f"{r['loadavg_after'][0]:.2f}{share}, CPU per run median {r['run_cpu_median_s']:.3f} s, main process "
+            f"CPU share {r['main_cpu_share']:.3f}, {os.cpu_count()} CPUs)")
 
 
 def speedups(res: list, kind: str) -> dict:
@@ -119,10 +133,15 @@ def speedups(res: list, kind: str) -> dict:
         if r["kind"] == kind:
             by.setdefault(r["workers"], []).append(r["rows_per_s"])
     med = {w: statistics.median(v) for w, v in sorted(by.items())}
+    cpu = {w: statistics.median(r["run_cpu_median_s"] for r in res if r["kind"] == kind and r["workers"] == w)
+           for w in med}
     if len(med) < 2:
-        return {"median_rows_per_s": med}
+        return {"median_rows_per_s": med, "run_cpu_s": cpu}
     lo, hi = min(med), max(med)
-    return {"median_rows_per_s": med, "speedup": med[hi] / med[lo], "of": [hi, lo]}
+    # the speed-up the CPU cost of a run allows when every worker has a whole core: independent of the
+    # background load as far as the CPU time of a run is
+    return {"median_rows_per_s": med, "run_cpu_s": cpu, "speedup": med[hi] / med[lo],
+            "cpu_speedup": hi / lo * cpu[lo] / cpu[hi], "of": [hi, lo]}
 
 
 def main(argv=None) -> int:
@@ -145,7 +164,8 @@ def main(argv=None) -> int:
     summary = {kind: speedups(res, kind) for kind in ("dask", "plain") if any(r["kind"] == kind for r in res)}
     for kind, s in summary.items():
         if "speedup" in s:
-            print(f"{kind}: speed-up {s['of'][0]} vs {s['of'][1]} worker(s) (median rows/s): {s['speedup']:.2f}x")
+            print(f"{kind}: speed-up {s['of'][0]} vs {s['of'][1]} worker(s) (median rows/s): {s['speedup']:.2f}x; "
+                  f"from the CPU per run (whole cores): {s['cpu_speedup']:.2f}x")
     if args.json:
         Path(args.json).write_text(json.dumps({"runs": res, "summary": summary}, indent=1) + "\n",
                                    encoding="utf-8")

@@ -231,8 +231,25 @@ def cli_demo(args) -> int:
     return 0
 
 
+def _build_crane(dest: Path, scene: Path) -> int:
+    """A crane scene (a revolute joint and a hoist drive): CranePlant.fmu, CraneDrive.fmu and
+    DEST/CraneDrive.json, the drive parameters sized from the scene."""
+    import json
+
+    from .fmu.crane import build_crane_fmus
+
+    t0 = time.perf_counter()
+    plant, drive, values = build_crane_fmus(dest, scene)
+    print(f"built {plant} and {drive} ({time.perf_counter() - t0:.1f} s)")
+    p = dest / "CraneDrive.json"
+    p.write_text(json.dumps({"drive": values}, indent=1) + "\n", encoding="utf-8")
+    print(f"drive parameters sized for {scene.name} (start values for {drive.name}) -> {p}")
+    return 0
+
+
 def cli_build(args) -> int:
-    """Build the plant FMU of a scene (with --set applied) and the drive FMU; for an elevator scene also
+    """Build the plant FMU of a scene (with --set applied) and the drive FMU (a crane scene: the crane
+    plant and crane drive FMUs, `_build_crane`); for an elevator scene also
     write DEST/<name>.drive.json, the drive parameters sized from the scene (start values to give the
     drive FMU, whose built-in defaults are those of the R1 2:1 elevator)."""
     import json
@@ -250,6 +267,9 @@ def cli_build(args) -> int:
         path = dest / f"{name}.scene.toml"
         path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)), encoding="utf-8")
         scene = path
+    from .fmu.crane import is_crane_scene
+    if is_crane_scene(sc):
+        return _build_crane(dest, scene)
     t0 = time.perf_counter()
     plant, _ = cosim.build_plant_fmu(dest, scene, name)
     print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")

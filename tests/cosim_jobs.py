@@ -16,6 +16,11 @@ import sys
 import tempfile
 import zipfile
 
+try:
+    import fcntl   # the build lock of ensure_test_fmus (POSIX)
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DT = 1e-3
 
@@ -453,24 +458,39 @@ def libcosim_run(ssp_dir, t_end):
 
 
 # ---------------------------------------------------------------------------------------------- fixture helper
+def session_fmu_dir(tmp_path_factory):
+    """Where the session's test FMUs live: under pytest-xdist one directory for all workers (the parent
+    of the per-worker base temp), so the FMUs are built once per session, not once per worker."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER") and fcntl is not None:
+        base = base.parent
+    return base / "reeve_cosim_fmus"
+
+
 def ensure_test_fmus(base, timeout=600.0):
     """Build both FMUs with the CLI (`reeve-fmu build --dest base/fmus`) once per test session and copy
-    the SSP next to them (base/cosim/ReevingSystem -> ../../fmus/*.fmu resolves to base/fmus)."""
+    the SSP next to them (base/cosim/ReevingSystem -> ../../fmus/*.fmu resolves to base/fmus). A file
+    lock makes concurrent callers (pytest-xdist workers) wait for the one that builds (POSIX; without
+    fcntl each worker uses its own directory anyway, see session_fmu_dir)."""
     import pathlib
     import subprocess
 
     base = pathlib.Path(base)
+    base.mkdir(parents=True, exist_ok=True)
     marker = base / "built.ok"
-    if not marker.exists():
-        fmus = base / "fmus"
-        p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--dest", str(fmus)],
-                           cwd=REPO, capture_output=True, text=True, timeout=timeout)
-        if p.returncode != 0:
-            raise RuntimeError(f"reeve-fmu build failed ({p.returncode}):\n{p.stdout}\n{p.stderr}")
-        ssp = base / "cosim" / "ReevingSystem"
-        ssp.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(os.path.join(REPO, "cosim", "ReevingSystem", "SystemStructure.ssd"), ssp)
-        marker.write_text(p.stdout, encoding="utf-8")
+    with open(base / ".lock", "w", encoding="utf-8") as lock:
+        if fcntl is not None:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        if not marker.exists():
+            fmus = base / "fmus"
+            p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--dest", str(fmus)],
+                               cwd=REPO, capture_output=True, text=True, timeout=timeout)
+            if p.returncode != 0:
+                raise RuntimeError(f"reeve-fmu build failed ({p.returncode}):\n{p.stdout}\n{p.stderr}")
+            ssp = base / "cosim" / "ReevingSystem"
+            ssp.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(os.path.join(REPO, "cosim", "ReevingSystem", "SystemStructure.ssd"), ssp)
+            marker.write_text(p.stdout, encoding="utf-8")
     return {"base": str(base), "plant": str(base / "fmus" / "ReevingPlant.fmu"),
             "drive": str(base / "fmus" / "ElectricDrive.fmu"), "ssp": str(base / "cosim" / "ReevingSystem"),
             "build_log": marker.read_text(encoding="utf-8")}

@@ -55,7 +55,8 @@ def test_weighting_transfer_functions_match_iso_tables():
     for table, wname in ((WK_TABLE, "Wk"), (WD_TABLE, "Wd")):
         f = np.array(list(table))
         g = np.abs(A.weighting_response(f, wname))
-        assert np.allclose(g, list(table.values()), rtol=0.004, atol=0.0015), (wname, g)
+        # the table is rounded to 3 decimals (+-5e-4): measured max |error| 7.0e-4 (Wk), 2.4e-4 (Wd)
+        assert np.allclose(g, list(table.values()), rtol=0.0, atol=1.5e-3), (wname, g)
 
 
 def iso_magnitude_wk(f):
@@ -70,6 +71,10 @@ def iso_magnitude_wk(f):
     return abs(hh * hl * ht * hs)
 
 
+# the discretised filter's gain error grows with f/fs: measured -1.5e-6, -7.4e-5, -2.3e-4, -1.2e-3
+WK_GAIN_TOL = {1.0: 1e-5, 5.0: 5e-4, 10.0: 1.5e-3, 20.0: 5e-3}
+
+
 @pytest.mark.parametrize("f", [1.0, 5.0, 10.0, 20.0])
 def test_discrete_wk_filter_gain_on_sines(f):
     """Pure sine through the discretised filter at 1 kHz: steady-state peak-to-peak = 2*|Wk(f)|*amplitude."""
@@ -78,8 +83,8 @@ def test_discrete_wk_filter_gain_on_sines(f):
     y = A.weight(amp * np.sin(2 * np.pi * f * t), fs, "Wk")
     pp = A.peak_to_peak(y[t > 25.0])          # 0.4 Hz band limit has settled
     expected = 2 * amp * iso_magnitude_wk(f)
-    assert np.max(pp) == pytest.approx(expected, rel=0.01)
-    assert A.a95(pp) == pytest.approx(expected, rel=0.01)
+    assert np.max(pp) == pytest.approx(expected, rel=WK_GAIN_TOL[f])
+    assert A.a95(pp) == pytest.approx(expected, rel=WK_GAIN_TOL[f])
 
 
 def test_weighting_rejects_low_sample_rate():
@@ -100,9 +105,9 @@ def test_peak_to_peak_of_pure_sine():
     pp = A.peak_to_peak(x)
     # 2 s at 3 Hz = 12 half cycles; the cut ones at both ends are dropped -> 11 complete, 10 pp values
     assert pp.size == 10
-    assert np.allclose(pp, 2 * amp, rtol=1e-4)
+    assert np.allclose(pp, 2 * amp, rtol=5e-5)                # measured 6.1e-6 (sample grid)
     peaks = A.half_cycle_peaks(x)
-    assert np.allclose(np.abs(peaks), amp, rtol=1e-4) and np.all(peaks[1:] * peaks[:-1] < 0)
+    assert np.allclose(np.abs(peaks), amp, rtol=5e-5) and np.all(peaks[1:] * peaks[:-1] < 0)
 
 
 def test_peak_to_peak_with_exact_zeros_and_varying_amplitude():
@@ -148,34 +153,38 @@ def test_trip_summary_of_ideal_round_trip():
                        traction_limit=1.599)
     assert s["n_trips"] == 2
     t_flight = D / 1.6 + 1.6 / 0.8 + 0.8 / 1.0        # docs/reference-sets.md §3.3
+    # motion below v_rest = 1 mm/s is not counted: v = j t^2/2 stays below it for sqrt(2 v_rest/j) at each end
+    t_counted = t_flight - 2 * math.sqrt(2 * 1e-3 / 1.0)
     for tt in s["trip_times_s"]:
-        assert tt == pytest.approx(t_flight, abs=0.15)     # motion below v_rest (1 mm/s) not counted
+        assert tt == pytest.approx(t_counted, abs=1e-2)    # measured -2.1e-3 s (2 ms samples, 10 Hz filter)
     assert [r["direction"] for r in s["trips"]] == [1, -1]
-    assert s["stopping_errors_m"][0] == pytest.approx(0.004, abs=1e-5)
-    assert s["stopping_errors_m"][1] == pytest.approx(0.0, abs=1e-5)
-    assert s["v_max_m_s"] == pytest.approx(1.6, rel=1e-3)
+    assert s["stopping_errors_m"][0] == pytest.approx(0.004, abs=2e-6)   # measured -1.9e-7 m
+    assert s["stopping_errors_m"][1] == pytest.approx(0.0, abs=2e-6)     # measured 1.9e-7 m
+    assert s["v_max_m_s"] == pytest.approx(1.6, rel=2.5e-4)              # measured 2.6e-5
     # 10 Hz filtering of the jerk corners adds a few % (Butterworth overshoot)
-    assert s["max_acceleration_m_s2"] == pytest.approx(0.8, rel=0.01)
-    assert s["max_deceleration_m_s2"] == pytest.approx(0.8, rel=0.01)
-    assert s["a95_acceleration_m_s2"] == pytest.approx(0.8, rel=0.01)
-    assert s["max_jerk_m_s3"] == pytest.approx(1.0, rel=0.05)
-    assert s["vib_pp_max_m_s2"] < 0.01                  # an ideal profile has (almost) no vibration
-    assert s["torque_peak_Nm"] == pytest.approx(500.0, rel=1e-4)
-    assert s["traction_ratio_max"] == pytest.approx(1.5, rel=1e-4)
-    assert s["traction_utilisation_max"] == pytest.approx(1.5 / 1.599, rel=1e-4)
+    assert s["max_acceleration_m_s2"] == pytest.approx(0.8, rel=5e-3)    # measured 1.5e-3
+    assert s["max_deceleration_m_s2"] == pytest.approx(0.8, rel=5e-3)    # measured 1.5e-3
+    assert s["a95_acceleration_m_s2"] == pytest.approx(0.8, rel=2e-3)    # measured 2.7e-4
+    assert s["max_jerk_m_s3"] == pytest.approx(1.0, rel=0.05)            # measured 3.4e-2
+    assert s["vib_pp_max_m_s2"] < 0.01                  # an ideal profile has (almost) no vibration: 3.3e-3
+    # peaks of sines sampled at 2 ms: the grid can miss a peak by at most (1 - cos(w h/2)) = 5e-7 (measured 1.7e-10)
+    assert s["torque_peak_Nm"] == pytest.approx(500.0, rel=1e-6)
+    assert s["traction_ratio_max"] == pytest.approx(1.5, rel=1e-8)      # measured 4.5e-13
+    assert s["traction_utilisation_max"] == pytest.approx(1.5 / 1.599, rel=1e-8)
 
 
 def test_vibration_in_constant_speed_region():
-    """A 4 Hz, 0.1 m/s² car vibration: max and A95 peak-to-peak = 2 * 0.1 * |Wk(4 Hz)| (ISO table 0.967)."""
+    """A 4 Hz, 0.1 m/s² car vibration: max and A95 peak-to-peak = 2 * 0.1 * |Wk(4 Hz)| (ISO 8041 sections,
+    0.967 in the table)."""
     prof = scurve(39.0, 1.6, 0.8, 1.0, t_start=1.0)
     t, x, v, a = ideal_record(prof, 31.0, vib=lambda t: 0.1 * np.sin(2 * np.pi * 4.0 * t))
     s = A.trip_summary(t, x, v, a, landings=[0.0, 39.0])
-    expected = 2 * 0.1 * 0.967
-    assert s["vib_pp_max_m_s2"] == pytest.approx(expected, rel=0.03)
-    assert s["vib_pp_a95_m_s2"] == pytest.approx(expected, rel=0.03)
+    expected = 2 * 0.1 * iso_magnitude_wk(4.0)
+    assert s["vib_pp_max_m_s2"] == pytest.approx(expected, rel=0.03)    # measured 1.5e-2 (start transient)
+    assert s["vib_pp_a95_m_s2"] == pytest.approx(expected, rel=3e-3)    # measured 4.6e-4
     n_pp = s["trips"][0]["n_pp"]
     c0, c1 = s["trips"][0]["cs_region_s"]
-    assert n_pp == pytest.approx(2 * 4.0 * (c1 - c0), abs=3)    # two half cycles per period
+    assert n_pp == pytest.approx(2 * 4.0 * (c1 - c0), abs=3)    # two half cycles per period: 145 for 147.0
 
 
 def test_bounce_at_rest_is_not_a_trip():

@@ -32,7 +32,7 @@ def job(name, *args, timeout=600.0):
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    return cosim_jobs.ensure_test_fmus(tmp_path_factory.getbasetemp() / "reeve_cosim_fmus")
+    return cosim_jobs.ensure_test_fmus(cosim_jobs.session_fmu_dir(tmp_path_factory))
 
 
 @pytest.mark.parametrize("scheme,level", [("gauss-seidel", 1), ("jacobi", 1), ("gauss-seidel", 2)])

@@ -336,3 +336,37 @@ def test_step_argument_checks():
     with pytest.raises(ValueError, match="t ="):
         d.step(1.0, 1e-3, 0.0, 0.0)
     assert d.phase == PHASE_IDLE and d.brake_command == 0.0
+
+
+def test_torque_is_held_while_the_brake_closes():
+    """From the brake-apply command until the brake-drop delay has passed the drive holds the torque of
+    the zero-speed hold, whatever speed it measures: a measured speed alternating by ±0.5 rad/s from
+    step to step (what a loop closed on the engaging brake's stiff spring and sampled at 1 ms sees) leaves
+    the torque reference constant; the closed speed loop (Kp = 970 N·m·s/rad) answered it with ±485 N·m."""
+    from reeve_fmu.core.drive import PHASE_DROP, PHASE_HOLD
+
+    p = r1(landings=(0.0, 1.0), moves=(1,))
+    d = ElectricDrive(p)
+    dt, t, w, th, k = 1e-3, 0.0, 0.0, 0.0, 0
+    cmd_prev, t_edge, brake_open = 0.0, -1.0, False
+    hold_ref, refs, taus = None, [], []
+    while t < d.t_end:
+        w_meas = w + (0.5 * (-1) ** k if d.phase == PHASE_DROP else 0.0)
+        tau, cmd = d.step(t, dt, w_meas, th)
+        if d.phase == PHASE_HOLD:
+            hold_ref = d.torque_ref
+        elif d.phase == PHASE_DROP:
+            refs.append(d.torque_ref)
+            taus.append(tau)
+        if cmd != cmd_prev:
+            cmd_prev, t_edge = cmd, t + dt
+        brake_open = (cmd == 1.0 and t + dt - t_edge >= 0.15 - 1e-12) or (brake_open and cmd == 1.0)
+        w = w + dt * (tau - T_EMPTY) / J_EMPTY if brake_open else 0.0
+        th += dt * w
+        t += dt
+        k += 1
+    assert abs(len(refs) - p.brake_drop_delay / dt) <= 1
+    assert all(r == refs[0] for r in refs)                    # no speed feedback while the brake closes
+    # the torque of the hold's last tick (-353.07 N·m): measured 0.0014 N·m from the last whole step in HOLD
+    assert abs(refs[0] - hold_ref) < 0.01, (refs[0], hold_ref)
+    assert abs(taus[-1] - refs[0]) <= 1e-9 * abs(refs[0])      # the torque path has settled (1.1e-13 N·m)

@@ -41,7 +41,7 @@ ASCII_LOCALE = {"LANG": "C", "LC_ALL": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOC
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    return cosim_jobs.ensure_test_fmus(tmp_path_factory.getbasetemp() / "reeve_cosim_fmus")
+    return cosim_jobs.ensure_test_fmus(cosim_jobs.session_fmu_dir(tmp_path_factory))
 
 
 @pytest.fixture(scope="module")

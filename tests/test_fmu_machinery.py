@@ -296,6 +296,26 @@ def test_package_served_from_stable_cache_and_numba_cache_hits(toy, tmp_path):
         assert str(cache) in r2["probe"]["cache_path"]
 
 
+def test_fmu_package_copy_loads_the_kernels_its_source_compiled(toy, tmp_path):
+    """numba's cache is keyed by the path inside the package and the file content, not by where the
+    copy lives: kernels compiled by the package loaded from its snapshot directory are loaded, not
+    compiled again, by the FMU's copy of the same sources (in <cache>/<hash>/reeve_fmu)."""
+    cache = tmp_path / "cache"
+    code = "import json; from reeve_fmu.fmu.jitcheck import jit_cache_probe as p; print(json.dumps(p()))"
+    env = dict(os.environ, REEVE_FMU_CACHE_DIR=str(cache), PYTHONPATH=toy["snap"])
+    p = subprocess.run([sys.executable, "-c", code], cwd=toy["snap"], env=env, capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    direct = json.loads(p.stdout)
+    assert direct["module_file"].startswith(toy["snap"])
+    if not direct["jit"]:
+        pytest.skip("numba is not in use")
+    assert direct["cache_misses"] == 1 and direct["cache_hits"] == 0          # compiled here
+    r = job("cache_run", toy["fmu"], cache=cache)
+    assert r["status"] == 0 and str(cache) in r["pkg_file"]                   # another copy ...
+    assert r["probe"]["cache_hits"] == 1 and r["probe"]["cache_misses"] == 0  # ... no compile
+
+
 def test_host_that_already_imported_reeve_fmu(toy):
     r = job("host_imported", toy["snap"], str(toy["base"]), toy["fmu"], cache=toy["cache"])
     assert r["same_status"] == 0 and r["same_msgs"] == []

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from reeve_fmu.core.jacobian import _element_res, element_block, newton_matrix_analytic
+from reeve_fmu.core.jacobian import _element_res, element_block, element_scratch, newton_matrix_analytic
 from reeve_fmu.core.kernel import compiled_kernel
 from reeve_fmu.core.model import build_model, new_state
 from reeve_fmu.core.scene import Drive, load_scene
@@ -49,7 +49,8 @@ MODELS = {
     "planar-cubic-W1": lambda: elevator(3),
     "planar-cubic-W2": lambda: _ropes(elevator(2), wrap_model="W2"),
     "spatial-linear-crane": lambda: crane(2),
-    "spatial-cubic-crane": lambda: _ropes(crane(1), element="cubic"),
+    "planar-cubic-bending": lambda: _ropes(elevator(2), EI=50.0),
+    "spatial-cubic-crane": lambda: _ropes(crane(1), element="cubic", EI=50.0),
 }
 
 
@@ -84,7 +85,7 @@ def test_element_jacobians(name):
     nd = m.K.nd
     QE, VE, MEs, QEs = np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne))
     X, XD, MEt, QEt = np.empty((1, ne)), np.empty((1, ne)), np.empty((1, ne, ne)), np.empty((1, ne))
-    r0, r1, S, JE = np.empty(ne), np.empty(ne), np.empty((5, ne)), np.empty((ne, ne))
+    r0, r1, S, JE = np.empty(ne), np.empty(ne), element_scratch(nd, ne), np.empty((ne, ne))
     worst = (0.0, -1, "")
     for ie in range(n_el):
         element_eval(KJ, st.c, st.q, st.v, ie, QE, VE, MEs, QEs)
@@ -119,6 +120,8 @@ def test_element_jacobians(name):
             err = np.max((np.abs(B - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2)))
             worst = max(worst, (err, ie, part))
     print(name, worst)
+    # measured 1.3e-9 (1-D) ... 1.4e-7 (planar slack span: the smoothed tension-only law), beyond the
+    # references' own difference
     assert worst[0] <= 1e-6, worst
 
 
@@ -158,4 +161,5 @@ def test_newton_matrix_equals_differences(name, contact):
     A1, A2 = ref
     err = np.max(np.abs(unpack_dense(J, SP) - A2) - np.abs(A1 - A2)) / np.max(np.abs(A2))
     print(name, contact, err)
-    assert err <= 1e-6, err
+    # measured 1.2e-13 (spatial crane) ... 1.06e-10 (1-D elevator), beyond the references' own difference
+    assert err <= 1e-9, err

@@ -31,9 +31,10 @@ def test_hanging_static_elongation_exact():
     r, b = sc.ropes[0], sc.bodies[0]
     g = 9.81
     delta = (b.mass * g * r.length + r.rhoA * g * r.length ** 2 / 2) / r.EA
-    assert y["mass.position"] == pytest.approx(-delta, rel=1e-9)
-    assert y["rope.tension_end"] == pytest.approx(b.mass * g, rel=1e-9)
-    assert y["rope.tension_start"] == pytest.approx(b.mass * g + r.rhoA * g * r.length, rel=1e-9)
+    # round-off of the statics solve: measured 4.8e-14, 3.9e-14, 2.7e-13
+    assert y["mass.position"] == pytest.approx(-delta, rel=3e-13)
+    assert y["rope.tension_end"] == pytest.approx(b.mass * g, rel=3e-13)
+    assert y["rope.tension_start"] == pytest.approx(b.mass * g + r.rhoA * g * r.length, rel=2e-12)
 
 
 def test_hanging_first_axial_frequency_beta_tan_beta():
@@ -53,7 +54,7 @@ def test_hanging_first_axial_frequency_beta_tan_beta():
     r, b = sc.ropes[0], sc.bodies[0]
     beta = brentq(lambda x: x * math.tan(x) - r.rhoA * r.length / b.mass, 1e-9, math.pi / 2 - 1e-9)
     exact = beta * math.sqrt(r.EA / r.rhoA) / r.length
-    assert w1 == pytest.approx(exact, rel=1e-4)
+    assert w1 == pytest.approx(exact, rel=2e-7)      # measured 2.3e-8 (20 elements of 2.5 m)
 
 
 def test_modal_series_reference_meets_its_initial_condition():
@@ -61,13 +62,13 @@ def test_modal_series_reference_meets_its_initial_condition():
     tension at the top), and the late-time mean is the static elongation."""
     sc = _hanging("none")
     z, N = bench.hanging_release_exact(sc, np.array([0.0]))
-    assert abs(z[0]) < 1e-7
-    assert abs(N[0]) < 1e-3 * 500 * 9.81
+    assert abs(z[0]) < 1e-13                         # measured 1.2e-14 m
+    assert abs(N[0]) < 1e-4 * 500 * 9.81             # the series' truncation: measured 1.6e-5 of m g
     t = np.linspace(0.0, 60.0, 120001)
     zt, _ = bench.hanging_release_exact(sc, t, n_modes=50)
     r, b = sc.ropes[0], sc.bodies[0]
     delta = (b.mass * 9.81 * r.length + r.rhoA * 9.81 * r.length ** 2 / 2) / r.EA
-    assert np.mean(zt) == pytest.approx(-delta, rel=2e-3)
+    assert np.mean(zt) == pytest.approx(-delta, rel=2e-3)    # measured 8.7e-4 (60 s of an undamped series)
 
 
 def test_lagrangian_release_follows_the_modal_series():

@@ -200,3 +200,12 @@ def test_findings_explain_the_trip_traction_verdict():
     fail = vd._trip_traction({"traction_ratio_max": 1.9}, lim)
     assert fail.status == "FAIL" and "gross rope slip is possible" in vd.explain([fail])[0]
     assert vd.explain([vd.Verdict("x", "PASS", 1.0, 2.0, "", "")]) == []
+    # the static braking case's margin decides the sentence: R1 2:1 1.593 / 1.599, the high-rise 1.279 / 1.450
+    for value, limit, words in ((1.593, 1.599, "with little margin there"), (1.279, 1.450, "holds with margin")):
+        static = vd.Verdict("EN 81-50 emergency braking (0.5 m/s²)", "PASS", value, limit, "", "")
+        assert words in vd.explain([warn, static])[0]
+    # an encoder-only stop off by 18 mm: the finding quotes the stop with the shaft information system
+    enc = vd.Verdict("stopping accuracy", "FAIL", -18.25, 10.0, "mm", "", "worst stop: 0 m (down, 2)")
+    sis = vd.Verdict("stopping accuracy (with SIS)", "PASS", 4.869, 10.0, "mm", "", "worst stop: 0 m (down, 2)")
+    assert "with it the worst stop of this trip was +4.9 mm (PASS)" in vd.explain([enc, sis])[0]
+    assert "with it" not in vd.explain([enc])[0]

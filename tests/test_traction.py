@@ -49,22 +49,60 @@ def test_check_vector_and_model_limit():
     assert abs(1 + m.K.trac_efa - traction_limit(0.0758, 95, 30, 180)) < 1e-12
 
 
+def hanging_side(mass, span):
+    """Hand statics of one side of the 2:1 roping at the traction sheave: the sheave on the body carries
+    the body and the rope on its half wrap on two falls of equal tension (frictionless, tangent points
+    at one height), plus the weight of the vertical span up to the traction sheave. Six ropes; the
+    weight per metre of stretched rope is rhoA g/(1 + T/EA), so up the span dT/dz = rhoA g/(1 + T/EA),
+    i.e. T + T^2/(2 EA) grows by rhoA g z."""
+    g, rhoA, EA, r = 9.81, 6 * 0.26, 6 * 2.9e6, 0.16
+    T = mass * g / 2
+    for _ in range(20):                  # the stretch depends on the tension: a fixed point
+        T = (mass * g + rhoA * g / (1 + T / EA) * math.pi * r) / 2
+    c = T + T * T / (2 * EA) + rhoA * g * span
+    return EA * (math.sqrt(1 + 2 * c / EA) - 1)
+
+
 def test_car_loading_125_percent_no_slip():
-    """125 % rated load at the bottom landing, mu = 0.1, machine held: the rope only creeps."""
+    """125 % rated load at the bottom landing, mu = 0.1, machine held: the rope does not slip and the
+    tension ratio is the hand statics (car sheave 40 m below the traction sheave, counterweight sheave
+    3 m), below the limit e^(f alpha) = 1.858."""
     sc = variant(mu=en81_mu("loading"), masses={"car": 1300 + 1250},
                  positions={"car": (0.0, 0.0, 0.0), "counterweight": (0.32, 0.0, 39.5)},
                  table=[[0.0, 0.0], [5.0, 0.0]])
     res, sim = run(sc, 3.0)
     assert not sim.warnings
-    assert np.max(np.abs(res["traction.slip"])) < CREEP
-    assert res["traction.traction_ratio"].max() < traction_limit(0.1, 95, 30, 180)
+    assert np.max(np.abs(res["traction.slip"])) < 1e-9                  # measured 2.8e-14 m
+    ratio = res["traction.traction_ratio"]
+    hand = hanging_side(2550.0, 40.0) / hanging_side(1750.0, 3.0)      # 1.5200
+    assert np.max(np.abs(ratio / hand - 1)) < 1e-7                      # measured 9.1e-9
+    assert hand < traction_limit(0.1, 95, 30, 180)
+
+
+def slipping_deceleration(z_car, z_cw, v, e):
+    """Car acceleration (up) of the base scene while the rope slips with T_cw = e T_car at the traction
+    sheave, for a rigid rope: the spans to the traction sheave run at 2v (anchor spans stand still),
+    each sheave rolls (J/r^2 plus its half wrap rho_A pi r of rope), the wrap on a body's sheave takes
+    rope in at 0 and hands it on at 2v (momentum flux rho_A v^2 per fall). Momentum balances:
+      T_car = T_b + w L2 + 2 rho_A L2 a,   2 T_b = (m_car + rho_A pi r)(g + a) + (J/r^2 + rho_A pi r) a + 2 rho_A v^2
+      T_cw  = T_c + w L3 - 2 rho_A L3 a,   2 T_c = (m_cw + rho_A pi r)(g - a) - (J/r^2 + rho_A pi r) a + 2 rho_A v^2
+    with w = rho_A g; T_cw = e T_car is linear in a."""
+    g, rhoA, r, J, m_car, m_cw = 9.81, 6 * 0.26, 0.16, 0.15, 1300.0, 1750.0
+    L2, L3 = 42.5 - (z_car + 2.5), 42.5 - z_cw
+    wrap, roll = rhoA * math.pi * r, J / r ** 2 + rhoA * math.pi * r
+    c0 = (m_car + wrap) * g / 2 + rhoA * v * v + rhoA * g * L2
+    c1 = (m_car + wrap) / 2 + roll / 2 + 2 * rhoA * L2
+    w0 = (m_cw + wrap) * g / 2 + rhoA * v * v + rhoA * g * L3
+    w1 = -(m_cw + wrap) / 2 - roll / 2 - 2 * rhoA * L3
+    return (w0 - e * c0) / (e * c1 - w1)
 
 
 @pytest.mark.parametrize("decel,slips", [(0.3, False), (2.0, True)])
 def test_emergency_braking(decel, slips):
     """Empty car going up at rated speed, machine decelerating at decel, mu = 0.1/(1 + v_rope/10):
     within the limit the rope only creeps; beyond it the rope slips, the tension ratio is pinned at
-    e^(f alpha) and the car decelerates more slowly than the machine."""
+    e^(f alpha) and the car decelerates as the rigid-rope momentum balance with that ratio gives
+    (slipping_deceleration), more slowly than the machine."""
     t_dec = 1.6 / decel
     table = [[0.0, 0.0], [0.5, 0.0], [3.5, 1.6], [6.0, 1.6], [6.0 + t_dec, 0.0], [9.0 + t_dec, 0.0]]
     limit = traction_limit(0.0758, 95, 30, 180)
@@ -72,11 +110,18 @@ def test_emergency_braking(decel, slips):
     slip = np.max(np.abs(res["traction.slip"]))
     ratio = res["traction.traction_ratio"].max()
     if not slips:
-        assert slip < CREEP and ratio < limit
+        assert slip < CREEP and ratio < limit       # measured 4.3e-4 m; 1.5425 (limit 1.5994)
     else:
-        assert slip > 0.1
-        assert abs(ratio / limit - 1) < 0.005
-        assert res["car.acceleration"].min() > -decel * 0.8
+        assert slip > 0.1                           # measured 2.41 m
+        assert abs(ratio / limit - 1) < 0.005       # measured 6.7e-4 (the creep law's overshoot)
+        # the ratio is pinned from 6.05 to 8.24 s; the rope's axial ringing (+-0.23 m/s^2) averages out
+        # over the window: measured -8.7e-4 of the mean deceleration (0.697 m/s^2)
+        t = res.time
+        w = (t > 6.1) & (t < 8.2)
+        a_hand = slipping_deceleration(res["car.position"][w], res["counterweight.position"][w],
+                                       res["car.velocity"][w], limit)
+        assert abs(np.mean(res["car.acceleration"][w]) / np.mean(a_hand) - 1) < 5e-3
+        assert np.mean(a_hand) > -0.5 * decel
 
 
 def test_car_stalled_counterweight_on_buffer_rope_slips():

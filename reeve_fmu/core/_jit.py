@@ -94,10 +94,86 @@ def _cache_dir():
     return str(target)
 
 
+def _install_package_locator(cache_dir: str) -> None:
+    """Cache this package's kernels at `cache_dir/<directory inside the package>`, stamped by file
+    content. numba's own locator names the cache subdirectory after the source file's absolute path,
+    so every copy of the same sources (the checkout, an FMU's vendored copy, a second worktree)
+    compiled everything again into its own subdirectory; `cache_dir` is already keyed by the hash of
+    those sources, so the copies can share one set of compiled kernels. Without the numba internals
+    this relies on, numba's default locator stays in use."""
+    from pathlib import Path
+    try:
+        from numba.core import caching
+        from numba.core.caching import UserProvidedCacheLocator
+    except ImportError:  # pragma: no cover - numba moved its internals
+        return
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # numba >= 0.61 / older
+    pkg = Path(__file__).resolve().parents[1]
+
+    class PackageCacheLocator(UserProvidedCacheLocator):
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            rel = Path(py_file).resolve().parent.relative_to(pkg)
+            self._cache_path = os.path.join(cache_dir, "pkg", *rel.parts)
+
+        def get_source_stamp(self):
+            import hashlib
+            with open(self._py_file, "rb") as f:
+                return hashlib.sha256(f.read()).hexdigest()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                Path(py_file).resolve().relative_to(pkg)
+            except (ValueError, OSError):
+                return None      # not a file of this copy of the package: numba's locators
+            return super().from_function(py_func, py_file)
+
+    classes = getattr(impl, "_locator_classes", None)
+    if isinstance(classes, list):
+        classes.insert(0, PackageCacheLocator)
+
+
+_LOCK_DIR = None   # where compile locks live (None: no cross-process locking)
+
 if _numba is not None and not os.environ.get("NUMBA_CACHE_DIR"):
     _dir = _cache_dir()
     if _dir is not None:
         _numba.config.CACHE_DIR = _dir
+        _install_package_locator(_dir)
+        _LOCK_DIR = os.path.join(_dir, "locks")
+
+
+def _one_compile_at_a_time(dispatcher):
+    """Let one process at a time compile a given kernel. Processes started together on a cold cache
+    (pytest-xdist workers, FMU instances, Dask workers of a sweep) otherwise all compile the same
+    kernels side by side; with the lock the others wait and then load the result from the on-disk
+    cache. numba's in-process compiler lock is taken first, so threads cannot deadlock on the file
+    locks, and a kernel's lock is only ever held while waiting for its callees' (a call graph has no
+    cycles), so processes cannot either."""
+    try:
+        import fcntl
+        from numba.core.compiler_lock import global_compiler_lock
+    except ImportError:  # pragma: no cover - Windows, or numba moved it
+        return dispatcher
+    import hashlib
+    compile_ = dispatcher.compile
+    name = f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
+    path = os.path.join(_LOCK_DIR, hashlib.sha1(name.encode()).hexdigest()[:20] + ".lock")
+
+    def compile(sig):
+        with global_compiler_lock:
+            try:
+                os.makedirs(_LOCK_DIR, exist_ok=True)
+                fh = open(path, "a", encoding="utf-8")
+            except OSError:
+                return compile_(sig)
+            with fh:
+                fcntl.flock(fh, fcntl.LOCK_EX)
+                return compile_(sig)
+
+    dispatcher.compile = compile
+    return dispatcher
 
 
 def njit(*args, **kwargs):
@@ -106,7 +182,11 @@ def njit(*args, **kwargs):
         # numpy error model: float division by zero gives inf/nan instead of a branch + exception
         # on every division (measurably faster in the element kernels); callers check finiteness.
         kwargs.setdefault("error_model", "numpy")
-        return _numba.njit(*args, **kwargs)
+        if _LOCK_DIR is None or not kwargs.get("cache"):
+            return _numba.njit(*args, **kwargs)
+        if len(args) == 1 and callable(args[0]):
+            return _one_compile_at_a_time(_numba.njit(**kwargs)(args[0]))
+        return lambda f: _one_compile_at_a_time(_numba.njit(*args, **kwargs)(f))
     if len(args) == 1 and callable(args[0]) and not kwargs:
         return args[0]
     return lambda f: f

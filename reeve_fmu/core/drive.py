@@ -39,7 +39,7 @@ PHASE_PRETORQUE = 1   # brake applied, torque ramps to the load-weighing pre-tor
 PHASE_LIFT = 2        # brake release commanded, position hold at zero speed (anti-rollback)
 PHASE_RUN = 3         # S-curve running
 PHASE_HOLD = 4        # profile finished, zero-speed position hold, brake still open
-PHASE_DROP = 5        # brake apply commanded, position hold continues until the brake has engaged
+PHASE_DROP = 5        # brake apply commanded, the holding torque is held until the brake has engaged
 PHASE_RAMPDOWN = 6    # brake engaged, torque ramps linearly to zero
 PHASE_DWELL = 7       # at rest between moves: torque off, brake applied
 PHASE_DONE = 8        # after the last move
@@ -73,8 +73,9 @@ class DriveParams:
 
     Sequence per move: pre-torque ramp (`pretorque_time`) -> brake release command -> wait
     `brake_lift_delay` -> S-curve to the target landing -> zero-speed hold (`hold_time`) -> brake apply
-    command -> wait `brake_drop_delay` -> torque ramp to zero (`torque_ramp_time`) -> `dwell_time` -> next
-    move. The first move starts its pre-torque at `start_delay`.
+    command -> wait `brake_drop_delay` holding the last torque (speed loop open while the brake closes) ->
+    torque ramp to zero (`torque_ramp_time`) -> `dwell_time` -> next move. The first move starts its
+    pre-torque at `start_delay`.
     """
 
     # mechanics as seen by the drive
@@ -325,8 +326,15 @@ def _speed_tick(xs, xi, P, sched, prof, tk, w, th, xsis):
             Tref = Tlim
         elif Tref < -Tlim:
             Tref = -Tlim
-        # anti-windup: conditional integration, frozen while saturated in the direction of the error
-        if not ((Tu > Tlim and e > 0.0) or (Tu < -Tlim and e < 0.0)):
+        if phase == PHASE_DROP:
+            # brake closing: hold the torque that held the car at zero speed, speed loop open. Closed on
+            # the engaging brake (a ~380 Hz stick spring on the rotor) the loop, fed once per
+            # communication step, chatters step to step (1 ms Jacobi / 2 ms Gauss-Seidel)
+            if prev_phase != PHASE_DROP:
+                xs[_X_TR0] = xs[_X_TREF]
+            Tref = xs[_X_TR0]
+        elif not ((Tu > Tlim and e > 0.0) or (Tu < -Tlim and e < 0.0)):
+            # anti-windup: conditional integration, frozen while saturated in the direction of the error
             xs[_X_INT] += P[_P_KI] * e * (P[_P_HB] * P[_P_NSP])
         xs[_X_WCMD] = wcmd
         xs[_X_EPOS] = epos

@@ -11,11 +11,13 @@ straight into the banded layout of core/sparse.py:
   * linear element, axial force (elastic, Kelvin-Voigt damping, smoothed tension-only law, with the
     material-length dependence through l = s2 - s1 and the Eshelby force on the s rows) and gravity:
     closed form (`linear_stiffness`);
-  * linear element, inertia terms (d(M_e a_e)/dq_e and the quadratic-velocity vector): element-local
-    central differences of the kernel with stiffness and gravity switched off (2 ne kernel calls per
-    element; exact in v, where these terms are quadratic, second order in q, on the element's scale);
-  * cubic element: element-local central differences of the whole kernel (2 ne kernel calls per
-    element; closed form of its bending and ALE inertia terms not done);
+  * linear element, inertia terms (d(M_e a_e)/dq_e and the quadratic-velocity vector): closed form
+    (elements/linear_jac.py);
+  * cubic element: axial and bending stiffness (with the ALE dependence on l = s2 - s1), Kelvin-Voigt
+    damping and gravity in closed form (elements/cubic_jac.py); inertia terms by element-local central
+    differences of its mass matrix and quadratic-velocity vector (2 ne calls per element; exact in v,
+    where these terms are quadratic, second order in q on the element's scale): their q-derivative
+    in closed form would differentiate the 4-point Gauss sums of N^T N-dot products a second time;
   * q-level terms: hitch springs and dampers, buffers, stored drum rope, brake and the groove friction's
     spring law in closed form (`qlevel_closed`); what couples a q-level row to element strains (a creep
     sheave's kappa and creep force, the groove friction's capacity from the end tensions) by central
@@ -28,8 +30,10 @@ import math
 import numpy as np
 
 from ._jit import njit
-from .elements.cubic import cubic_element_at
+from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
+from .elements.cubic_jac import cubic_stiffness, gravity_jac
 from .elements.linear import SLACK_STRAIN, linear_element_at
+from .elements.linear_jac import linear_inertia
 from .sparse import bordered_factor, residual_sparse
 from .system import UE_CREEP, _static_end_tension, creep_kappa, creep_terms, element_eval, q_terms
 
@@ -126,12 +130,16 @@ def linear_stiffness(nd, rhoA, EA, nu, tonly, G, QE, VE, ie, bq, gv, JE, S):
 
 @njit(cache=True, inline="always")
 def _element_res(K, ie, full, X, XD, ae, G1, MEt, QEt, out):
-    """out = M_e a_e - Q_e of element ie at X[0], XD[0]; full = False: inertia only (a linear
-    element with stiffness, damping and gravity off; G1 then holds zeros)."""
+    """out = M_e a_e - Q_e of element ie at X[0], XD[0]; full = False: inertia only (mass matrix and
+    quadratic-velocity vector: stiffness, damping and gravity off; G1 then holds zeros)."""
     nd = K.nd
     if K.el_type == 1:
-        cubic_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                         G1, X, XD, MEt, QEt, 0)
+        if full:
+            cubic_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                             G1, X, XD, MEt, QEt, 0)
+        else:
+            cubic_mass(nd, K.el_rhoA[ie], X[0], MEt[0])
+            cubic_qv(nd, K.el_rhoA[ie], X[0], XD[0], MEt[0], QEt[0])
     elif full:
         linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, G1, K.el_C[ie],
                           X, XD, MEt, QEt, 0)
@@ -143,6 +151,11 @@ def _element_res(K, ie, full, X, XD, ae, G1, MEt, QEt, out):
         for b in range(ne):
             s += MEt[0, a, b] * ae[b]
         out[a] = s
+
+
+def element_scratch(nd, ne):
+    """Scratch S of element_block."""
+    return np.empty((9 + 4 * nd + 2 * ne, ne))
 
 
 @njit(cache=True)
@@ -158,11 +171,20 @@ def element_block(K, ie, QE, VE, MEs, QEs, ae, ba, bq, gv, JE, X, XD, G1, MEt, Q
         X[0, a] = QE[ie, a]
         XD[0, a] = VE[ie, a]
     for k in range(nd):
-        G1[0, k] = K.el_g[ie, k] if cubic else 0.0
-    if not cubic:
+        G1[0, k] = 0.0
+    if cubic:
+        gravity_jac(nd, K.el_rhoA[ie], K.el_g[ie], X[0], bq, JE)
+        n2 = 2 * nd
+        cubic_stiffness(nd, K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0, X[0], XD[0], bq, gv, JE,
+                        S[9:9 + n2], S[9 + n2:9 + 2 * n2, :n2], S[9 + 2 * n2:9 + 2 * n2 + ne],
+                        S[9 + 2 * n2 + ne:9 + 2 * n2 + 2 * ne], S[:9])
+    else:
         linear_stiffness(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g, QE, VE, ie,
                          bq, gv, JE, S)
-    # central differences: exact for the quadratic-velocity terms (quadratic in v), second order in q
+        linear_inertia(nd, K.el_rhoA[ie], QE, VE, ie, ae, bq, gv, JE)
+        return
+    # cubic inertia, central differences: exact for the quadratic-velocity terms (quadratic in v),
+    # second order in q
     for b in range(ne):
         hq = FD_STEP * (1.0 + abs(QE[ie, b]))
         dx = hq / bq
@@ -223,7 +245,7 @@ def elements_pass(K, SP, W, qdd, pos, J, ba, bq, gv):
     r0 = np.empty(ne)
     r1 = np.empty(ne)
     ae = np.empty(ne)
-    S = np.empty((5, ne))
+    S = np.empty((9 + 4 * nd + 2 * ne, ne))
     el_map = K.el_map
     el_coef = K.el_coef
     for ie in range(el_map.shape[0]):

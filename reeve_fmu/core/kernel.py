@@ -41,6 +41,9 @@ Kernel = namedtuple("Kernel", [
     "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
     # spatial rigid bodies (bodies.rigid_terms): rotation-vector indices, inertia tensors in body axes
     "rb_q", "rb_J",
+    # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
+    # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs
+    "tq_el", "tq_phi", "tq_phic", "tq_vb", "tq_v0", "tq_p", "tq_dref", "tq_out",
 ])
 
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
@@ -162,6 +165,14 @@ if JIT:
         ("jg_B", types.float64[::1]),
         ("rb_q", types.int64[:, ::1]),
         ("rb_J", types.float64[:, :, ::1]),
+        ("tq_el", types.int64[::1]),
+        ("tq_phi", types.int64[:, ::1]),
+        ("tq_phic", types.float64[:, ::1]),
+        ("tq_vb", types.int64[:, ::1]),
+        ("tq_v0", types.float64[:, ::1]),
+        ("tq_p", types.float64[:, ::1]),
+        ("tq_dref", types.float64[::1]),
+        ("tq_out", types.float64[:, ::1]),
     ])
 
     @structref.register
@@ -240,7 +251,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -341,6 +352,14 @@ if JIT:
         k.jg_B = jg_B
         k.rb_q = rb_q
         k.rb_J = rb_J
+        k.tq_el = tq_el
+        k.tq_phi = tq_phi
+        k.tq_phic = tq_phic
+        k.tq_vb = tq_vb
+        k.tq_v0 = tq_v0
+        k.tq_p = tq_p
+        k.tq_dref = tq_dref
+        k.tq_out = tq_out
         return k
 
 

@@ -41,6 +41,7 @@ from .builder.elimination import creep_table, drive_setup, statics_sets
 from .builder.outputs import output_table
 from .builder.spans import add_rope
 from .builder.state import start
+from .builder.torsion import add_torsion
 
 INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
 #                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
@@ -141,6 +142,7 @@ def _build(scene: Scene) -> Model:
     add_body_coordinates(bs)
     for ir, rope in enumerate(scene.ropes):
         add_rope(bs, ir, rope)
+    add_torsion(bs)
     add_body_inertia(bs)
     arr = node_arrays(bs)
     drive = drive_setup(bs)

@@ -16,6 +16,7 @@ from .model import State, build_model
 from .plausibility import check_or_raise
 from .scene import Body, Rope, Scene, SceneError, load_scene
 from .solver import SolverError, Simulator
+from .system import assemble
 
 # plant parameters a user may tune (name -> (unit, description)); all change the compiled model
 PARAMETERS = {
@@ -54,9 +55,52 @@ def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = 
     return replace(scene, bodies=tuple(bodies), ropes=tuple(ropes), drive=drive, brake=brake)
 
 
+def with_joint_input(scene: Scene, body: str, kind: str) -> Scene:
+    """The scene with the joint of `body` driven by a Plant input: kind "speed" (the joint rate
+    follows the input) or "torque" (the input acts on the joint's inertia; the joint's damping is
+    kept)."""
+    if kind not in ("speed", "torque"):
+        raise ValueError(f"joint input kind must be 'speed' or 'torque', got {kind!r}")
+    bodies = list(scene.bodies)
+    idx = [i for i, b in enumerate(bodies) if b.name == body and b.joint is not None]
+    if not idx:
+        raise SceneError(f"{scene.source}: no body named {body!r} on a joint (bodies.joint) to drive")
+    b = bodies[idx[0]]
+    bodies[idx[0]] = replace(b, motion=replace(b.motion, kind=f"{kind}-input"))
+    return replace(scene, bodies=tuple(bodies))
+
+
+class JointInput:
+    """One joint driven by a Plant input. speed: each step writes a one-segment profile into the
+    kernel's prescribed-joint table (the rate ramps linearly from its value at the step start to
+    the input at the step end: continuous rate, bounded acceleration, the angle its exact
+    integral); torque: the joint's torque table becomes the constant input."""
+
+    def __init__(self, model, body):
+        self.body, self.kind = body.name, body.motion.kind.split("-")[0]
+        self.j = model.q_names.index(f"{body.name}.{'angle' if body.joint == 'revolute' else 'travel'}")
+        K = model.K
+        dofs = list(K.jp_dof if self.kind == "speed" else K.jt_dof)
+        # views: the compiled kernel shares these arrays (kernel.compiled_kernel does not copy)
+        self.row = (K.jp_prof if self.kind == "speed" else K.jt_tab)[dofs.index(self.j)]
+
+    def set(self, st: State, dt: float, value: float) -> None:
+        r = self.row
+        if self.kind == "torque":
+            r[1, :] = value
+            return
+        x0, v0, t0 = st.q[self.j], st.v[self.j], st.t
+        r[:, 0] = (t0, x0, v0, (value - v0) / dt, 0.0)
+        r[:, 1] = (t0 + dt, x0 + 0.5 * (v0 + value) * dt, value, 0.0, 0.0)
+        r[0, 2:] = 1e300
+
+
 class Plant:
     """Torque in, outputs out. `step(dt, torque, brake_command)` advances by dt with the inputs
-    held; outputs are the engine's output names (`car.position`, `traction.tension_in`, ...)."""
+    held; outputs are the engine's output names (`car.position`, `traction.tension_in`, ...).
+    Joints whose motion is `speed-input` or `torque-input` (`with_joint_input`) are listed in
+    `joint_inputs` ("<body>.speed" or "<body>.torque"); `step(..., joints=[...])` gives their values
+    in that order (rad/s or m/s; N m or N)."""
 
     def __init__(self, scene: Scene | str, **params):
         if not isinstance(scene, Scene):
@@ -68,6 +112,9 @@ class Plant:
         self.model = build_model(self.scene)
         self.sim = Simulator(self.model)
         self.output_names = self.model.output_names
+        self._joints = [JointInput(self.model, b) for b in self.scene.bodies
+                        if b.joint is not None and b.motion.kind.endswith("-input")]
+        self.joint_inputs = tuple(f"{ji.body}.{ji.kind}" for ji in self._joints)
         self.state: State = self.sim.initial_state()
         self.warnings += self.sim.warnings
         self._y = self.sim.outputs(self.state)
@@ -76,10 +123,11 @@ class Plant:
     def t(self) -> float:
         return self.state.t
 
-    def step(self, dt: float, torque: float, brake_command: float) -> np.ndarray:
+    def step(self, dt: float, torque: float, brake_command: float, joints=None) -> np.ndarray:
         """Advance by dt (> 0) with motor torque [N m] and brake command (1 = release, 0 = apply)
-        held; returns the outputs. Raises ValueError for bad inputs, SolverError if the solver
-        stops (the state is then left at the last good step)."""
+        held, and the joint inputs `joints` (see the class); returns the outputs. Raises ValueError
+        for bad inputs, SolverError if the solver stops (the state is then left at the last good
+        step)."""
         torque, brake_command = float(torque), float(brake_command)
         if not (dt > 0.0 and dt - dt == 0.0 and torque - torque == 0.0 and brake_command - brake_command == 0.0):
             # (x - x == 0.0 is False exactly for NaN and +-inf: one test per step for all inputs)
@@ -89,8 +137,37 @@ class Plant:
                 raise ValueError(f"motor.torque must be finite, got {torque}")
             raise ValueError(f"brake.command must be finite, got {brake_command}")
         st = self.state
+        if joints is not None:
+            self._set_joints(st, dt, joints)
         self._y = self.sim.step(st, st.t + dt, torque, brake_command).copy()
         return self._y
+
+    def _set_joints(self, st: State, dt: float, joints) -> None:
+        if len(joints) != len(self._joints):
+            raise ValueError(f"{len(joints)} joint input(s) given, the plant has {list(self.joint_inputs)}")
+        for ji, x, name in zip(self._joints, joints, self.joint_inputs):
+            x = float(x)
+            if not math.isfinite(x):
+                raise ValueError(f"{name} must be finite, got {x}")
+            ji.set(st, dt, x)
+
+    def holding_torque(self) -> float:
+        """Motor torque [N m] that balances the driven coordinate in the current state (at rest:
+        the torque that holds the load)."""
+        m, st = self.model, self.state
+        ue = self.sim._kernel_inputs_at(st)
+        ue[0] = 0.0
+        M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
+        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
+        return float(-Q[m.K.mot_dof] / m.K.mot_gain)
+
+    def start_with_torque(self, torque: float) -> None:
+        """Before the first step: the motor torque acts from t0 on (accelerations and outputs made
+        consistent with it), e.g. the holding torque, so that a held load starts at rest."""
+        st = self.state
+        st.u[0] = float(torque)
+        self.sim._consistent_acceleration(st)
+        self._y = self.sim.outputs(st).copy()
 
     def warm_up(self) -> None:
         """Load (or compile) the step kernels now with a throw-away step on a copy of the state, so that
@@ -113,8 +190,11 @@ class Plant:
 
     # FMU state: builtin types, bit-exact
     def get_state(self) -> dict:
-        return {"state": self.state.to_dict(), "y": self._y.tolist()}
+        return {"state": self.state.to_dict(), "y": self._y.tolist(),
+                "joints": [ji.row.tolist() for ji in self._joints]}
 
     def set_state(self, d: dict):
         self.state = State.from_dict(d["state"])
         self._y = np.array(d["y"], float)
+        for ji, row in zip(self._joints, d.get("joints", ())):
+            ji.row[...] = row

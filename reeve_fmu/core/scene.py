@@ -36,6 +36,7 @@ class Body:
     position: tuple                  # m, reference point [x, y, z] at t = 0
     free: tuple                      # free coordinates, subset of ("x", "y", "z", "theta")
     damping: float = 0.0             # N s/m, viscous guide friction on every free axis
+    angular_damping: float = 0.0     # N m s/rad, viscous damping on the rotation coordinates (theta, rotation)
     inertia: object = 0.0            # kg m^2: about y through the centre of mass (theta), about the joint axis;
     #                                  3x3 tensor about the centre of mass in body axes (rotation)
     joint: str | None = None         # None (free coordinates) | revolute | prismatic (to the ground)
@@ -44,11 +45,15 @@ class Body:
     motion: "Motion | None" = None   # how the joint coordinate moves
 
 
+MOTION_KINDS = ("free", "profile", "torque", "speed-input", "torque-input")
+
+
 @dataclass(frozen=True)
 class Motion:
     """A joint's motion: free (with viscous damping), a jerk-limited S-curve profile of the joint
-    coordinate, or a torque (force) table acting on the joint's inertia."""
-    kind: str = "free"               # free | profile | torque
+    coordinate, a torque (force) table acting on the joint's inertia, or an input of the Plant
+    (speed-input: the joint rate follows it; torque-input: it acts on the joint's inertia)."""
+    kind: str = "free"               # free | profile | torque | speed-input | torque-input
     distance: float = 0.0            # rad (revolute) or m (prismatic), S-curve travel
     v_max: float = 0.1
     a_max: float = 0.1
@@ -101,6 +106,19 @@ class Rope:
     wrap_elements: int = 2           # W2: cubic elements per wrap (1-4)
     element: str = "linear"          # linear | cubic (ALE-ANCF with bending; planar/spatial models)
     EI: float = 0.0                  # N m^2 per rope, bending stiffness (cubic elements)
+    torsion: "Torsion | None" = None # axial-torsion coupling (spatial model), None: no twist
+
+
+@dataclass(frozen=True)
+class Torsion:
+    """A rope's axial-torsion coupling (core/elements/torsion.py): law, diameter, torque factors,
+    torsional stiffness, rotary inertia per length."""
+    law: str = "costello"            # torque-factor | costello | feyrer
+    diameter: float = 0.0            # m
+    k0: float = 0.0                  # torque factor at zero twist (sign: lay direction)
+    k1: float = 0.0                  # twist dependence, k = k0 + k1 d kappa
+    GJ0: float = 0.0                 # N m^2
+    rotary_inertia: float = 0.0      # kg m, rho I_p of the rope (0: rhoA d^2 / 8)
 
 
 @dataclass(frozen=True)
@@ -184,13 +202,14 @@ SCHEMA_KEYS = {
     "scene": {"name", "description", "model", "gravity", "t_end", "output_step", "sheave_contact", "tangents"},
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
-    "bodies": {"name", "mass", "position", "free", "damping", "inertia", "joint", "motion"},
+    "bodies": {"name", "mass", "position", "free", "damping", "angular_damping", "inertia", "joint", "motion"},
     "joint": {"kind", "axis", "pivot"},
     "motion": {"kind", "distance", "v_max", "a_max", "jerk", "t_start", "torque", "damping"},
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
-              "wrap_model", "wrap_elements", "route", "element", "EI"},
+              "wrap_model", "wrap_elements", "route", "element", "EI", "torsion"},
+    "torsion": {"law", "diameter", "k0", "k1", "GJ0", "rotary_inertia"},
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
               "table", "torque", "motor_inertia"},
@@ -401,7 +420,8 @@ def _parse_bodies(r: _Reader, data, names, model="axial-1d") -> list:
         bodies.append(Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
                            position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
                            free=tuple(a for a in BODY_COORDS if a in free),
-                           damping=r.number(b, path, "damping", 0.0, nonneg=True), inertia=inertia))
+                           damping=r.number(b, path, "damping", 0.0, nonneg=True), inertia=inertia,
+                           angular_damping=r.number(b, path, "angular_damping", 0.0, nonneg=True)))
     return bodies
 
 
@@ -452,7 +472,7 @@ def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
                                   f"[kg m^2] (including m d^2 of the centre of mass), got {inertia:g}")
     mo = r.table(b.get("motion", {}), f"{path}.motion", SCHEMA_KEYS["motion"])
     mp = f"{path}.motion"
-    motion = Motion(kind=r.string(mo, mp, "kind", "free", ("free", "profile", "torque")),
+    motion = Motion(kind=r.string(mo, mp, "kind", "free", MOTION_KINDS),
                     distance=r.number(mo, mp, "distance", 0.0), v_max=r.number(mo, mp, "v_max", 0.1, positive=True),
                     a_max=r.number(mo, mp, "a_max", 0.1, positive=True),
                     jerk=r.number(mo, mp, "jerk", 0.2, positive=True),
@@ -563,7 +583,8 @@ def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_nam
                           wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1", "W2")),
                           wrap_elements=r.integer(rp, path, "wrap_elements", 2),
                           element=r.string(rp, path, "element", "linear", ("linear", "cubic")),
-                          EI=r.number(rp, path, "EI", 0.0, nonneg=True)))
+                          EI=r.number(rp, path, "EI", 0.0, nonneg=True),
+                          torsion=_parse_torsion(r, rp, path, model)))
         if ropes[-1].wrap_model == "W2" and ropes[-1].element != "cubic":
             r.fail(f"{path}.wrap_model", "'W2' (cubic elements on the sheave wraps) needs element = 'cubic' "
                                          "(planar or spatial model); linear ropes use 'W0' or 'W1'")
@@ -580,6 +601,26 @@ def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_nam
         if statics == "rope-length" and length is None:
             r.fail(f"{path}.length", "missing: initial.statics = 'rope-length' needs each rope's unstretched length")
     return ropes
+
+
+def _parse_torsion(r: _Reader, rp, path, model):
+    """A rope's `torsion` table (None without one); the twist needs the spatial model."""
+    if "torsion" not in rp:
+        return None
+    tp = f"{path}.torsion"
+    d = r.table(rp["torsion"], tp, SCHEMA_KEYS["torsion"])
+    if model != "spatial":
+        r.fail(tp, f"axial-torsion coupling needs scene.model = 'spatial', the scene's model is {model!r}")
+    tor = Torsion(law=r.string(d, tp, "law", "costello", ("torque-factor", "costello", "feyrer")),
+                  diameter=r.number(d, tp, "diameter", positive=True, required=True),
+                  k0=r.number(d, tp, "k0", required=True), k1=r.number(d, tp, "k1", 0.0),
+                  GJ0=r.number(d, tp, "GJ0", 0.0, nonneg=True),
+                  rotary_inertia=r.number(d, tp, "rotary_inertia", 0.0, nonneg=True))
+    C = tor.k0 * tor.diameter * r.number(rp, path, "EA", positive=True, required=True)
+    if tor.law != "torque-factor" and not tor.GJ0 * rp["EA"] > C * C:
+        r.fail(f"{tp}.GJ0", f"the {tor.law} law needs GJ0 EA > (k0 d EA)^2 (positive definite energy): "
+                            f"GJ0 > {C * C / rp['EA']:.4g} N m^2, got {tor.GJ0:g}")
+    return tor
 
 
 def _parse_route(r: _Reader, rp, path, body_names, sheave_names, used_sheaves) -> list:

@@ -102,6 +102,21 @@ def lu_solve(LU, piv, b):
 # path is faster (measured in benchmarks/scaling.py, docs/performance.md).
 SPARSE_MIN_FREE = 40
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
+# A Newton tolerance at or below TOL_ROUNDOFF asks for convergence to round-off: the round-off exit
+# (position change <= 1e-14 (1 + |q|)) then also waits until the correction stops shrinking, since
+# at that exit accelerations may still move by ~1e-14 |q| / (h^2 beta), ~1e-6 m/s^2 at h = 1 ms.
+TOL_ROUNDOFF = 1e-10
+
+
+@njit(cache=True, inline="always")
+def _converged(dmax, dprev, amax, qmax, bq, tol, last):
+    """Newton exit test on the last correction dmax (the one before: dprev)."""
+    if dmax <= tol * (1.0 + amax):
+        return True
+    if dmax * bq > 1e-14 * (1.0 + qmax):
+        return False
+    return tol > TOL_ROUNDOFF or dmax > 0.5 * dprev or last
+
 
 @njit(cache=True, inline="always")
 def _residual(K, W, c, q, v, qdd, t, u, r):
@@ -191,6 +206,7 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
                 info[0] = 0.0
                 continue
             info[0] = h
+        dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
                 ok = _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
@@ -221,10 +237,11 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
                 break
             # converged: relative acceleration change below tol, or the position change it
             # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
-            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+            if _converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
                     info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
                 return 0
+            dprev = dmax
     return 1
 
 
@@ -267,6 +284,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
                 info[0] = 0.0
                 continue
             info[0] = h
+        dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
                 ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
@@ -297,10 +315,11 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
             info[2] += 1
             if not (dmax == dmax) or dmax > 1e300:
                 break
-            if dmax <= tol * (1.0 + amax) or dmax * bq <= 1e-14 * (1.0 + qmax):
+            if _converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
                     info[0] = 0.0
                 return 0
+            dprev = dmax
     return 1
 
 
@@ -419,7 +438,10 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     for k in range(ncrp):
                         creep_input_set(K, q, info, ue, hs, k, kr[0, k], kr[1, k])
                 elif ncrp > 0:
-                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, False)
+                    # fresh = False as a runtime bool (ncrp > 0 here), not the literal False: numba
+                    # then compiles one creep_inputs for this call and the Python callers' (a
+                    # literal argument is a signature of its own, compiled again)
+                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
                 qo[:] = q
                 vo[:] = v
                 ao[:] = a
@@ -478,7 +500,8 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         t = t1
         info[1] += 1
         if out_every > 0 and (step + 1) % out_every == 0:
-            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, False, kr[0])
+            # fresh = False as a runtime bool, not a literal: one compiled outputs_ws with outputs()
+            outputs_ws(K, W, c, q, v, qdd, q_ref, t, ue, y, step < 0, kr[0])
             ybuf[row, 0] = t
             for k in range(y.shape[0]):
                 ybuf[row, k + 1] = y[k]
@@ -693,23 +716,32 @@ class Simulator:
         else:
             st.info[8] = float(-f_needed / k) if k > 0 else 0.0
 
-    def _statics(self, st: State, mode: str) -> State:
+    def _statics(self, st: State, mode: str, torsion: bool = True) -> State:
         m = self.model
         K = m.K
         nq = m.nq
+        if torsion and K.nl_on & 4:
+            # a rope's torque grows with its tension, which the geometric guess does not have: from
+            # there the block's yaw has no stiffness and Newton may land on the unstable branch. The
+            # equilibrium without the torsion terms is the start instead.
+            st = self._statics(st, mode, torsion=False)
         if mode == "positions":
             unknowns = list(m.statics_unknowns)
         else:
             locked = set(range(nq)) - set(m.statics_equations)
             unknowns = [("q", j) for j in range(nq) if j not in locked]
         eqs = list(m.statics_equations)
+        if not torsion:   # the twist coordinates have no stiffness without the torsion terms
+            eqs = [j for j in eqs if m.q_kind[j] != "twist"]
+            unknowns = [(k, i) for k, i in unknowns if k != "q" or m.q_kind[i] != "twist"]
         par = m.par0.copy()
-        KS = m.KJ
+        from .kernel import compiled_kernel
+        KB = m.K if torsion else m.K._replace(nl_on=m.K.nl_on & 3)
+        KS = m.KJ if KB is m.K else compiled_kernel(KB)
         if np.any(m.K.el_tonly):
             # tension-only ropes have a kink at zero strain, where the geometric guess starts: solve the
             # statics with the bilateral law and check below that every span ends up in tension
-            from .kernel import compiled_kernel
-            KS = compiled_kernel(m.K._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
+            KS = compiled_kernel(KB._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
         q = st.q.copy()
         M = np.empty((nq, nq))
         Q = np.empty(nq)

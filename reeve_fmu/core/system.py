@@ -16,6 +16,7 @@ from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_element_1d_at,
                               linear_element_at)
 from .bodies import nl_convect, nl_update, rigid_terms
+from .elements.torsion import torsion_energy, torsion_terms
 from .kernel import new_work
 from .profiles import profile_eval
 
@@ -497,6 +498,8 @@ def assemble_ws(K, W, c, q, v, t, u):
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
+    if flags & 4:   # axial-torsion coupling of torsion ropes (after nl_update: the frames' rotations)
+        torsion_terms(K, QE, q, Q)
     Md = W.Md
     for j in range(nq):
         M[j, j] += Md[j]
@@ -529,7 +532,9 @@ def outputs(K, c, q, v, qdd, q_ref, t, u, y):
     """Fill y with the outputs listed in K.out_* (see model.py)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, True, np.empty(K.crp_s.shape[0]))
+    # fresh = True as a runtime bool, not a literal: numba compiles outputs_ws once for this and the
+    # stepping loop's call (a literal argument is a signature of its own)
+    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, n_el >= 0, np.empty(K.crp_s.shape[0]))
 
 
 @njit(cache=True)
@@ -636,6 +641,8 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
                 if K.jt_dof[m] == j:
                     r += _interp(K.jt_tab[m], t)
             y[k] = r
+        elif kind == 14:   # torsion span: rope torque [N m] (j = 0) or twist [rad/m] (j = 1)
+            y[k] = K.tq_out[K.out_i[k], K.out_j[k]]
 
 
 @njit(cache=True)
@@ -685,6 +692,8 @@ def energy_u(K, c, q, v, u):
     for k in range(K.spr_dof.shape[0]):
         j = K.spr_dof[k]
         U += 0.5 * K.spr_k[k] * q[j] * q[j]
+    if K.nl_on & 4:
+        U += torsion_energy(K, QE, q)
     return T, Vg, U
 
 

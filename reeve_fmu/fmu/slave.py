@@ -105,6 +105,7 @@ UNITS: dict[str, tuple[dict[str, int], float, dict[str, tuple[float, float]]]] =
     "rad": ({"rad": 1}, 1.0, {"deg": (_DEG, 0.0)}),
     "rad/s": ({"rad": 1, "s": -1}, 1.0, {"rpm": (_RPM, 0.0), "deg/s": (_DEG, 0.0)}),
     "rad/s2": ({"rad": 1, "s": -2}, 1.0, {"deg/s2": (_DEG, 0.0)}),
+    "rad/s3": ({"rad": 1, "s": -3}, 1.0, {}),
     "A": ({"A": 1}, 1.0, {}),
     "V": ({"kg": 1, "m": 2, "s": -3, "A": -1}, 1.0, {}),
     "Ohm": ({"kg": 1, "m": 2, "s": -3, "A": -2}, 1.0, {"mOhm": (1e3, 0.0)}),

@@ -2,7 +2,8 @@
 master on the other side of the bus.
 
 It does what a lift controller does with a CiA 402 drive: waits for the drive's boot-up/heartbeat,
-configures the drive's heartbeat consumer over SDO (0x1016:01 = controller node 0x10, 50 ms), starts the
+configures the drive's heartbeat consumer over SDO (0x1016:01 = controller node 0x10, 50 ms) and its max
+torque (0x6072 = the drive model's torque.max, rounded up to whole per mille of 0x6076), starts the
 node (NMT), and then, on every SYNC, reads TPDO1 (statusword, counter) and TPDO2 (position, velocity),
 steps the ElectricDrive with that sample and answers with RPDO1: controlword (enable sequence, CST),
 target torque, brake release, and the SYNC counter it answers. Every 10 ms (whole SYNC cycles) it sends
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 from .buses import send_batch
 from .protocol import (COB_EMCY, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX,
                        COB_SYNC, COB_TPDO1, COB_TPDO2, CONTROLLER_NODE_ID, DRIVE_NODE_ID, MODE_CST,
-                       NMT_START, NMT_STATE_OPERATIONAL, S_FAULT, S_FAULT_REACTION_ACTIVE,
+                       NM_PER_PERMILLE, NMT_START, NMT_STATE_OPERATIONAL, S_FAULT, S_FAULT_REACTION_ACTIVE,
                        S_OPERATION_ENABLED, SYNC_COUNTER_MAX, controlword_for, protocol, state_from_statusword)
 
 
@@ -81,6 +82,13 @@ def make_electric_drive(values=None):
     return make_drive(values)
 
 
+def max_torque_permille(drive) -> int:
+    """0x6072 for the drive model: its torque limit T_max (N m) in per mille of the rated torque 0x6076,
+    rounded up so that the drive never rejects a command the model is allowed to give (at most the
+    int16 range of the target torque 0x6071)."""
+    return min(32767, int(math.ceil(drive.params.T_max / NM_PER_PERMILLE - 1e-9)))
+
+
 class BuiltinController:
     def __init__(self, bus, cfg: ControllerConfig, drive=None, node_id: int = DRIVE_NODE_ID):
         import can
@@ -93,6 +101,8 @@ class BuiltinController:
         self.stats = ControllerStats()
         self._Message = can.Message
         self._own = frozenset({COB_RPDO1, COB_HB_CONTROLLER, COB_NMT, COB_SDO_RX})
+        self.max_torque_pm = max_torque_permille(self.drive)
+        self.max_torque = self.max_torque_pm * NM_PER_PERMILLE      # N m, the command clamp
 
     def _send(self, cob, data):
         self.bus.send(self._Message(arbitration_id=cob, data=data, is_extended_id=False))
@@ -120,7 +130,8 @@ class BuiltinController:
         return False
 
     def start(self) -> None:
-        """Warm up the drive model, wait for the drive, configure its heartbeat consumer, NMT start."""
+        """Warm up the drive model, wait for the drive, configure its heartbeat consumer and max torque,
+        NMT start."""
         warm = make_electric_drive(self.cfg.drive_values)
         warm.step(0.0, self.cfg.dt, 0.0, 0.0)          # compiles / loads the numba step before the clock runs
         deadline = time.perf_counter() + self.cfg.start_timeout
@@ -134,6 +145,8 @@ class BuiltinController:
             ok = self._sdo_download(0x1016, 1, (CONTROLLER_NODE_ID << 16) | self.cfg.consumer_ms)
             if not ok:
                 raise RuntimeError("SDO download of 0x1016:01 (heartbeat consumer) failed")
+        if not self._sdo_download(0x6072, 0, self.max_torque_pm, size=2):
+            raise RuntimeError(f"SDO download of 0x6072 (max torque {self.max_torque_pm} per mille) failed")
         self._send(COB_NMT, bytes([NMT_START, self.node_id]))
 
     def run(self) -> ControllerStats:
@@ -162,6 +175,7 @@ class BuiltinController:
         dec_fb = self.proto.DriveFeedback.decode
         enc_cmd = self.proto.TorqueCmd.encode
         drive = self.drive
+        tmax = self.max_torque
         hb_every = cfg.heartbeat_every
         k = -1
         c_prev = None
@@ -218,7 +232,7 @@ class BuiltinController:
                         if state == S_OPERATION_ENABLED and st.operation_enabled_at is None:
                             st.operation_enabled_at = t
                         cw = controlword_for(state)
-                    tau = min(max(tau, -1000.45), 1000.45)
+                    tau = min(max(tau, -tmax), tmax)
                     frames = []
                     if hb_every and k % hb_every == 0:
                         frames.append(Msg(arbitration_id=COB_HB_CONTROLLER, is_extended_id=False,

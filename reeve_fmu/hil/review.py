@@ -165,7 +165,7 @@ def write_report(out: Path, cfg, summary: dict, time_, cols: dict) -> Path:
                 "cycles": summary["steps"], "simulated [s]": summary["simulated_s"],
                 "car load [kg]": (cfg.plant_values or {}).get("car.load"), "landings visited [m]": list(seq),
                 "faults injected": ", ".join(cfg.inject) if cfg.inject else "none",
-                "plant / drive parameters": f"{cfg.plant_values} / {dv}"}
+                "plant parameters": dict(cfg.plant_values or {}), "drive parameters": dict(dv)}
     note = summary.get("verdicts_note")
     findings = list(summary.get("findings") or []) + ([note] if note else [])
     return report.write_report(out, title, scenario, _key_figures(summary), summary.get("verdicts") or [], pngs,

@@ -135,21 +135,16 @@ _DEMO_SCENARIO: tuple | None = None
 
 
 def demo_scenario() -> tuple[dict, dict]:
-    """(plant_values, drive_values) of `reeve-fmu demo` (reeve_fmu/demo.py): rated load 1000 kg, landings
-    0 m and 39 m, one round trip, Level-1 drive, pre-torque = the plant's holding torque at each landing
-    (cosim.holding_torques). The built-in controller runs this drive; the bench runs this plant."""
+    """(plant_values, drive_values) of `reeve-fmu demo` (reeve_fmu/demo.py): the shipped 2:1 scene at its
+    rated load, landings 0 m and 39 m, one round trip, Level-1 drive sized from the scene
+    (studies.trip.trip_case: torque and power limits, inertia, speed-loop gains), pre-torque = the plant's
+    holding torque at each landing. The built-in controller runs this drive; the bench runs this plant."""
     global _DEMO_SCENARIO
     if _DEMO_SCENARIO is None:
-        from ..fmu import cosim
-        from ..studies import trip as demo
-        from ..core.scene import load_scene
+        from ..studies.trip import trip_case
 
-        scene = load_scene(cosim.default_scene_path())
-        plant_values = {"car.load": float(demo.RATED_LOAD_KG)}
-        pre = cosim.holding_torques(scene, demo.LANDINGS, plant_values["car.load"])
-        drive_values = {"landing[1]": demo.LANDINGS[0], "landing[2]": demo.LANDINGS[1], "trip.moves": 2,
-                        "pretorque[1]": pre[0], "pretorque[2]": pre[1], "drive.level": 1}
-        _DEMO_SCENARIO = (plant_values, drive_values)
+        case = trip_case(None)
+        _DEMO_SCENARIO = (dict(case.plant_values), dict(case.drive_values))
     return dict(_DEMO_SCENARIO[0]), dict(_DEMO_SCENARIO[1])
 
 
@@ -186,11 +181,13 @@ def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_va
     scheme "gauss-seidel": the demo's coupling (drive first with the sample at t_k, its torque held over
                    [t_k, t_k+1)), full float precision.
     Returns {"time": ..., name: ...} sampled at every t_k (k = 0..n_steps)."""
+    from .controller import max_torque_permille
     from .plants import make_default_plant
     from .protocol import NM_PER_PERMILLE, RAD_PER_INC
 
     plant = make_default_plant(params=plant_values)
     drive = _drive_model(drive_values)
+    tmax = max_torque_permille(drive) * NM_PER_PERMILLE      # the controller's clamp (0x6072)
     on = list(plant.output_names)
     iw, ia = on.index("motor.speed"), on.index("motor.angle")
     idx = [on.index(n) for n in names]
@@ -207,7 +204,7 @@ def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_va
             th = round(th / RAD_PER_INC) * RAD_PER_INC
             y = plant.step(dt, tau, brake)
             tq, br = drive.step(k * dt, dt, w, th)
-            tq = min(max(tq, -1000.45), 1000.45)
+            tq = min(max(tq, -tmax), tmax)
             tau, brake = round(tq / NM_PER_PERMILLE) * NM_PER_PERMILLE, (1.0 if br > 0.5 else 0.0)
         else:
             tau, brake = drive.step(k * dt, dt, w, th)

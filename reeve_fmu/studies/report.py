@@ -241,6 +241,8 @@ def _num(v):
 
 
 def _cell(v):
+    if isinstance(v, dict):           # parameter sets: "key = value" at 4 significant digits
+        return ", ".join(f"{k} = {_cell(x)}" for k, x in v.items()) or "none"
     if isinstance(v, (list, tuple)):
         return ", ".join(_num(x) if isinstance(x, float) else str(x) for x in v)
     return _num(v) if isinstance(v, float) else str(v)

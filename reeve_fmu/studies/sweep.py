@@ -112,6 +112,7 @@ def run_one(study: dict, index: int, params: dict) -> dict:
 
     row = {"run": index, **{f"param.{k}": v for k, v in params.items()}, "error": None}
     t0 = time.perf_counter()
+    c0 = time.process_time()
     try:
         sets = dict(params)
         if "load_percent" in sets:
@@ -159,6 +160,7 @@ def run_one(study: dict, index: int, params: dict) -> dict:
         if os.environ.get("REEVE_FMU_DEBUG"):
             row["error"] += "\n" + traceback.format_exc()
     row["wall_s"] = time.perf_counter() - t0
+    row["cpu_s"] = time.process_time() - c0     # CPU time of this (single-threaded) worker process
     return row
 
 

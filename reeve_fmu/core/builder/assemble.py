@@ -12,6 +12,7 @@ from .coordinates import Arrays
 from .elimination import Drive
 from .outputs import Outputs
 from .state import BuildState
+from .torsion import torsion_fields
 
 CREEP_VREG = 1e-3   # m/s: material speed over which the arriving side changes at a reversal (tanh blend)
 
@@ -67,17 +68,20 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
         mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
-        **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs)), **d.joints,
-        **rigid_fields(scene, bs.body_dofs),
+        **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs), torsion_fields(bs)), **d.joints,
+        **rigid_fields(scene, bs.body_dofs), **torsion_fields(bs),
     )
 
 
-def _flagged(nl: dict, joints: dict, rigid: dict) -> dict:
+def _flagged(nl: dict, joints: dict, rigid: dict, torsion: dict) -> dict:
     """The nonlinear-row fields with nl_on's bit 2 set when the model has joints or spatial rigid
-    bodies: the 1D and translating models then read one flag per residual and skip all of it."""
+    bodies, bit 4 with torsion spans: the 1D and translating models then read one flag per residual
+    and skip all of it."""
     nl = dict(nl)
     if any(len(joints[k]) for k in ("jp_dof", "jt_dof", "jg_dof")) or len(rigid["rb_q"]):
         nl["nl_on"] = int(nl["nl_on"]) | 2
+    if len(torsion["tq_el"]):
+        nl["nl_on"] = int(nl["nl_on"]) | 4
     return nl
 
 

@@ -62,6 +62,8 @@ def add_body_inertia(bs: BuildState) -> None:
     is not constant (core/bodies.rigid_terms)."""
     for b in bs.scene.bodies:
         for ax, j in bs.body_dofs[b.name].items():
+            if ax in ("theta", "rx", "ry", "rz") and b.angular_damping > 0:
+                bs.springs.append((j, 0.0, b.angular_damping))
             if ax in ("theta", "angle"):   # the position is the centre of mass: no gravity moment
                 bs.M0_terms.append((j, j, b.inertia))   # (a revolute body's: elimination.joint_tables)
                 continue

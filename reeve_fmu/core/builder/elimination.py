@@ -71,8 +71,12 @@ def joint_tables(scene, body_dofs, g, springs):
             springs.append((j, 0.0, mo.damping))
         if mo.kind == "profile":
             jp.append((j, scurve(mo.distance, mo.v_max, mo.a_max, mo.jerk, t_start=mo.t_start).arrays))
+        elif mo.kind == "speed-input":   # at rest until the Plant writes each step's ramp (plant.py)
+            jp.append((j, np.array([[0.0, 1e300], [0.0] * 2, [0.0] * 2, [0.0] * 2, [0.0] * 2])))
         elif mo.kind == "torque":
             jt.append((j, np.array(mo.torque, float).T))
+        elif mo.kind == "torque-input":  # a constant table the Plant overwrites each step
+            jt.append((j, np.zeros((2, 1))))
         if b.joint == "revolute":
             # potential -m g . R(angle) d0 of the centre of mass, d0 from the pivot (Rodrigues)
             a, d0 = np.asarray(b.joint_axis), np.asarray(b.position) - np.asarray(b.pivot)

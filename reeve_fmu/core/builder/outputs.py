@@ -8,7 +8,7 @@ from .elimination import Drive
 from .state import BuildState
 
 (OUT_Q, OUT_V, OUT_A, OUT_TENSION, OUT_RATIO, OUT_TORQUE, OUT_QREL, OUT_BRAKE, OUT_BUFFER, OUT_SLIP,
- OUT_FRICTION, OUT_CANGLE, OUT_CSPEED, OUT_JOINT) = range(14)
+ OUT_FRICTION, OUT_CANGLE, OUT_CSPEED, OUT_JOINT, OUT_TORSION) = range(15)
 
 
 @dataclass
@@ -55,6 +55,12 @@ def output_table(bs: BuildState, d: Drive, crp_index: dict, mot_crp: int) -> Out
     for name, e_first, e_last in bs.rope_end_taps:
         o.add(f"{name}.tension_start", OUT_TENSION, e_first, 0)
         o.add(f"{name}.tension_end", OUT_TENSION, e_last, 1)
+    for k, sp in enumerate(bs.torsion):   # torsion spans (builder/torsion.py)
+        o.add(f"{sp['rope']}.span{sp['span']}.torque", OUT_TORSION, k, 0)
+        o.add(f"{sp['rope']}.span{sp['span']}.twist", OUT_TORSION, k, 1)
+    for j, (name, kind) in enumerate(zip(bs.q_names, bs.q_kind)):
+        if kind == "twist":
+            o.add(name, OUT_Q, j)
     dv = scene.drive
     if dv.kind != "none" and mot_crp >= 0:
         o.add("motor.angle", OUT_CANGLE, mot_crp)

@@ -57,6 +57,7 @@ class BuildState:
     drums: list = field(default_factory=list)       # (dof, rhoA, sign)
     # exact tangents: the nonlinear rows (core/bodies.NonlinearRows), None when tangents are frozen
     nlr: object = None
+    torsion: list = field(default_factory=list)     # torsion spans (builder/torsion.py)
 
     def new_q(self, name, kind, value) -> int:
         """Append a generalized coordinate; returns its index."""

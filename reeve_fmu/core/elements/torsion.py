@@ -174,3 +174,162 @@ def torsion_span(law, EA, rhoA, d, k0, k1, GJ0, g, rA, rB, sA, sB, phiA, phiB, v
     grad[8] = -M
     grad[9] = M
     return S, M, eps, kap, delta, l * w - rhoA * l * gmid
+
+
+# ------------------------------------------------------------------ the torsion field in dynamics
+# The dynamic engine's linear element already carries the axial part (tension EA eps, gravity, the
+# Kelvin-Voigt damping, the ALE inertia). A torsion rope adds, per span, the difference between its
+# coupling law and that axial part: the same generalized forces as torsion_span with the axial law
+# subtracted, so nothing is counted twice.
+
+@njit(cache=True)
+def torsion_extra(law, EA, d, k0, k1, GJ0, rA, rB, sA, sB, phiA, phiB, vA, vB, dref, grad, wk):
+    """grad (16) = dU_t/d[rA(3), rB(3), sA, sB, phiA, phiB, vA(3), vB(3)] of the torsion part
+    U_t = l (w - EA eps^2 / 2) of one span (for the torque-factor law: minus its generalized forces).
+    Returns (M, kappa, Delta); a span of non-positive length or chord returns zeros (the element
+    reports it)."""
+    l = sB - sA
+    D0, D1, D2 = rB[0] - rA[0], rB[1] - rA[1], rB[2] - rA[2]
+    dist = math.sqrt(D0 * D0 + D1 * D1 + D2 * D2)
+    if not (l > 0.0 and dist > 0.0):
+        for k in range(16):
+            grad[k] = 0.0
+        return 0.0, 0.0, dref
+    t = wk[0:3]
+    gt = wk[3:6]
+    ga = wk[6:9]
+    gb = wk[9:12]
+    t[0], t[1], t[2] = D0 / dist, D1 / dist, D2 / dist
+    delta = transport_angle_grad(t, vA, vB, dref, gt, ga, gb)
+    eps = dist / l - 1.0
+    kap = (phiB + delta - phiA) / l
+    w, S, M, E = coupling_law(law, EA, d, k0, k1, GJ0, eps, kap)
+    S0 = EA * eps
+    dS = S - S0
+    dE = E - (0.5 * EA * eps * eps - S0 * (1.0 + eps))
+    tg = t[0] * gt[0] + t[1] * gt[1] + t[2] * gt[2]
+    for k in range(3):
+        dU = dS * t[k] + M * (gt[k] - tg * t[k]) / dist
+        grad[k] = -dU
+        grad[3 + k] = dU
+        grad[10 + k] = M * ga[k]
+        grad[13 + k] = M * gb[k]
+    grad[6] = -dE
+    grad[7] = dE
+    grad[8] = -M
+    grad[9] = M
+    return M, kap, delta
+
+
+@njit(cache=True, inline="always")
+def _frame(K, k, e, out):
+    """Frame vector of end e of torsion span k in world axes: the body-axis vector turned by its
+    body's current rotation (bodies.rows_eval has set K.nl_BR)."""
+    v0, v1, v2 = K.tq_v0[k, 3 * e], K.tq_v0[k, 3 * e + 1], K.tq_v0[k, 3 * e + 2]
+    b = K.tq_vb[k, e]
+    if b >= 0 and K.nl_bk[b] != 1:
+        R = K.nl_BR
+        a0, a1, a2, c, s = R[b, 0], R[b, 1], R[b, 2], R[b, 3], R[b, 4]
+        dd = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
+        v0, v1, v2 = (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * dd, v1 * c + (a2 * v0 - a0 * v2) * s + a1 * dd,
+                      v2 * c + (a0 * v1 - a1 * v0) * s + a2 * dd)
+    out[0], out[1], out[2] = v0, v1, v2
+
+
+@njit(cache=True, inline="always")
+def _frame_force(K, q, b, v, g, Q):
+    """Generalized force of dU = g . dv on the rotation coordinates of body b, with dv = dtheta x v:
+    dU = dtheta . (v x g); a rotation vector phi has dtheta = T(phi) dphi, an angle about a fixed
+    axis dtheta = axis d(angle)."""
+    m0 = v[1] * g[2] - v[2] * g[1]
+    m1 = v[2] * g[0] - v[0] * g[2]
+    m2 = v[0] * g[1] - v[1] * g[0]
+    bq = K.nl_bq
+    if K.nl_bk[b] == 2:
+        p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        if th2 < 1e-8:
+            a = 0.5 - th2 / 24.0
+            bb = 1.0 / 6.0 - th2 / 120.0
+        else:
+            th = math.sqrt(th2)
+            a = (1.0 - math.cos(th)) / th2
+            bb = (th - math.sin(th)) / (th2 * th)
+        # T = I + a phi^ + bb (phi phi^T - th2 I);  dU/dphi = T^T m
+        pm = p0 * m0 + p1 * m1 + p2 * m2
+        c0 = p1 * m2 - p2 * m1        # phi x m;  (phi^)^T m = -phi x m
+        c1 = p2 * m0 - p0 * m2
+        c2 = p0 * m1 - p1 * m0
+        f = 1.0 - bb * th2
+        Q[bq[b, 4]] -= f * m0 - a * c0 + bb * p0 * pm
+        Q[bq[b, 5]] -= f * m1 - a * c1 + bb * p1 * pm
+        Q[bq[b, 6]] -= f * m2 - a * c2 + bb * p2 * pm
+    elif K.nl_bk[b] == 0 and bq[b, 3] >= 0:
+        Q[bq[b, 3]] -= K.nl_bax[b, 0] * m0 + K.nl_bax[b, 1] * m1 + K.nl_bax[b, 2] * m2
+
+
+@njit(cache=True)
+def torsion_terms(K, QE, q, Q):
+    """Add the torsion part of every torsion span (torsion_extra) to Q: its node and material
+    coordinate forces through the element's map (like the element's own forces), the torques on
+    the twist coordinates and the moments on the bodies that carry the frames. Call after the
+    element loop (QE holds the element coordinates) and bodies.nl_update (K.nl_BR)."""
+    wk = np.empty(12)
+    g = np.empty(16)
+    vA = np.empty(3)
+    vB = np.empty(3)
+    el_map, el_coef = K.el_map, K.el_coef
+    nw = el_map.shape[2]
+    for k in range(K.tq_el.shape[0]):
+        ie = K.tq_el[k]
+        _frame(K, k, 0, vA)
+        _frame(K, k, 1, vB)
+        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
+        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
+        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        p = K.tq_p[k]
+        M, kap, delta = torsion_extra(int(p[0]), p[1], p[2], p[3], p[4], p[5], QE[ie, 0:3], QE[ie, 3:6],
+                                      QE[ie, 6], QE[ie, 7], phiA, phiB, vA, vB, K.tq_dref[k], g, wk)
+        K.tq_dref[k] = delta
+        K.tq_out[k, 0] = M
+        K.tq_out[k, 1] = kap
+        for a in range(8):
+            for w in range(nw):
+                ba = el_coef[ie, a, w]
+                if ba != 0.0:
+                    Q[el_map[ie, a, w]] -= ba * g[a]
+        if jA >= 0:
+            Q[jA] -= g[8]
+        if jB >= 0:
+            Q[jB] -= g[9]
+        for e in range(2):
+            b = K.tq_vb[k, e]
+            if b >= 0:
+                _frame_force(K, q, b, vA if e == 0 else vB, g[10 + 3 * e:13 + 3 * e], Q)
+
+
+@njit(cache=True)
+def torsion_energy(K, QE, q):
+    """Torsion part of the strain energy, sum of l (w - EA eps^2 / 2) over the torsion spans (the
+    energy laws; the torque-factor law has none: its GJ0 kappa^2 / 2 part only). QE: the element
+    coordinates at q, K.nl_BR the rotations at q (after an assembly at q)."""
+    vA = np.empty(3)
+    vB = np.empty(3)
+    U = 0.0
+    for k in range(K.tq_el.shape[0]):
+        ie = K.tq_el[k]
+        _frame(K, k, 0, vA)
+        _frame(K, k, 1, vB)
+        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
+        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
+        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        p = K.tq_p[k]
+        l = QE[ie, 7] - QE[ie, 6]
+        D0, D1, D2 = QE[ie, 3] - QE[ie, 0], QE[ie, 4] - QE[ie, 1], QE[ie, 5] - QE[ie, 2]
+        dist = math.sqrt(D0 * D0 + D1 * D1 + D2 * D2)
+        delta = transport_angle(D0 / dist, D1 / dist, D2 / dist, vA[0], vA[1], vA[2], vB[0], vB[1], vB[2],
+                                K.tq_dref[k])
+        eps = dist / l - 1.0
+        w = coupling_law(int(p[0]), p[1], p[2], p[3], p[4], p[5], eps, (phiB + delta - phiA) / l)[0]
+        U += l * (w - 0.5 * p[1] * eps * eps)
+    return U

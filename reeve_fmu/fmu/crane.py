@@ -1,0 +1,216 @@
+"""The crane plant and crane drive FMUs: configuration, build, and an fmpy master for the pair.
+
+* `build_crane_fmus(dest, scene)`: `CranePlant.fmu` from a slewing-crane scene (fmus/reeve_crane_slave.py,
+  model reeve_fmu.core.craneplant.CranePlant) and `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py,
+  reeve_fmu.core.cranedrive.CraneDrive); `reeve-fmu build --scene <crane scene>` calls it.
+* `cosimulate_crane(plant_fmu, drive_fmu, ...)`: the hoist-and-slew cycle, Gauss-Seidel (the drive
+  steps first with the plant's speeds at t, then the plant holding the drive's new torques).
+
+This module imports only numpy (plus reeve_fmu) at import time: it is vendored into the FMUs.
+"""
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from pathlib import Path
+from typing import Mapping, Optional, Sequence
+
+import numpy as np
+
+CRANE_NAME = "CranePlant"
+CRANE_DRIVE_NAME = "CraneDrive"
+CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_config)
+CRANE_SCENE = "scene.toml"
+SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
+
+#: crane plant inputs: name -> (declared type, description)
+CRANE_INPUTS = {
+    "motor.torque": ("Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step"),
+    "slew.torque": ("Torque", "slew drive torque on the jib's joint (used when slew.input = 0), held over the step"),
+    "slew.speed": ("AngularVelocity", "slew speed of the jib's joint (used when slew.input = 1); the joint "
+                                      "rate ramps linearly to it over the step"),
+}
+
+
+def is_crane_scene(scene) -> bool:
+    """A scene the crane plant FMU can be built from (a revolute joint and a hoist drive)."""
+    return scene.drive.sheave is not None and any(b.joint == "revolute" for b in scene.bodies)
+
+
+def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapping[str, str]) -> list:
+    """FMI declaration of each crane output (unit or declaredType, description, feed-through).
+    Accelerations, rope forces at sheaves and the joint torque react to an input change within an
+    arbitrarily short step (declared as depending on all inputs); positions, velocities and angles
+    integrate them (no dependency)."""
+    derived = {
+        "payload.swing_radial": "swing angle of the payload outwards from the slew axis (docs/crane.md)",
+        "payload.swing_tangential": "swing angle of the payload in the direction of positive slew (docs/crane.md)",
+        "payload.yaw": "heading of the payload's body x axis about the vertical, from the scene's orientation",
+    }
+    out = []
+    for n in names:
+        obj, _, q = n.partition(".")
+        spec = {"name": n, "unit": None, "type": None, "description": n, "depends": False}
+        if n in derived:
+            spec.update(type="Angle", description=derived[n])
+        elif q.startswith("position."):
+            spec.update(type="Position", description=f"{obj} centre of mass, {q[-1]} (z up)")
+        elif q.startswith("velocity."):
+            spec.update(type="Velocity", description=f"{obj} velocity of the centre of mass, {q[-1]}")
+        elif q.startswith("acceleration."):
+            spec.update(type="Acceleration", depends=True, description=f"{obj} acceleration, {q[-1]}")
+        elif q.startswith("rotation_rate."):
+            spec.update(unit="rad/s", description=f"{obj} rate of the rotation vector, {q[-1]}")
+        elif q.startswith("rotation."):
+            spec.update(type="Angle", description=f"{obj} rotation vector from the scene's orientation, {q[-1]}")
+        elif q == "angle":
+            spec.update(type="Angle", description=f"{obj} angle" + (" (slew, about the joint axis)" if obj == parts["slew"] else ""))
+        elif q in ("angular_velocity", "speed"):
+            spec.update(type="AngularVelocity", description=f"{obj} angular speed")
+        elif q == "angular_acceleration":
+            spec.update(type="AngularAcceleration", depends=True, description=f"{obj} angular acceleration")
+        elif q == "joint_torque":
+            spec.update(type="Torque", depends=True, description=f"torque the slew drive applies to {obj}'s joint")
+        elif q in ("tension_in", "tension_out"):
+            side = "entry" if q == "tension_in" else "exit"
+            spec.update(type="Force", depends=obj in sheaves, description=f"rope force at the {side} tangent point of {obj}")
+        elif q in ("tension_start", "tension_end"):
+            spec.update(type="Force", description=f"rope force at the {q[8:]} of rope {obj}")
+        elif n in ("motor.angle", "motor.speed"):
+            spec.update(type="Angle" if q == "angle" else "AngularVelocity",
+                        description=f"hoist motor {q} (positive hoists)")
+        else:
+            spec.update(unit="1")
+        out.append(spec)
+    return out
+
+
+def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
+    """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
+    from ..core.craneplant import CranePlant
+    from ..core.plausibility import check_or_raise
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene_path)
+    check_or_raise(scene)
+    cp = CranePlant(scene, "torque")
+    return {
+        "format": "reeve_fmu.crane_fmu/1",
+        "name": name,
+        "scene": CRANE_SCENE,
+        "scene_name": scene.name,
+        "scene_description": getattr(scene, "description", "") or "",
+        "parts": cp.parts,
+        "holding_torque": cp.holding_torque(),
+        "stop_time": float(scene.t_end),
+        "outputs": crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts),
+    }
+
+
+def crane_drive_defaults(scene, holding_torque: float) -> dict:
+    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
+    scene's hoist and slew profiles as the references."""
+    from ..core.cranedrive import CraneDriveParams
+    from ..core.craneplant import crane_parts
+
+    p = crane_parts(scene)
+    v = CraneDriveParams().values()
+    reel = next(s for s in scene.sheaves if s.name == p["reel"])
+    bodies = {b.name: b for b in scene.bodies}
+    jib, pay = bodies[p["slew"]], bodies[p["payload"]]
+    v["hoist.radius"] = reel.radius
+    v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
+    v["hoist.holding_torque"] = float(holding_torque)
+    v["slew.inertia"] = jib.inertia
+    dv = scene.drive
+    if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up
+        v.update({"hoist.distance": -dv.distance, "hoist.v_max": dv.v_max, "hoist.a_max": dv.a_max,
+                  "hoist.jerk": dv.jerk, "hoist.t_start": dv.t_start})
+    mo = jib.motion
+    if mo is not None and mo.kind == "profile":
+        v.update({"slew.distance": mo.distance, "slew.v_max": mo.v_max, "slew.a_max": mo.a_max,
+                  "slew.jerk": mo.jerk, "slew.t_start": mo.t_start})
+    return v
+
+
+def _entry(kind: str) -> Path:
+    from .cosim import repo_root
+
+    p = repo_root() / "fmus" / f"reeve_{kind}_slave.py"
+    if not p.is_file():
+        raise FileNotFoundError(f"FMU entry script {p} not found: building FMUs needs a source checkout")
+    return p
+
+
+def build_crane_fmus(dest, scene) -> tuple[Path, Path, dict]:
+    """Build CranePlant.fmu for `scene` (a path) and CraneDrive.fmu into dest; returns their paths
+    and the drive parameters sized for the scene (start values for CraneDrive.fmu)."""
+    from ..core.scene import load_scene
+    from .build import NUMBA, NUMPY, build_fmu
+
+    scene_path = Path(scene)
+    cfg = crane_config(scene_path)
+    res = {CRANE_SCENE: scene_path.read_bytes(), CRANE_CONFIG: (json.dumps(cfg, indent=1) + "\n").encode()}
+    dest = Path(dest)
+    plant = build_fmu(_entry("crane"), dest, resources=res)
+    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA))
+    return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
+
+
+class CraneCosim:
+    """Sampled signals of a crane co-simulation: `time` and named columns."""
+
+    def __init__(self, time_, columns):
+        self.time, self.columns = time_, columns
+
+    def __getitem__(self, name):
+        return self.columns[name]
+
+
+def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float = 30.0, slew_input: str = "speed",
+                     drive_values: Optional[Mapping[str, float]] = None,
+                     record: Sequence[str] = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw",
+                                              "payload.position.z", "jib.angle", "jib.angular_velocity",
+                                              "jib.joint_torque", "motor.speed", "tip.tension_out")) -> CraneCosim:
+    """Co-simulate CranePlant.fmu with CraneDrive.fmu (Gauss-Seidel, communication step `step`):
+    the drive reads motor.speed and the jib's angular velocity, the plant takes motor.torque and
+    slew.torque or slew.speed (slew_input). Raises RuntimeError with both FMUs' logs if a step fails."""
+    from .runner import SlaveHandle
+
+    if slew_input not in SLEW_MODES:
+        raise ValueError(f"slew_input must be one of {SLEW_MODES}, got {slew_input!r}")
+    n = int(math.floor(t_end / step + 1e-9))
+    handles = []
+    try:
+        plant = SlaveHandle.open(plant_fmu, "crane")
+        handles.append(plant)
+        drive = SlaveHandle.open(drive_fmu, "crane_drive")
+        handles.append(drive)
+        plant.setup(0.0, t_end, start_values={"slew.input": SLEW_MODES.index(slew_input)})
+        drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
+        slew_w = next(nm for nm in plant.variables if nm.endswith(".angular_velocity"))
+        cmd = "slew.speed" if slew_input == "speed" else "slew.torque"
+        rows = []
+        for k in range(n):
+            t = k * step
+            w, ws = plant.get_many(["motor.speed", slew_w])
+            drive.set_many({"motor.speed": w, "slew.angular_velocity": ws})
+            _status(drive.do_step(t, step), "crane drive", handles, t)
+            tq, sc = drive.get_many(["motor.torque", cmd])
+            plant.set_many({"motor.torque": tq, cmd: sc})
+            _status(plant.do_step(t, step), "crane plant", handles, t)
+            rows.append([t + step, tq, sc] + plant.get_many(list(record)))
+    finally:
+        for h in reversed(handles):
+            h.close()
+    a = np.array(rows).reshape(-1, 3 + len(record))
+    cols = {"motor.torque": a[:, 1], cmd: a[:, 2]}
+    cols.update({name: a[:, 3 + i] for i, name in enumerate(record)})
+    return CraneCosim(a[:, 0], cols)
+
+
+def _status(status, what, handles, t):
+    if status > 1:
+        logs = "\n".join(f"--- {h.instance_name} ---\n{h.log_text()}" for h in handles)
+        raise RuntimeError(f"{what} doStep at t = {t:.4f} s returned status {status}\n{logs}")
