@@ -437,4 +437,6 @@ def test_closed_form_row_acceleration_matches_the_second_difference():
             B.rows_eval(q, *G_, -1, f0)
             B.rows_accel_fd(q, v, G_, K.nl_cols, f0, np.zeros(nr), np.zeros(nr), np.zeros(m.nq), ref)
             B.rows_accel(q, v, G_, acc)
-            assert np.max(np.abs(acc - ref)) < 5e-7 * np.max(np.abs(ref))   # measured 5.3e-8 (difference error)
+            # measured 5e-8 .. 1.5e-6: round-off of the second difference itself (s rows of ~100 m
+            # divided by NL_EPS^2)
+            assert np.max(np.abs(acc - ref)) < 5e-6 * np.max(np.abs(ref))
