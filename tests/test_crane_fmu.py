@@ -58,7 +58,7 @@ def test_speed_input_is_integrated_exactly_and_torque_input_equals_the_torque_ta
         ya = a.step(0.01, 0.0, 0.0, [tau])
         yb = b.step(0.01, 0.0, 0.0)
     assert np.array_equal(ya, yb)
-    assert a.output("jib.joint_torque") == pytest.approx(tau, rel=1e-12)
+    assert a.output("jib.joint_torque") == pytest.approx(tau, rel=1e-11)   # measured 1.0e-12 (round-off)
     assert a.output("jib.angular_velocity") > 0.0
     with pytest.raises(ValueError, match="jib.torque must be finite"):
         a.step(0.01, 0.0, 0.0, [math.nan])
@@ -103,7 +103,7 @@ def test_crane_fmu_static_tension_and_honest_state(fmus):
     # payload-end rope force at rest = M g; measured -2.1e-8 relative at t = 0 and after 2 s
     for row in (r["t0"], r["t2"]):
         assert row[0] == pytest.approx(M * G, rel=2e-7)
-    assert abs(r["t2"][1] - r["t0"][1]) < 2e-10         # the holding torque holds (measured 1.9e-11 m)
+    assert abs(r["t2"][1] - r["t0"][1]) < 4e-11         # the holding torque holds (measured 3.6e-12 m)
     assert r["a"] == r["b"] == r["c"]                    # rewind and deserialize: bit-identical
 
 
@@ -125,10 +125,10 @@ def test_crane_fmu_centripetal_swing_angle(fmus):
         return c + a1 * np.cos(w1 * t) + b1 * np.sin(w1 * t) + a2 * np.cos(w2 * t) + b2 * np.sin(w2 * t)
     wp = math.sqrt(G / 15.6)
     p, _ = curve_fit(model, t[last], ratio, p0=[1.0, 0.1, 0.1, wp - w, 0.1, 0.1, wp + w])
-    assert np.std(ratio - model(t[last], *p)) < 2e-4          # the fit explains the swing (measured 2.4e-5)
-    # measured 1.0032: the rope's own mass (0.7 % of the load), the box and the rope leaving the
+    assert np.std(ratio - model(t[last], *p)) < 1e-3          # the fit explains the swing (measured 1.1e-4)
+    # measured 1.0006: the rope's own mass (0.7 % of the load), the box and the rope leaving the
     # tip sheave at the swing angle are not in the point-mass formula
-    assert abs(p[0] - 1.0) < 0.01, p
+    assert abs(p[0] - 1.0) < 5e-3, p
 
 
 def test_crane_fmu_solver_failure_is_logged_and_discarded(fmus):

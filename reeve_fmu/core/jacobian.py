@@ -35,7 +35,8 @@ from .elements.cubic_jac import cubic_stiffness, gravity_jac
 from .elements.linear import SLACK_STRAIN, linear_element_at
 from .elements.linear_jac import linear_inertia
 from .sparse import bordered_factor, residual_sparse
-from .system import UE_CREEP, _static_end_tension, creep_kappa, creep_terms, element_eval, q_terms
+from .system import (UE_CREEP, _static_end_tension, creep_kappa, creep_terms, creep_wound, element_eval,
+                     q_terms)
 
 FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
 QL_STEP = 1e-9     # and of the q-level ones (the friction laws saturate within ~1e-5 m)
@@ -340,7 +341,7 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
     if K.brake_T > 0.0 and j >= 0 and pos[j] >= 0 and not mark[j]:
         gain = K.mot_gain
         if K.mot_crp >= 0 and K.crp_kind[K.mot_crp] == 0 and u.shape[0] > UE_CREEP:
-            gain *= creep_terms(K, W.QE, W.VE, v, K.mot_crp)[0]
+            gain *= creep_terms(K, W.QE, W.VE, v, K.mot_crp, creep_wound(u, K.mot_crp))[0]
         kz = K.mot_gain * creep_kappa(K, u, K.mot_crp)          # dz/dq
         z = u[2] + kz * (q[j] - u[3])
         kb = u[1] * K.brake_T / K.brake_wreg * _elastoplastic_d(z, K.brake_wreg)

@@ -45,7 +45,8 @@ from .builder.torsion import add_torsion
 
 INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
 #                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
-#                per creep sheave (sheave_contact = "creep": the angle is integrated, not a function of s)
+#                per creep sheave (sheave_contact = "creep": the angle is integrated, not a function of s);
+#                with creep drums then their wound-rope records (_info_with_wound_records)
 
 
 @dataclass
@@ -162,6 +163,31 @@ def _build(scene: Scene) -> Model:
                            wrap_el_idx=arr.wrap_idx, creep_sheaves=tuple(crp["name"])))
 
 
+WOUND_BIN = 0.05     # m of rope per bin of a drum's wound-rope record (at most WOUND_BINS_MAX bins)
+WOUND_BINS_MAX = 4096
+
+
+def _info_with_wound_records(model: Model, q, c) -> np.ndarray:
+    """State.info: INFO_SIZE slots, one angle per creep sheave, one record index per creep sheave
+    (0: none), then per creep drum its wound-rope record [sigma of bin 0, bin length, bins, mean
+    kappa per bin (0: not started; system.wound_kappa fills it)] over sigma in [0, a bound on the
+    rope length]."""
+    K = model.K
+    nc = K.crp_s.shape[0]
+    drums = [k for k in range(nc) if K.crp_el_in[k] < 0]
+    if not drums:
+        return np.zeros(INFO_SIZE + nc)
+    span = 1.5 * (float(np.max(np.abs(c), initial=0.0)) + float(np.max(np.abs(q), initial=0.0))) + 1.0
+    nb = int(min(WOUND_BINS_MAX, max(16, np.ceil(span / WOUND_BIN))))
+    head = INFO_SIZE + 2 * nc
+    info = np.zeros(head + len(drums) * (3 + nb))
+    for i, k in enumerate(drums):
+        o = head + i * (3 + nb)
+        info[INFO_SIZE + nc + k] = o
+        info[o:o + 3] = (0.0, span / nb, nb)
+    return info
+
+
 def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     """A state at rest with the given coordinates (default: the geometric guess)."""
     nq = model.nq
@@ -169,7 +195,7 @@ def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     par = model.par0 if par is None else np.asarray(par, float)
     c = model.c0 + model.Bpar @ par
     nf = len(model.K.free)
-    info = np.zeros(INFO_SIZE + model.K.crp_s.shape[0])
+    info = _info_with_wound_records(model, q, c)
     brake = model.scene.brake
     info[5] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
     u = np.zeros(2)

@@ -27,8 +27,9 @@ from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_input_set, creep_inputs, creep_terms, energy_u, outputs, outputs_ws, set_prescribed, set_prescribed_creep,
-                     traction_deflection, traction_slip, workspace)
+                     creep_input_set, creep_inputs, creep_terms, creep_wound, energy_u, outputs, outputs_ws,
+                     set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
+                     wound_record)
 
 
 class SolverError(RuntimeError):
@@ -470,11 +471,15 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
                 for k in range(ncrp):   # W holds the converged iterate's element arrays
-                    kap, rate, _ = creep_terms(K, W.QE, W.VE, v, k)
+                    kap, rate, _ = creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k))
                     kr[0, k] = kap
                     kr[1, k] = rate
                     if K.crp_kind[k] == 0:
                         info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
+            if status == 0:
+                for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
+                    if K.crp_el_in[k] < 0:
+                        wound_record(K, info, k, q1[K.crp_s[k]], q[K.crp_s[k]], th1[k], info[INFO_CREEP + k])
             if status == 0 or status == 4:
                 break
             # no convergence (1), or an iterate with a span below min_span (2): substeps. A span that

@@ -23,7 +23,7 @@ from .profiles import profile_eval
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
 UE_CREEP = 8      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
-UE_STRIDE = 5
+UE_STRIDE = 6
 
 
 @njit(cache=True, inline="always")
@@ -114,8 +114,18 @@ def groove_strain(K, X, XD, ie, end, rate):
     strain its tension carries, N / EA of the element's law (linear: the smoothed positive part of
     axial_law; cubic: max(eps, 0)). A slack rope arrives on the groove unstrained: its chord strain
     (negative while the span sags or a slack rope piles up) is no strain of the rope."""
-    e = end_strain(K, X, ie, end)
-    ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
+    if K.nd == 1 and K.el_type != 1:   # the 1D path: strain and rate with one division
+        dk = X[ie, 1] - X[ie, 0]
+        il = 1.0 / (X[ie, 3] - X[ie, 2])
+        ad = abs(dk)
+        e = ad * il - 1.0
+        ed = 0.0
+        if rate:
+            sg = 1.0 if dk >= 0.0 else -1.0
+            ed = (sg * (XD[ie, 1] - XD[ie, 0]) - ad * (XD[ie, 3] - XD[ie, 2]) * il) * il
+    else:
+        e = end_strain(K, X, ie, end)
+        ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
     if K.el_tonly[ie] == 0:
         return e, ed
     if K.el_type == 1:
@@ -127,25 +137,34 @@ def groove_strain(K, X, XD, ie, end, rate):
 
 
 @njit(cache=True, inline="always")
-def creep_terms(K, QE, VE, v, k):
+def creep_terms(K, QE, VE, v, k, kw):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly;
     kappa = 1 + the arriving strain (groove_strain). The arriving side is the in-span while material
     runs along the route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg
-    makes a reversal smooth (at rest kappa is the mean of both sides). A drum's only span arrives
-    either way (its stored rope is taken at that span's strain).
+    makes a reversal smooth (at rest kappa is the mean of both sides). A drum winds at its span's
+    strain and pays out at kw, the kappa its outermost stored rope was wound with (wound_kappa; kw = 0:
+    no record, the span's strain either way).
     The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
     -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
     arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
     ei = K.crp_el_in[k]
     eo = K.crp_el_out[k]
-    if ei < 0:
+    x = v[K.crp_s[k]] / K.crp_vreg
+    th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
+    if ei < 0:   # a drum (always a route's first stop)
         e, ed = groove_strain(K, QE, VE, eo, 0, True)
-        return 1.0 + e, ed, 0.0
+        if kw <= 0.0:
+            return 1.0 + e, ed, 0.0
+        # paying out (sigma dot < 0) returns the rope at the kappa it was wound with (wound_kappa);
+        # the strain changes to the span's in a creep arc at the exit: force as on a sheave, weighted
+        # by the paying-out part of the blend so that it vanishes at rest and while winding
+        w = 0.5 * (1.0 - th)
+        d = kw - 1.0 - e
+        return (w * kw + (1.0 - w) * (1.0 + e), (1.0 - w) * ed,
+                -th * w * 0.5 * K.el_EA[eo] * d * d)
     if eo < 0:
         e, ed = groove_strain(K, QE, VE, ei, 1, True)
         return 1.0 + e, ed, 0.0
-    x = v[K.crp_s[k]] / K.crp_vreg
-    th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
     w = 0.5 * (1.0 - th)
     e_in, r_in = groove_strain(K, QE, VE, ei, 1, w > 0.0)
     e_out, r_out = groove_strain(K, QE, VE, eo, 0, w < 1.0)
@@ -164,6 +183,7 @@ def creep_input_set(K, q, info, ue, h, k, kap, rate):
     ue[i + 2] = q[K.crp_s[k]]
     ue[i + 3] = rate
     ue[i + 4] = kap + 0.5 * h * rate
+    ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0)   # started by the first step
 
 
 @njit(cache=True)
@@ -179,8 +199,69 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
                 gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             if K.crp_el_out[k] >= 0:
                 gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-        kap, rate, _ = creep_terms(K, QE, VE, v, k)
+        kap, rate, _ = creep_terms(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
         creep_input_set(K, q, info, ue, h, k, kap, rate)
+
+
+# A drum's wound rope, last in first out: rope wound at kappa = 1 + eps occupies kappa x its material
+# length of rim and comes off at that kappa. Record (State.info, set up by model.new_state): per drum
+# a fixed grid of bins over its material coordinate, each holding the mean kappa of the stored rope in
+# it; winding writes it once per step (wound_record), paying out only reads it, and inside a step
+# the bin at the step start's sigma is a constant kernel input (ue[.. + 5]), so the Newton residual
+# stays smooth and the FMU state is the State's arrays as before.
+
+@njit(cache=True, inline="always")
+def _wound_at(K, info, k):
+    """info index of creep sheave k's wound-rope record (0: none)."""
+    i = INFO_CREEP + K.crp_s.shape[0] + k
+    return int(info[i]) if info.shape[0] > i else 0
+
+
+@njit(cache=True)
+def wound_kappa(K, info, q, k, kap):
+    """kappa of the rope drum k pays out next (the bin just below sigma); 0 when k has no record.
+    A record not yet started is filled with kap > 0 (the stored rope taken at the strain the drum
+    has at its first step; kernel inputs for a state, h = 0, pass 0 and leave it unstarted)."""
+    o = _wound_at(K, info, k)
+    if o == 0:
+        return 0.0
+    nb = int(info[o + 2])
+    if info[o + 3] == 0.0:
+        if kap <= 0.0:
+            return 0.0
+        for j in range(nb):
+            info[o + 3 + j] = kap
+    j = int(math.ceil((q[K.crp_s[k]] - info[o]) / info[o + 1])) - 1
+    return info[o + 3 + min(max(j, 0), nb - 1)]
+
+
+@njit(cache=True)
+def wound_record(K, info, k, s0, s1, th0, th1):
+    """Record the rope drum k wound over an accepted step (sigma s0 -> s1 > s0, angle th0 -> th1):
+    kappa = -R (th1 - th0) / (s1 - s0) in the bins it covers; the bin holding s0 keeps the mean with
+    the rope below s0. Paying out (s1 <= s0) leaves the record: the rope above sigma is off the drum
+    and its bins are overwritten when it is wound again."""
+    o = _wound_at(K, info, k)
+    if o == 0 or s1 <= s0 or info[o + 3] == 0.0:
+        return
+    kap = -K.crp_R[k] * (th1 - th0) / (s1 - s0)
+    x0 = (s0 - info[o]) / info[o + 1]
+    x1 = (s1 - info[o]) / info[o + 1]
+    nb = int(info[o + 2])
+    j = max(int(math.floor(x0)), 0)
+    while j < nb and j < x1:
+        a = max(x0, float(j))
+        b = min(x1, j + 1.0)
+        if b > j:
+            info[o + 3 + j] = (info[o + 3 + j] * (a - j) + kap * (b - a)) / (b - j)
+        j += 1
+
+
+@njit(cache=True, inline="always")
+def creep_wound(u, k):
+    """The kernel input kw of creep sheave k (wound_kappa at the step start; 0 without one)."""
+    i = UE_CREEP + UE_STRIDE * k + 5
+    return u[i] if u.shape[0] > i else 0.0
 
 
 @njit(cache=True, inline="always")
@@ -207,7 +288,7 @@ def creep_angle(K, q, u, k, kap):
 
 @njit(cache=True)
 def creep_power(K, c, q, v):
-    """Creep dissipation [W] of all sheaves at (q, v) (>= 0)."""
+    """Creep dissipation [W] of all sheaves at (q, v) (>= 0; a drum's exit arc is not included)."""
     n_el, ne = K.el_idx.shape[0], K.el_idx.shape[1]
     QE, VE = np.empty((n_el, ne)), np.empty((n_el, ne))
     P = 0.0
@@ -215,7 +296,7 @@ def creep_power(K, c, q, v):
         if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
             gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-            P -= creep_terms(K, QE, VE, v, k)[2] * v[K.crp_s[k]]
+            P -= creep_terms(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
     return P
 
 
@@ -403,7 +484,7 @@ def q_terms(K, W, q, v, t, u):
     gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
     for k in range(K.crp_s.shape[0]):
         j = K.crp_s[k]
-        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k)
+        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k))
         Q[j] += fc
         if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
             # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
@@ -558,7 +639,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
     n = K.out_kind.shape[0]
     if fresh:
         for k in range(K.crp_s.shape[0]):
-            kaps[k] = creep_terms(K, QE, VE, v, k)[0]
+            kaps[k] = creep_terms(K, QE, VE, v, k, creep_wound(u, k))[0]
     for k in range(n):
         kind = K.out_kind[k]
         i = K.out_i[k]
