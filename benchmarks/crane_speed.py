@@ -5,7 +5,7 @@ under load), best of `--repeat` runs after a warm-up, statics excluded, outputs 
   rigid box payload); target >= 50x real time;
 * `cubic`: the same with cubic elements (span sway); target >= 5x (reported as not available when the
   engine rejects the scene);
-* `8fall`: scenes/crane_8fall_dynamic.toml when it exists (the 8-fall dynamic hoist); target >= 1x;
+* `8fall`: scenes/crane_8fall_hoist.toml when it exists (the 8-fall dynamic hoist); target >= 1x;
 * the 2:1 elevator trip (benchmarks/trip_2to1_compare.py compares it with another checkout).
 
 `--other CHECKOUT` measures the cases in that checkout too, alternately in fresh interpreters (warm
@@ -47,7 +47,7 @@ print(json.dumps(dict(cpu_s=best, rtf={t_end} / best, n_dof=m.nq, steps=int(st.i
                       iters_per_step=st.info[2] / st.info[1], jac_builds=int(st.info[3]))))
 """
 CASES = {"linear": ("slewing_crane.toml", False, 50.0), "cubic": ("slewing_crane.toml", True, 5.0),
-         "8fall": ("crane_8fall_dynamic.toml", False, 1.0)}
+         "8fall": ("crane_8fall_hoist.toml", False, 1.0)}
 
 
 def run_case(root: Path, case: str, t_end: float, repeat: int) -> dict:

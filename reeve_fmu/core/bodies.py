@@ -12,8 +12,10 @@ nonlinear: p_r = f_r(q). This module evaluates those rows in every residual:
 * W1 wraps: the material coordinate of the leaving node is sigma + R * wrap angle(q), so the rope
   stored on a wrap follows the current wrap angle and the rope length is conserved exactly.
 
-For each nonlinear row the Jacobian row B_r(q) (central differences, step NL_H) and the convective
-acceleration (dB/dt qdot)_r (second central difference along qdot, step NL_EPS) are recomputed.
+For each nonlinear row the Jacobian row B_r(q) (rows_jacobian) and the convective acceleration
+(dB/dt qdot)_r (rows_accel) are recomputed in closed form: rigid body motions, the tangency conditions
+differentiated once and twice, wrap angles. rows_jacobian_fd / rows_accel_fd / rigid_terms_fd do the
+same by central differences (steps NL_H, NL_EPS, RB_H): the tests' reference.
 `nl_update` writes them into the kernel's element maps (el_coef) and into c (so that the unchanged
 gather gives x = f(q) and its velocity B(q) qdot); `nl_convect` subtracts M_e (dB/dt qdot) from an
 element's force vector. Models without nonlinear rows never call either (kernel.nl_on = 0).
