@@ -54,7 +54,7 @@ def check_or_raise(scene: Scene) -> list[str]:
     if errors:
         text = "\n".join(str(f) for f in errors)
         if len(errors) > 1:
-            text = f"{len(errors)} physically impossible values:\n" + text
+            text = f"{scene.source}: {len(errors)} physically impossible values:\n" + text
         raise PlausibilityError(text, found)
     return [str(f) for f in found]
 
@@ -265,11 +265,15 @@ def _rope_diameter(scene, rope):
     if isinstance(d, (int, float)) and not isinstance(d, bool) and d > 0 \
             and crane.get("rope", scene.ropes[0].name) == rope.name:
         return float(d), False
+    if rope.torsion is not None and rope.torsion.diameter > 0:   # the torsion table states the diameter
+        return float(rope.torsion.diameter), False
     return math.sqrt(rope.rhoA / STEEL_ROPE_DENSITY), True
 
 
 def _check_sheave_diameters(scene, add):
-    crane = "crane" in scene.extra or scene.model == "spatial-torsion"
+    # a rope with a torsion table is a crane hoist rope (elevator ropes are modelled without twist)
+    crane = "crane" in scene.extra or scene.model == "spatial-torsion" or \
+        any(r.torsion is not None for r in scene.ropes)
     limit, rule = (DD_CRANE, "ISO 16625 (cranes)") if crane else (DD_ELEVATOR, "EN 81-50")
     index = {s.name: i for i, s in enumerate(scene.sheaves)}
     for rope in scene.ropes:
