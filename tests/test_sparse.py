@@ -185,8 +185,8 @@ def test_sparse_path_equals_dense_path(name):
     err, err_loop = _rel(fresh_s, fresh_d), _rel(loop_s, loop_d)
     print(name, "fresh", np.max(err), m.output_names[int(np.argmax(err))], "loop", np.max(err_loop),
           m.output_names[int(np.argmax(err_loop))])
-    # measured in a clean CI run (loop samples): elevator_2to1_8el_W0 1.0e-10, highrise_8el 2.0e-10,
-    # hanging_rope_32el 2.3e-10, brake_held_8el 3.2e-9 (the held brake's stiff stick spring amplifies
-    # round-off in the converged state); the others <= 1e-10. Bound at ~3x the worst measured value.
+    # measured (loop samples / fresh evaluation): elevator_2to1_8el_W0 1.0e-10 / 1.0e-10, highrise_8el
+    # 2.0e-10 / 1.7e-10, hanging_rope_32el 2.3e-10 / 2.1e-10, brake_held_8el 3.2e-9 (brake.torque: the
+    # held brake's stiff stick spring amplifies round-off) / 1.1e-10; the others <= 8e-11.
     assert np.max(err_loop) <= 1e-8, np.max(err_loop)
-    assert np.max(err) <= 1e-8, np.max(err)
+    assert np.max(err) <= 1e-9, np.max(err)
