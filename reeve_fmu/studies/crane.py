@@ -52,6 +52,7 @@ from ..core.builder.routes import span_tangents, stop_geometry
 from ..core.builder.state import start
 from ..core.geometry import GeometryError, _basis
 from ..core.scene import Scene, SceneError, _Reader, load_scene, parse_scene
+from ..core.system import assemble
 
 
 class CraneError(ValueError):
@@ -1046,3 +1047,94 @@ def cli_crane(args) -> int:
         msg += f"cabling: equilibrium lost at h = {ch:.3f} m (yaw {np.degrees(res.critical_yaw):.1f} deg)"
     print(msg + f" -> {out}/rotation.csv, rotation.png, summary.json")
     return 0
+
+
+# ------------------------------------------------------------- cabling of the dynamic model
+@dataclass
+class YawPath:
+    """Equilibria of a dynamic model (core.model, rotation-vector hook block) along its yaw."""
+    yaw: np.ndarray            # rad, prescribed block yaw per accepted point
+    height: np.ndarray         # m, block sheaves below the fixed sheaves they hang from
+    critical_height: float     # m, the fold of height(yaw): parabola through the last three points
+    critical_yaw: float        # rad
+    q: np.ndarray              # coordinates at the last accepted point
+
+
+def yaw_equilibrium(sim, st, q, jyaw: int, jfree: int, psi: float, tol: float = 1e-9):
+    """Statics of the dynamic model with the block yaw q[jyaw] = psi prescribed and the rope coordinate
+    q[jfree] (the drum's) free instead: the yaw is the continuation parameter, which passes the fold
+    of height(yaw) where a sweep in height cannot. Newton with a forward-difference Jacobian from q;
+    returns the coordinates, or None when Newton does not converge (the caller halves its step)."""
+    m = sim.model
+    nq = m.nq
+    eqs = np.array(m.statics_equations)
+    unk = np.array(sorted((set(range(nq)) - {jyaw}) & set(m.statics_equations) | {jfree}))
+    q = q.copy()
+    q[jyaw] = psi
+    M, Q, zero = np.empty((nq, nq)), np.empty(nq), np.zeros(nq)
+    u = sim.kernel_inputs(st)
+    fscale = max(1.0, float(np.max(np.abs(m.K.F0))))
+
+    def resid(x):
+        qq = q.copy()
+        qq[unk] = x
+        if assemble(m.KJ, st.c, qq, zero, 0.0, u, M, Q) < 0:
+            return None
+        return Q[eqs].copy()
+    x = q[unk].copy()
+    J = np.empty((len(eqs), len(unk)))
+    for _ in range(30):
+        r = resid(x)
+        if r is None or not np.all(np.isfinite(r)):
+            return None
+        if np.max(np.abs(r)) < tol * fscale:
+            q[unk] = x
+            return q
+        for k in range(len(unk)):
+            xp = x.copy()
+            xp[k] += 1e-7 * (1.0 + abs(x[k]))
+            rp = resid(xp)
+            if rp is None:
+                return None
+            J[:, k] = (rp - r) / (xp[k] - x[k])
+        try:
+            x = x - np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:
+            return None
+    return None
+
+
+def block_height(model, q, block: str) -> float:
+    """Mean height of the fixed sheaves above the block's sheaves (their centres, the block's pose in
+    q): the fall length of a crane whose falls hang from the boom tip."""
+    from scipy.spatial.transform import Rotation
+    bd = model.body_dofs[block]
+    body = next(b for b in model.scene.bodies if b.name == block)
+    pos = np.array([q[bd[a]] for a in ("x", "y", "z")])
+    rot = Rotation.from_rotvec([q[bd[a]] for a in ("rx", "ry", "rz")]).as_matrix()
+    on = [s for s in model.scene.sheaves if s.body == body.name]
+    fixed = [s for s in model.scene.sheaves if s.body is None and s.kind != "drum"]
+    z_block = np.mean([(pos + rot @ np.asarray(s.center, float))[2] for s in on])
+    return float(np.mean([s.center[2] for s in fixed]) - z_block)
+
+
+def cabling_of_model(sim, st, block: str, drum: str, dpsi: float = 0.02, dpsi_min: float = 1e-4) -> YawPath:
+    """Continuation of the dynamic model's statics in the block yaw from its equilibrium st (rope paid
+    out from the drum as needed): the height rises with the yaw up to the fold (cabling); the step is cut
+    by 3 when Newton fails or the height falls, down to dpsi_min, and the fold is the vertex of the
+    parabola height(yaw) through the last three accepted points."""
+    m = sim.model
+    jyaw, jd = m.body_dofs[block]["rz"], m.sheave_dof[drum]
+    q = st.q.copy()
+    hist = [(q[jyaw], block_height(m, q, block))]
+    while dpsi > dpsi_min:
+        qn = yaw_equilibrium(sim, st, q, jyaw, jd, hist[-1][0] + dpsi)
+        h = block_height(m, qn, block) if qn is not None else -math.inf
+        if h <= hist[-1][1]:
+            dpsi /= 3.0
+            continue
+        q = qn
+        hist.append((q[jyaw], h))
+    P = np.array(hist)
+    ch, cy = _refine_fold([(h, p) for p, h in hist])
+    return YawPath(yaw=P[:, 0], height=P[:, 1], critical_height=float(ch), critical_yaw=float(cy), q=q)
