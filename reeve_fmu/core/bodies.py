@@ -654,6 +654,29 @@ def nl_update(K, c, q, v):
             K.nl_acc[ie, a] = acc[r]
 
 
+@njit(cache=True)
+def wrap_weight(K, Q, q, energy):
+    """The weight of the rope a W1 wrap gains or loses as its angle changes: V = -(l_w(q) - lw) rhoA g.c
+    per wrap (l_w = s_out - sigma, c the sheave centre, lw the lumped part). Without it the span
+    elements' gravity potential, which counts material leaving a span at the span's mid-height, makes a
+    spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q += rhoA g.c d l_w/dq (the part of
+    -dV/dq that moves material; the centre's motion under the unlumped rope, rhoA (l_w - lw) g.dc/dq, is
+    left out: order rhoA g times the wrap's length change). energy: return V instead (after nl_update)."""
+    rk, rf, P, J, cols, f0 = K.nl_rk, K.nl_rf, K.nl_P, K.nl_J, K.nl_cols, K.nl_f0
+    V = 0.0
+    for r in range(rk.shape[0]):
+        if rk[r, 0] != ROW_WRAP:
+            continue
+        ip = int(rf[r, 3])
+        gc = rf[r, 4] * P[ip, 0] + rf[r, 5] * P[ip, 1] + rf[r, 6] * P[ip, 2]
+        if energy:
+            V -= (f0[r] - q[rk[r, 3]] - rf[r, 7]) * gc
+            continue
+        for k in range(cols.shape[0]):
+            Q[cols[k]] += gc * J[r, k]
+    return V
+
+
 @njit(cache=True, inline="always")
 def nl_convect(K, MEs, QEs, ie):
     """QEs[ie] -= MEs[ie] (dB/dt qdot) for element ie: the part of the nodes' acceleration that is
@@ -690,7 +713,7 @@ def empty_fields() -> dict:
     return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
                 nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
                 nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
-                nl_rf=f2.copy(), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
+                nl_rf=np.zeros((0, 8)), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
                 nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
                 nl_colbody=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
@@ -744,12 +767,14 @@ class NonlinearRows:
             for comp in comps:
                 self.rows[("pos", node, comp)] = (ROW_TANGENT, span, end, comp, 0.0, 0.0, 0.0, 0, None)
 
-    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis):
+    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0):
         """s of the node leaving a W1 wrap: sigma + R * current wrap angle (about the sheave's axis,
-        which is the incoming span's end-B axis)."""
+        which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector), lw: the
+        wrap's rope whose weight the builder lumped (wrap_weight adds the rest)."""
         if self.moving[span_in] or self.moving[span_out]:
             centre = self.spans[span_in][1]
-            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, 0.0, centre, j_sigma)
+            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, 0.0, centre, j_sigma,
+                                      tuple(rhoA_g), lw)
 
     def _cols(self):
         """q indices of every registered body coordinate and the body tables of rows_eval."""
@@ -772,7 +797,8 @@ class NonlinearRows:
         specs = [self.rows[k] for k in keys]
         nr = len(keys)
         rk = np.array([[s[0], s[1], s[2], s[3]] for s in specs], np.int64).reshape(nr, 4)
-        rf = np.array([[s[4], s[5], s[6], s[7]] for s in specs], float).reshape(nr, 4)
+        rf = np.array([[s[4], s[5], s[6], s[7]] + (list(s[9]) + [s[10]] if len(s) > 9 else [0.0] * 4)
+                       for s in specs], float).reshape(nr, 8)
         col_k = {j: k for k, j in enumerate(cols)}
         colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib]) for j in cols], np.int64)
         body_cols = {ib: [col_k[int(j)] for j in bq[ib] if j >= 0] for ib in range(len(self.bodies))}

@@ -767,6 +767,7 @@ class Simulator:
             return Q[eqs].copy(), qq, pp, c
 
         x = np.array([q[i] if k == "q" else par[i] for k, i in unknowns], float)
+        rot = [n for n, (k, i) in enumerate(unknowns) if k == "q" and m.q_names[i].endswith((".rx", ".ry", ".rz"))]
         fscale = max(1.0, float(np.max(np.abs(K.F0))) if nq else 1.0)
         cap = max(1.0, float(np.max(np.abs(m.c0))) if m.c0.size else 1.0)   # scene size [m]
         outside = 0.0
@@ -788,8 +789,10 @@ class Simulator:
                 # outside J's range is left for the next iteration (the rope weight across an unloaded
                 # span: the loaded rope holds it); if it stays, nothing holds that body
                 step, outside = _newton_direction(J.toarray() if hasattr(J, "toarray") else J, r)
-            # a Newton step longer than the scene is not trusted: it is cut to the scene's size first
-            lam = min(1.0, cap / max(float(np.max(np.abs(step), initial=0.0)), 1e-300))
+            # a Newton step longer than the scene is not trusted: it is cut to the scene's size first,
+            # and to half a radian of body rotation (an unloaded start has a near-singular yaw)
+            lam = min(1.0, cap / max(float(np.max(np.abs(step), initial=0.0)), 1e-300),
+                      0.5 / max(float(np.max(np.abs(step[rot]), initial=0.0)), 1e-300))
             while lam > 1e-6:
                 rt = resid(x + lam * step)[0]
                 if rt is not None and np.max(np.abs(rt)) < max(rn, 1e-300) * (1 - 1e-4 * lam) or rn < 1e-9 * fscale:

@@ -15,7 +15,7 @@ from ._jit import njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_element_1d_at,
                               linear_element_at)
-from .bodies import nl_convect, nl_update, rigid_terms
+from .bodies import nl_convect, nl_update, rigid_terms, wrap_weight
 from .elements.torsion import torsion_energy, torsion_terms
 from .kernel import new_work
 from .profiles import profile_eval
@@ -576,6 +576,7 @@ def assemble_ws(K, W, c, q, v, t, u):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
         _nl_convect_all(K, MEs, QEs, Q)
+        wrap_weight(K, Q, q, False)
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
@@ -773,6 +774,8 @@ def energy_u(K, c, q, v, u):
     for k in range(K.spr_dof.shape[0]):
         j = K.spr_dof[k]
         U += 0.5 * K.spr_k[k] * q[j] * q[j]
+    if K.nl_on & 1:
+        Vg += wrap_weight(K, Q, q, True)
     if K.nl_on & 4:
         U += torsion_energy(K, QE, q)
     return T, Vg, U

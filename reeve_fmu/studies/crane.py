@@ -1069,10 +1069,11 @@ def yaw_equilibrium(sim, st, q, jyaw: int, jfree: int, psi: float, tol: float = 
     nq = m.nq
     eqs = np.array(m.statics_equations)
     unk = np.array(sorted((set(range(nq)) - {jyaw}) & set(m.statics_equations) | {jfree}))
-    q = q.copy()
-    q[jyaw] = psi
     M, Q, zero = np.empty((nq, nq)), np.empty(nq), np.zeros(nq)
     u = sim.kernel_inputs(st)
+    ang = m.K.nl_ANG.copy()           # the tangent solver's warm start (its branch) at the start
+    q = q.copy()
+    q[jyaw] = psi
     fscale = max(1.0, float(np.max(np.abs(m.K.F0))))
 
     def resid(x):
@@ -1086,7 +1087,7 @@ def yaw_equilibrium(sim, st, q, jyaw: int, jfree: int, psi: float, tol: float = 
     for _ in range(30):
         r = resid(x)
         if r is None or not np.all(np.isfinite(r)):
-            return None
+            break
         if np.max(np.abs(r)) < tol * fscale:
             q[unk] = x
             return q
@@ -1094,13 +1095,14 @@ def yaw_equilibrium(sim, st, q, jyaw: int, jfree: int, psi: float, tol: float = 
             xp = x.copy()
             xp[k] += 1e-7 * (1.0 + abs(x[k]))
             rp = resid(xp)
-            if rp is None:
-                return None
-            J[:, k] = (rp - r) / (xp[k] - x[k])
+            J[:, k] = (rp - r) / (xp[k] - x[k]) if rp is not None else np.nan
         try:
             x = x - np.linalg.solve(J, r)
+            if not np.all(np.isfinite(x)):
+                break
         except np.linalg.LinAlgError:
-            return None
+            break
+    m.K.nl_ANG[:] = ang
     return None
 
 
@@ -1118,23 +1120,32 @@ def block_height(model, q, block: str) -> float:
     return float(np.mean([s.center[2] for s in fixed]) - z_block)
 
 
-def cabling_of_model(sim, st, block: str, drum: str, dpsi: float = 0.02, dpsi_min: float = 1e-4) -> YawPath:
+def cabling_of_model(sim, st, block: str, drum: str, dpsi: float = 0.02, d: float = 0.02) -> YawPath:
     """Continuation of the dynamic model's statics in the block yaw from its equilibrium st (rope paid
-    out from the drum as needed): the height rises with the yaw up to the fold (cabling); the step is cut
-    by 3 when Newton fails or the height falls, down to dpsi_min, and the fold is the vertex of the
-    parabola height(yaw) through the last three accepted points."""
+    out from the drum as needed) in steps dpsi: the height rises with the yaw up to the fold (cabling)
+    and falls beyond it. The march stops after two falling steps (one alone may be a jump of the
+    tangent points, not the fold) or when Newton fails (step cut by 3 down to dpsi / 100); the fold is
+    the vertex of the parabola through the highest point and the points +-d around it."""
     m = sim.model
     jyaw, jd = m.body_dofs[block]["rz"], m.sheave_dof[drum]
     q = st.q.copy()
-    hist = [(q[jyaw], block_height(m, q, block))]
-    while dpsi > dpsi_min:
-        qn = yaw_equilibrium(sim, st, q, jyaw, jd, hist[-1][0] + dpsi)
-        h = block_height(m, qn, block) if qn is not None else -math.inf
-        if h <= hist[-1][1]:
-            dpsi /= 3.0
+    hist = [(q[jyaw], block_height(m, q, block), q)]
+    step, falling = dpsi, 0
+    while falling < 2 and step > dpsi / 100 and hist[-1][0] < math.pi:
+        qn = yaw_equilibrium(sim, st, hist[-1][2], jyaw, jd, hist[-1][0] + step)
+        if qn is None:
+            step /= 3.0
             continue
-        q = qn
-        hist.append((q[jyaw], h))
-    P = np.array(hist)
-    ch, cy = _refine_fold([(h, p) for p, h in hist])
+        h = block_height(m, qn, block)
+        falling = falling + 1 if h < hist[-1][1] else 0
+        hist.append((qn[jyaw], h, qn))
+    k = max(range(len(hist)), key=lambda i: hist[i][1])
+    psi, h, q = hist[k]
+    side = [yaw_equilibrium(sim, st, q, jyaw, jd, psi + e) for e in (-d, d)]
+    if all(x is not None for x in side):
+        around = [(block_height(m, side[0], block), psi - d), (h, psi), (block_height(m, side[1], block), psi + d)]
+        ch, cy = _refine_fold(around)
+    else:
+        ch, cy = h, psi
+    P = np.array([(p_, h_) for p_, h_, _ in hist[:k + 1]])
     return YawPath(yaw=P[:, 0], height=P[:, 1], critical_height=float(ch), critical_yaw=float(cy), q=q)

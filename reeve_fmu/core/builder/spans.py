@@ -120,7 +120,7 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
             bs.nlr.tangent_rows(node, rb.nl_spans[k], end, bs.comps_nd)
         if 0 < k and rb.rope.wrap_model == "W1" and stops[k].sheave is not None:
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
-                            rb.geo[k][2])
+                            rb.geo[k][2], rb.rhoA * np.asarray(bs.g, float), rb.wraps[k][0])
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
         rope_wraps.append((k, _add_wrap_elements(bs, span_nodes[k - 1][1], ends[0], rb.geo[k], rb.wraps[k],
                                                  bs.sheaves[stops[k].sheave], rb.sig[k],
