@@ -183,8 +183,14 @@ def _end_node(bs: BuildState, rb: _Rope, kind, k, T, stop, e) -> int:
             bs.springs.append((jh, st.hitch_stiffness * rope.count, st.hitch_damping * rope.count))
     node = dict(r=r, e=e, s=rb.s_row(kind, k))
     if bs.cubic:
-        if st.sheave is not None:
-            # leaves/meets the sheave tangentially: slope = stretch * span direction
+        if st.sheave is not None and bs.nlr is not None and rope.EI == 0.0:
+            # exact tangents, no bending stiffness: the rope leaves the pitch circle in whatever
+            # direction its span takes (a pinned string end); holding the slope on the chord would be
+            # a moment the rope cannot carry (span sway frequency +14 % with two elements per span)
+            node["d"] = bs.free_slope(f"{rope.name}.span{k}.{kind}", e)
+        elif st.sheave is not None:
+            # leaves/meets the sheave tangentially: slope = stretch * span direction (exact tangents:
+            # the current direction, a nonlinear row of core/bodies.py)
             jl = bs.new_q(f"{rope.name}.span{k}.{kind}.stretch", "slope", 1.0)
             node["d"] = Affine(np.zeros(3)).add(jl, e)
             node["stretch"] = jl
