@@ -5,7 +5,8 @@
   current span (EI > 0), rope material conserved, energy drift second order in the step;
 * the slewing crane (scenes/slewing_crane.toml) with two cubic elements per span: the jib span's
   transverse sway against the taut string f = (1 / 2L) sqrt(T / rho A'), rho A' = rho A s / L the mass
-  per stretched length, and the payload's slew-and-hoist motion against the linear-element crane.
+  per stretched length, and the payload's slew-and-hoist motion against the linear-element crane;
+* three linear elements per span on the same beam: energy drift second order.
 """
 import math
 import sys
@@ -164,3 +165,14 @@ def test_cubic_rope_without_bending_stiffness_has_free_end_slopes_and_balances_e
     assert moved["beam.theta"] < -0.4                # measured -0.43 rad
     assert d1 < 2e-5                                 # measured 2.9e-6
     assert 3.5 < d1 / d2 < 4.5                       # measured 4.00: second order
+
+
+def test_linear_elements_several_per_span_with_exact_tangents_balance_energy():
+    """Three linear elements per span on the rotating / translating beam: interior nodes free, their
+    s interpolated between the span ends; energy drift second order in h."""
+    m = build_model(loads_scene(_beam_scene().replace("[[ropes]]", "[[ropes]]\nelements_per_span = 3", 1), "b3.toml"))
+    d1, moved = _run_beam(m, 1e-3)
+    d2, _ = _run_beam(m, 5e-4)
+    assert moved["beam.theta"] < -0.4 and moved["tip.s"] > 0.15      # measured -0.43 rad, 0.20 m
+    assert d1 < 1e-5                                                    # measured 1.0e-6
+    assert 3.5 < d1 / d2 < 4.5                                          # measured 4.01: second order
