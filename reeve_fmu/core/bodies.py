@@ -10,7 +10,11 @@ nonlinear: p_r = f_r(q). This module evaluates those rows in every residual:
 * the common tangent of the two stops of each span (closed form for coplanar circles, the same formula
   as geometry.tangent), so tangent points slide on the pitch circles as the span turns;
 * W1 wraps: the material coordinate of the leaving node is sigma + R * wrap angle(q), so the rope
-  stored on a wrap follows the current wrap angle and the rope length is conserved exactly.
+  stored on a wrap follows the current wrap angle and the rope length is conserved exactly;
+* cubic elements: the slope dr/ds of a span's end node at a sheave is lambda * e(q), lambda the
+  node's stretch coordinate and e(q) = (TB - TA) / |TB - TA| the current span direction, so the rope
+  leaves the pitch circle tangentially at the current tangent point (the slope's direction is
+  eliminated by the geometry; only its length, the stretch, stays a coordinate).
 
 For each nonlinear row the Jacobian row B_r(q) (rows_jacobian) and the convective acceleration
 (dB/dt qdot)_r (rows_accel) are recomputed in closed form: rigid body motions, the tangency conditions
@@ -30,7 +34,7 @@ from ._jit import njit
 
 NL_H = 1e-4      # m or rad: Jacobian step; truncation ~ h^2/6 |f'''| ~ 2e-9 m, round-off ~ 1e-16 |f| / h
 NL_EPS = 5e-4    # step of the second difference along qdot (normalised by its largest component)
-ROW_TANGENT, ROW_WRAP = 0, 1
+ROW_TANGENT, ROW_WRAP, ROW_SLOPE = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
@@ -176,6 +180,37 @@ def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
     out[5] = P[iB, 2] + RB * (cB * uB2 + sB_ * vB2)
 
 
+@njit(cache=True, inline="always")
+def _span_dir(TW, k, comp):
+    """Component comp of the unit direction of span k, (TB - TA) / |TB - TA|."""
+    d0, d1, d2 = TW[k, 3] - TW[k, 0], TW[k, 4] - TW[k, 1], TW[k, 5] - TW[k, 2]
+    return (TW[k, 3 + comp] - TW[k, comp]) / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True, inline="always")
+def extra_coef(rk, TW, r):
+    """The B entry of a row's own coordinate (-2 in nl_rw): 1 for a W1 wrap's sigma, the span
+    direction's component for a slope row's stretch."""
+    if rk[r, 0] == ROW_SLOPE:
+        return _span_dir(TW, rk[r, 1], rk[r, 3])
+    return 1.0
+
+
+@njit(cache=True, inline="always")
+def _slope_rate(TW, k, comp, lam, dT):
+    """lam * d e_comp for the tangent-point changes dT of span k: lam (dD - e (e . dD))_comp / L,
+    D = TB - TA, L = |D|."""
+    L = 0.0
+    ed = 0.0
+    for m in range(3):
+        L += (TW[k, 3 + m] - TW[k, m]) ** 2
+    L = math.sqrt(L)
+    for m in range(3):
+        ed += (TW[k, 3 + m] - TW[k, m]) / L * (dT[3 + m] - dT[m])
+    e = (TW[k, 3 + comp] - TW[k, comp]) / L
+    return lam * (dT[3 + comp] - dT[comp] - e * ed) / L
+
+
 @njit(cache=True)
 def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, only, f):
     """The nonlinear rows f at q.
@@ -187,7 +222,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     span k runs from point sp[k, 0] to sp[k, 1] with sg[k] = (RA, sA, RB, sB) and the sheave axes
     sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
     component) or (ROW_WRAP, span in, span out, sigma index) with rf[r] = (R, sense relative to the
-    span-in end-B axis, s offset, centre point). P, TW, BR (body rotations), ANG (contact angles), AX
+    span-in end-B axis, s offset, centre point) or (ROW_SLOPE, span, end, world component) with
+    rf[r, 0] = the stretch coordinate's index (f = q[stretch] * span direction). P, TW, BR (body rotations), ANG (contact angles), AX
     (two axes) are scratch. only >= 0: recompute only the points and spans on body `only` (the others
     keep their values in P and TW: a Jacobian column of that body's coordinate)."""
     for b in range(bq.shape[0]):
@@ -238,6 +274,8 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     for r in range(rk.shape[0]):
         if rk[r, 0] == ROW_TANGENT:
             f[r] = TW[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+        elif rk[r, 0] == ROW_SLOPE:
+            f[r] = q[int(rf[r, 0])] * _span_dir(TW, rk[r, 1], rk[r, 3])
         else:
             k_in, k_out = rk[r, 1], rk[r, 2]
             ip = int(rf[r, 3])
@@ -406,6 +444,9 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
             if rk[r, 0] == ROW_TANGENT:
                 J[r, k] = dTW[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
                 continue
+            if rk[r, 0] == ROW_SLOPE:
+                J[r, k] = _slope_rate(TW, rk[r, 1], rk[r, 3], q[int(rf[r, 0])], dTW[rk[r, 1]])
+                continue
             k_in, k_out = rk[r, 1], rk[r, 2]
             ip = int(rf[r, 3])
             n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
@@ -543,6 +584,29 @@ def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
 
 
 @njit(cache=True)
+def _slope_accel(T, VT, AT, comp, lam, dlam):
+    """Convective acceleration of a slope row lam * e, e = D / L, D = TB - TA: 2 lam' e' + lam e''
+    at zero coordinate accelerations, with e' = (D' - e L') / L, L' = e . D' and
+    e'' = (D'' - e (e . D'') - e (e' . D') - 2 e' L') / L (D'': the touching points' convective part)."""
+    L = math.sqrt((T[3] - T[0]) ** 2 + (T[4] - T[1]) ** 2 + (T[5] - T[2]) ** 2)
+    e = np.empty(3)
+    dD = np.empty(3)
+    aD = np.empty(3)
+    for m in range(3):
+        e[m] = (T[3 + m] - T[m]) / L
+        dD[m] = VT[3 + m] - VT[m]
+        aD[m] = AT[3 + m] - AT[m]
+    Ld = e[0] * dD[0] + e[1] * dD[1] + e[2] * dD[2]
+    ea = e[0] * aD[0] + e[1] * aD[1] + e[2] * aD[2]
+    ed = (dD[comp] - e[comp] * Ld) / L
+    edD = 0.0
+    for m in range(3):
+        edD += (dD[m] - e[m] * Ld) / L * dD[m]
+    edd = (aD[comp] - e[comp] * ea - e[comp] * edD - 2.0 * ed * Ld) / L
+    return 2.0 * dlam * ed + lam * edd
+
+
+@njit(cache=True)
 def rows_accel(q, v, G, acc):
     """acc = (dB/dt) v of the rows (their acceleration at zero coordinate accelerations), in closed
     form at the poses of the last rows_eval: body motions (_body_motion), touching points by
@@ -569,6 +633,10 @@ def rows_accel(q, v, G, acc):
     for r in range(rk.shape[0]):
         if rk[r, 0] == ROW_TANGENT:
             acc[r] = AT[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]
+            continue
+        if rk[r, 0] == ROW_SLOPE:
+            j = int(rf[r, 0])
+            acc[r] = _slope_accel(TW[rk[r, 1]], VT[rk[r, 1]], AT[rk[r, 1]], rk[r, 3], q[j], v[j])
             continue
         k_in, k_out = rk[r, 1], rk[r, 2]
         ip = int(rf[r, 3])
@@ -603,23 +671,25 @@ def rows_accel(q, v, G, acc):
 def rows_accel_fd(q, v, G, cols, f0, fp, fm, qs, acc):
     """rows_accel by the second central difference of the rows along the body velocities (step
     NL_EPS; the tests' reference); f0 = f(q)."""
-    nrm = 0.0
+    rk, rf = G[9], G[10]
+    sel = np.zeros(q.shape[0], np.bool_)    # body coordinates and the slope rows' stretches
     for k in range(cols.shape[0]):
-        x = abs(v[cols[k]])
-        if x > nrm:
-            nrm = x
+        sel[cols[k]] = True
+    for r in range(rk.shape[0]):
+        if rk[r, 0] == ROW_SLOPE:
+            sel[int(rf[r, 0])] = True
+    nrm = 0.0
+    for j in range(q.shape[0]):
+        if sel[j] and abs(v[j]) > nrm:
+            nrm = abs(v[j])
     if nrm == 0.0:
         acc[:] = 0.0
         return
     for i in range(q.shape[0]):
-        qs[i] = q[i]
-    for k in range(cols.shape[0]):
-        j = cols[k]
-        qs[j] = q[j] + NL_EPS * v[j] / nrm
+        qs[i] = q[i] + (NL_EPS * v[i] / nrm if sel[i] else 0.0)
     rows_eval(qs, *G, -1, fp)
-    for k in range(cols.shape[0]):
-        j = cols[k]
-        qs[j] = q[j] - NL_EPS * v[j] / nrm
+    for i in range(q.shape[0]):
+        qs[i] = q[i] - (NL_EPS * v[i] / nrm if sel[i] else 0.0)
     rows_eval(qs, *G, -1, fm)
     sc = nrm * nrm / (NL_EPS * NL_EPS)
     for r in range(f0.shape[0]):
@@ -647,7 +717,7 @@ def nl_update(K, c, q, v):
             x = f0[r]
             for w in range(el_map.shape[2]):
                 k = rw[r, w]
-                b = 0.0 if k == -1 else (1.0 if k == -2 else J[r, k])
+                b = 0.0 if k == -1 else (extra_coef(K.nl_rk, K.nl_TW, r) if k == -2 else J[r, k])
                 el_coef[ie, a, w] = b
                 x -= b * q[el_map[ie, a, w]]
             c[el_idx[ie, a]] = x
@@ -734,7 +804,7 @@ class NonlinearRows:
         self.points = []        # (body index or -1, offset from the body's reference point)
         self.spans = []         # (point A, point B, RA, sA, RB, sB, sheave axes A and B in body axes)
         self.moving = []        # per span: True if a stop is on a body with a free coordinate
-        self.rows = {}          # ("pos", node, world comp) | ("s", node) -> row spec
+        self.rows = {}          # ("pos" | "slope", node, world comp) | ("s", node) -> row spec
 
     def _body(self, name):
         if name is None or name == "ground":
@@ -766,6 +836,13 @@ class NonlinearRows:
         if self.moving[span]:
             for comp in comps:
                 self.rows[("pos", node, comp)] = (ROW_TANGENT, span, end, comp, 0.0, 0.0, 0.0, 0, None)
+
+    def slope_rows(self, node, span, j_stretch, comps):
+        """Cubic elements: the slope of a span's end node at a sheave, stretch * current span direction."""
+        if self.moving[span]:
+            for comp in comps:
+                self.rows[("slope", node, comp)] = (ROW_SLOPE, span, 0, comp, float(j_stretch), 0.0, 0.0, 0.0,
+                                                    j_stretch)
 
     def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0):
         """s of the node leaving a W1 wrap: sigma + R * current wrap angle (about the sheave's axis,
@@ -813,7 +890,7 @@ class NonlinearRows:
         for s in specs:
             d = span_cols(s[1]) + (span_cols(s[2]) if s[0] == ROW_WRAP else [])
             d = sorted(set(d))
-            deps.append(d + ([-2] if s[0] == ROW_WRAP else []))
+            deps.append(d + ([-2] if s[0] in (ROW_WRAP, ROW_SLOPE) else []))
         W = max([el_map.shape[2]] + [len(d) for d in deps])
         rw = -np.ones((nr, W), np.int64)
         for r, d in enumerate(deps):
@@ -855,8 +932,8 @@ class NonlinearRows:
                 B[row, :] = 0.0
                 for k, j in enumerate(cols):
                     B[row, j] = f["nl_J"][r, k]
-                if specs[r][0] == ROW_WRAP:
-                    B[row, specs[r][8]] = 1.0
+                if specs[r][0] in (ROW_WRAP, ROW_SLOPE):
+                    B[row, specs[r][8]] = extra_coef(rk, f["nl_TW"], r)
                 c0[row] = f["nl_f0"][r] - B[row] @ q0
         return new_map, new_coef, f
 

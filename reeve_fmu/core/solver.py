@@ -835,12 +835,15 @@ class Simulator:
         coordinates' columns then come from compiled element-wise residuals (a scipy sparse matrix
         is returned) and each rope length (positions mode) from one residual."""
         n = len(x)
-        if n >= SPARSE_MIN_FREE:
+        # nonlinear rows (core/bodies.py): the element maps follow the poses, which neither the
+        # structural pattern nor the banded differences see: one residual per unknown
+        sparse = n >= SPARSE_MIN_FREE and not self.model.K.nl_on
+        if sparse:
             J = self._statics_jacobian_banded(resid, x, r, unknowns, eqs, KS, u, t)
             if J is not None:
                 return J
         J = np.zeros((len(eqs), n))
-        if n >= SPARSE_MIN_FREE:
+        if sparse:
             groups, rows = self._statics_groups(tuple(unknowns), tuple(eqs))
         else:
             groups, rows = [np.array([j]) for j in range(n)], None

@@ -47,6 +47,8 @@ def node_arrays(bs: BuildState) -> Arrays:
         def row_of(key):
             if key[0] == "pos":
                 return key[1] * nd + comps.index(key[2])
+            if key[0] == "slope":
+                return n_nodes * nd + key[1] * nd + comps.index(key[2])
             return _sidx(nd, n_nodes, n_slope, key[1])
         el_map, el_coef, nl = bs.nlr.finalize(nd, row_of, bs.q0, B, c0, el_idx, el_map, el_coef)
     ptr, idx, val = [0], [], []

@@ -118,6 +118,8 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     if rb.nl_spans is not None:      # exact tangents: the end nodes (and a W1 wrap's s) follow the poses
         for end, node in enumerate(ends):
             bs.nlr.tangent_rows(node, rb.nl_spans[k], end, bs.comps_nd)
+            if "stretch" in bs.nodes[node]:   # cubic: slope = stretch * current span direction
+                bs.nlr.slope_rows(node, rb.nl_spans[k], bs.nodes[node]["stretch"], bs.comps_nd)
         if 0 < k and rb.rope.wrap_model == "W1" and stops[k].sheave is not None:
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
                             rb.geo[k][2], rb.rhoA * np.asarray(bs.g, float), rb.wraps[k][0])
@@ -141,14 +143,16 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
 
 def register_spans(nlr, scene, rope, stops, geo):
     """Exact tangents: every span of the rope in the registry (core/bodies.py); returns their indices.
-    The nonlinear rows cover one linear element per span with rigid terminations."""
+    The nonlinear rows are the span end nodes (positions; cubic: slopes; W1: s of the leaving node);
+    interior nodes are free coordinates with s interpolated linearly between the end nodes' s at their
+    t = 0 offsets (a valid ALE mesh: the material between the nodes follows from their s). W2 wraps
+    and hitch springs are not available."""
     from ..scene import SceneError
     sheaves = {s.name: s for s in scene.sheaves}
     where = f"{scene.source}: [ropes.{rope.name}]"
-    if rope.element != "linear" or rope.wrap_model == "W2" or rope.elements_per_span != 1:
-        raise SceneError(f"{where} exact tangent points (rotating bodies, joints, scene.tangents = 'exact') "
-                         f"are implemented for linear elements, one per span (elements_per_span = 1), "
-                         f"wraps W0/W1")
+    if rope.wrap_model == "W2":
+        raise SceneError(f"{where} wrap_model = 'W2' is not available with exact tangent points (rotating "
+                         f"bodies, joints, scene.tangents = 'exact'): use 'W0' or 'W1'")
     desc = []
     for st, (c, R, a, sgn) in zip(stops, geo):     # c: the stop's world position at t = 0
         if st.sheave is not None:
@@ -179,10 +183,17 @@ def _end_node(bs: BuildState, rb: _Rope, kind, k, T, stop, e) -> int:
             bs.springs.append((jh, st.hitch_stiffness * rope.count, st.hitch_damping * rope.count))
     node = dict(r=r, e=e, s=rb.s_row(kind, k))
     if bs.cubic:
-        if st.sheave is not None:
-            # leaves/meets the sheave tangentially: slope = stretch * span direction
+        if st.sheave is not None and bs.nlr is not None and rope.EI == 0.0:
+            # exact tangents, no bending stiffness: the rope leaves the pitch circle in whatever
+            # direction its span takes (a pinned string end); holding the slope on the chord would be
+            # a moment the rope cannot carry (span sway frequency +14 % with two elements per span)
+            node["d"] = bs.free_slope(f"{rope.name}.span{k}.{kind}", e)
+        elif st.sheave is not None:
+            # leaves/meets the sheave tangentially: slope = stretch * span direction (exact tangents:
+            # the current direction, a nonlinear row of core/bodies.py)
             jl = bs.new_q(f"{rope.name}.span{k}.{kind}.stretch", "slope", 1.0)
             node["d"] = Affine(np.zeros(3)).add(jl, e)
+            node["stretch"] = jl
         else:
             node["d"] = bs.free_slope(f"{rope.name}.span{k}.{kind}", e)
     bs.nodes.append(node)
