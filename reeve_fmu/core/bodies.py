@@ -729,21 +729,28 @@ def wrap_weight(K, Q, q, energy):
     """The weight of the rope a W1 wrap gains or loses as its angle changes: V = -(l_w(q) - lw) rhoA g.c
     per wrap (l_w = s_out - sigma, c the sheave centre, lw the lumped part). Without it the span
     elements' gravity potential, which counts material leaving a span at the span's mid-height, makes a
-    spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q += rhoA g.c d l_w/dq (the part of
-    -dV/dq that moves material; the centre's motion under the unlumped rope, rhoA (l_w - lw) g.dc/dq, is
-    left out: order rhoA g times the wrap's length change). energy: return V instead (after nl_update)."""
-    rk, rf, P, J, cols, f0 = K.nl_rk, K.nl_rf, K.nl_P, K.nl_J, K.nl_cols, K.nl_f0
+    spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q -= dV/dq = rhoA g.c d l_w/dq (the rope
+    moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope). energy: return V
+    instead (after nl_update)."""
+    rk, rf, P, J, cols, f0, pb = K.nl_rk, K.nl_rf, K.nl_P, K.nl_J, K.nl_cols, K.nl_f0, K.nl_pb
     V = 0.0
     for r in range(rk.shape[0]):
         if rk[r, 0] != ROW_WRAP:
             continue
         ip = int(rf[r, 3])
         gc = rf[r, 4] * P[ip, 0] + rf[r, 5] * P[ip, 1] + rf[r, 6] * P[ip, 2]
+        dl = f0[r] - q[rk[r, 3]] - rf[r, 7]
         if energy:
-            V -= (f0[r] - q[rk[r, 3]] - rf[r, 7]) * gc
+            V -= dl * gc
             continue
         for k in range(cols.shape[0]):
             Q[cols[k]] += gc * J[r, k]
+            b = K.nl_colbody[k]
+            if pb[ip] == b:
+                v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_BR, b,
+                                                            cols[k])
+                c0, c1, c2 = _moved(P, ip, True, v0, v1, v2, w0, w1, w2, O0, O1, O2)
+                Q[cols[k]] += dl * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
     return V
 
 
