@@ -183,7 +183,8 @@ def _coloured_columns(K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv):
 @njit(cache=True, inline="always")
 def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     """Finite-difference Newton matrix d r / d qdd_free at the current iterate (q and v follow
-    through the Newmark relations). Returns -1 (vanishing span), 0 (singular) or 1."""
+    through the Newmark relations; column groups K.nl_grp: _coloured_columns). Returns -1
+    (vanishing span), 0 (singular) or 1."""
     nf = K.free.shape[0]
     st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
     if st < 0:
