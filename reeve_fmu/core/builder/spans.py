@@ -122,7 +122,7 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
                 bs.nlr.slope_rows(node, rb.nl_spans[k], bs.nodes[node]["stretch"], bs.comps_nd)
         if 0 < k and rb.rope.wrap_model == "W1" and stops[k].sheave is not None:
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
-                            rb.geo[k][2], rb.rhoA * np.asarray(bs.g, float), rb.wraps[k][0])
+                            rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0])
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
         rope_wraps.append((k, _add_wrap_elements(bs, span_nodes[k - 1][1], ends[0], rb.geo[k], rb.wraps[k],
                                                  bs.sheaves[stops[k].sheave], rb.sig[k],
@@ -139,6 +139,12 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     if stops[k + 1].sheave is not None:
         bs.tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(bs.elements) - 1, 1)
     return (chain[0], chain[-1], first_el, len(bs.elements) - 1)
+
+
+def _wrap_weight(bs: BuildState, rb: _Rope):
+    """rhoA g of a W1 wrap's rope for bodies.wrap_weight (linear elements; cubic ropes: not yet checked,
+    their wraps keep the weight lumped at the build-time wrap length)."""
+    return rb.rhoA * np.asarray(bs.g, float) if rb.rope.element == "linear" else np.zeros(3)
 
 
 def register_spans(nlr, scene, rope, stops, geo):
