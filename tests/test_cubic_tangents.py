@@ -176,3 +176,26 @@ def test_linear_elements_several_per_span_with_exact_tangents_balance_energy():
     assert moved["beam.theta"] < -0.4 and moved["tip.s"] > 0.15      # measured -0.43 rad, 0.20 m
     assert d1 < 1e-5                                                    # measured 1.0e-6
     assert 3.5 < d1 / d2 < 4.5                                          # measured 4.01: second order
+
+
+def test_coloured_newton_matrix_equals_the_column_by_column_one(cubic_crane):
+    """The dense Newton matrix of a model with nonlinear rows, differenced with the columns of a
+    group (sparse.dense_groups) perturbed together, is the column-by-column one to the bit: a
+    column's entries come from rows no other column of its group reaches."""
+    from reeve_fmu.core import solver as S
+    from reeve_fmu.core.kernel import compiled_kernel
+    from reeve_fmu.core.system import workspace
+    m, sim, st = cubic_crane
+    nf = len(m.K.free)
+    assert 0 < m.K.nl_grp[0] < nf                    # 32 groups for 44 columns
+    rng = np.random.default_rng(5)
+    v, qdd = 0.01 * rng.standard_normal(m.nq), 0.1 * rng.standard_normal(m.nq)
+    u = sim.kernel_inputs(st)
+    jacs = []
+    for K in (m.K, m.K._replace(nl_grp=np.zeros(1, np.int64))):
+        KJ = compiled_kernel(K)
+        jac = np.zeros((nf, nf))
+        S._build_jacobian(KJ, workspace(KJ), st.c.copy(), st.q.copy(), v.copy(), qdd.copy(), 0.0, u, jac,
+                          np.zeros(nf, np.int64), np.zeros(nf), np.zeros(nf), 1e-5, 1e-3)
+        jacs.append(jac)
+    assert np.array_equal(jacs[0], jacs[1])

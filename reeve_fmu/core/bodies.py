@@ -765,7 +765,8 @@ def empty_fields() -> dict:
                 nl_colbody=np.zeros(0, np.int64),
                 nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
                 nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
-                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64))
+                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64),
+                nl_grp=np.zeros(1, np.int64))
 
 
 class NonlinearRows:
@@ -896,7 +897,8 @@ class NonlinearRows:
                  nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
                  nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
                  nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
-                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64))
+                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64),
+                 nl_grp=np.zeros(1, np.int64))
         if nr:
             q0 = np.asarray(q0, float)
             G = tuple(f[k] for k in GEOMETRY_FIELDS)

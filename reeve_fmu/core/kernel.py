@@ -37,6 +37,10 @@ Kernel = namedtuple("Kernel", [
     "nl_J", "nl_qs", "nl_racc", "nl_rw", "nl_ent", "nl_acc",
     # nl_frz[0] = 1: the rows keep B(q), c and dB/dt qdot of the last update (solver, Newton matrix)
     "nl_frz",
+    # column groups of the dense Newton matrix of a model with nonlinear rows (sparse.dense_groups):
+    # [groups G, G + 1 group pointers, free columns by group, nf + 1 reach pointers, reached free rows];
+    # G = 0: column by column
+    "nl_grp",
     # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
     "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
     # spatial rigid bodies (bodies.rigid_terms): rotation-vector indices, inertia tensors in body axes
@@ -156,6 +160,7 @@ if JIT:
         ("nl_ent", types.int64[:, ::1]),
         ("nl_acc", types.float64[:, ::1]),
         ("nl_frz", types.int64[::1]),
+        ("nl_grp", types.int64[::1]),
         ("jp_dof", types.int64[::1]),
         ("jp_prof", types.float64[:, :, ::1]),
         ("jt_dof", types.int64[::1]),
@@ -251,7 +256,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, nl_grp, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -343,6 +348,7 @@ if JIT:
         k.nl_ent = nl_ent
         k.nl_acc = nl_acc
         k.nl_frz = nl_frz
+        k.nl_grp = nl_grp
         k.jp_dof = jp_dof
         k.jp_prof = jp_prof
         k.jt_dof = jt_dof

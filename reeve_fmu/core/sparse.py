@@ -86,6 +86,44 @@ def newton_pattern(K, elements=True):
     return P
 
 
+DENSE_GROUPS_MIN = 16   # free coordinates from which a model with nonlinear rows colours its columns
+
+
+def dense_groups(K) -> np.ndarray:
+    """Column groups for the dense Newton matrix of a model with nonlinear rows (kernel field nl_grp,
+    layout there): the matrix is differenced with the rows held (solver._build_jacobian), so a column
+    reaches the rows of the elements whose maps list it (a nonlinear entry lists all its columns,
+    whatever their current coefficient), the constant mass M0 and a rigid body's rotation block; the
+    other q-level terms are diagonal. Models with torsion spans, groove friction or creep sheaves
+    (couplings outside that list), or fewer than DENSE_GROUPS_MIN free coordinates: column by column."""
+    import scipy.sparse as sp
+    free = np.asarray(K.free, np.int64)
+    nf = len(free)
+    if not (K.nl_on & 1) or K.nl_on & 4 or K.trac_s >= 0 or len(K.crp_s) or nf < DENSE_GROUPS_MIN:
+        return np.zeros(1, np.int64)
+    rows, cols = [np.arange(K.nq)], [np.arange(K.nq)]
+    for ie in range(K.el_map.shape[0]):
+        qs = []
+        for a in range(K.el_map.shape[1]):
+            r = K.nl_ent[ie, a] if K.nl_ent.shape[0] else -1
+            w = K.nl_rw[r] != -1 if r >= 0 else K.el_coef[ie, a] != 0.0
+            qs.append(K.el_map[ie, a, :len(w)][w])
+        qs = np.unique(np.concatenate(qs))
+        rows.append(np.repeat(qs, len(qs)))
+        cols.append(np.tile(qs, len(qs)))
+    i0, j0 = np.nonzero(K.M0)
+    rows.append(i0), cols.append(j0)
+    for b in np.asarray(K.rb_q):
+        qs = np.asarray(b)[np.asarray(b) >= 0]
+        rows.append(np.repeat(qs, len(qs))), cols.append(np.tile(qs, len(qs)))
+    P = sp.csr_matrix((np.ones(sum(len(r) for r in rows), bool), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(K.nq, K.nq))[free][:, free].tocsc()
+    P.sort_indices()
+    ptr, idx = P.indptr.astype(np.int64), P.indices.astype(np.int64)
+    gptr, gcols = colour_columns(ptr, idx, nf, nf)
+    return np.concatenate([[len(gptr) - 1], gptr, gcols, ptr, idx]).astype(np.int64)
+
+
 def colour_columns(csc_ptr, csc_rows, nrows, n):
     """Greedy column colouring: columns of one colour share no row (distance-2 colouring of the
     column-intersection graph). Columns are taken in order, which for a banded matrix gives at most

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..bodies import rigid_fields
 from ..kernel import Kernel
+from ..sparse import dense_groups
 from ..traction import equivalent_friction
 from .coordinates import Arrays
 from .elimination import Drive
@@ -33,7 +34,7 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
     dv = scene.drive
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in bs.elements]
     buffers = scene.buffers
-    return Kernel(
+    K = Kernel(
         nd=bs.nd, nq=len(bs.q_names),
         B_ptr=np.array(arr.ptr, np.int64), B_idx=np.array(arr.idx, np.int64), B_val=np.array(arr.val, float),
         el_idx=arr.el_idx, el_map=arr.el_map, el_coef=arr.el_coef,
@@ -71,6 +72,7 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs), torsion_fields(bs)), **d.joints,
         **rigid_fields(scene, bs.body_dofs), **torsion_fields(bs),
     )
+    return K._replace(nl_grp=dense_groups(K))
 
 
 def _flagged(nl: dict, joints: dict, rigid: dict, torsion: dict) -> dict:
