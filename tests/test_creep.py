@@ -144,6 +144,31 @@ def test_drum_stored_length_against_angle_and_arriving_strain(mode, V):
         assert np.max(np.abs(-(res["hook.position"] - z0) - R * th)) <= 1e-11 * T
 
 
+@pytest.mark.parametrize("mode,V", [("creep", 0.0), ("creep", 1.0), ("creep", -1.0), ("rigid", 0.0)])
+def test_drum_torque_is_radius_times_tension(mode, V):
+    """Holding, paying out and winding at constant speed and load: the drum torque is R T, T the
+    rope's tension where it leaves the drum (moment balance of the drum). With creep the stored rope
+    keeps its strain, so its strain energy EA eps^2/2 per unit material pulls on the drum's s like the
+    span does; without that term the torque was R T (1 - eps/2), 1.44 N m low here (measured now
+    2.0e-11 of R m g in all three). The rigid rim stores the rope unstrained: R T (1 + eps/2) (the
+    assumption creep replaces; 1.44 N m high, that formula measured to 2.0e-11)."""
+    EA = 1e7
+    eps = M_CAR * G / EA
+    m = build(drum_hoist(mode, V, EA))
+    sim = Simulator(m)
+    st = sim.initial_state()
+    kap = 1.0 + eps if mode == "creep" else 1.0
+    j, jz = m.sheave_dof["drum"], m.body_dofs["hook"]["z"]
+    st.v[j] = -V / kap
+    st.v[jz] = -V * (1 + eps) / kap
+    sim._consistent_acceleration(st)
+    res = sim.advance(st, 2.0, out_dt=0.01)
+    RT = R * res["rope.tension_start"]
+    expect = RT if mode == "creep" else RT * (1 + eps / 2)
+    assert abs(RT[-1] - R * M_CAR * G) <= 2e-10 * R * M_CAR * G      # constant load: measured 2.3e-11
+    assert np.max(np.abs(res["motor.torque"] + expect)) <= 2e-10 * R * M_CAR * G   # measured 2.0e-11
+
+
 def test_drum_pays_out_at_the_strain_it_wound_with():
     """Wind 3 m at load A (1000 kg), stop, halve the load at rest (the state carried over to the same
     scene with 500 kg), pay the same 3 m of rim out at load B. The drum returns its wound rope last in

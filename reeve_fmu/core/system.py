@@ -151,17 +151,22 @@ def creep_terms(K, QE, VE, v, k, kw):
     eo = K.crp_el_out[k]
     x = v[K.crp_s[k]] / K.crp_vreg
     th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
-    if ei < 0:   # a drum (always a route's first stop)
+    if ei < 0:   # a drum (always a route's first stop; its stored rope is s in [0, sigma])
         e, ed = groove_strain(K, QE, VE, eo, 0, True)
+        EA = K.el_EA[eo]
+        # The stored rope keeps the strain it was wound with: its strain energy EA eps^2/2 per unit
+        # material (eps at the drum's boundary) pulls on sigma like the span does. With it the drum
+        # torque is R T exactly; without it R T (1 - eps/2).
         if kw <= 0.0:
-            return 1.0 + e, ed, 0.0
+            return 1.0 + e, ed, -0.5 * EA * e * e
         # paying out (sigma dot < 0) returns the rope at the kappa it was wound with (wound_kappa);
         # the strain changes to the span's in a creep arc at the exit: force as on a sheave, weighted
         # by the paying-out part of the blend so that it vanishes at rest and while winding
         w = 0.5 * (1.0 - th)
         d = kw - 1.0 - e
+        ew = kw - 1.0
         return (w * kw + (1.0 - w) * (1.0 + e), (1.0 - w) * ed,
-                -th * w * 0.5 * K.el_EA[eo] * d * d)
+                -th * w * 0.5 * EA * d * d - 0.5 * EA * (w * ew * ew + (1.0 - w) * e * e))
     if eo < 0:
         e, ed = groove_strain(K, QE, VE, ei, 1, True)
         return 1.0 + e, ed, 0.0
