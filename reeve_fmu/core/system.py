@@ -108,6 +108,38 @@ def end_strain_rate(K, X, XD, ie, end):
 
 
 @njit(cache=True, inline="always")
+def _weight_graded(K, X, XD, ie, end, rate, e, ed):
+    """A linear element's strain e is its mean; the rope's weight grades the tension along it (at rest
+    dT/ds = -rhoA g.t, t the unit tangent towards the element's end), so at its start the rope is
+    strained rhoA (g.t) l / (2 EA) more and at its end as much less: exact for a rope at rest on any
+    mesh, and what the creep kinematics need where a long heavy span meets the groove."""
+    nd = K.nd
+    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
+    ld = XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]
+    if nd == 1:
+        gt = K.el_g[ie, 0] if X[ie, 1] >= X[ie, 0] else -K.el_g[ie, 0]
+        gtd = 0.0
+    else:
+        n2 = 0.0
+        gd = 0.0
+        dd = 0.0
+        gdd = 0.0
+        for k in range(nd):
+            dk = X[ie, nd + k] - X[ie, k]
+            n2 += dk * dk
+            gd += K.el_g[ie, k] * dk
+            if rate:
+                vk = XD[ie, nd + k] - XD[ie, k]
+                dd += dk * vk
+                gdd += K.el_g[ie, k] * vk
+        inv = 1.0 / math.sqrt(n2)
+        gt = gd * inv
+        gtd = (gdd - gt * dd * inv) * inv if rate else 0.0
+    c = 0.5 * K.el_rhoA[ie] / K.el_EA[ie] * (1.0 if end == 0 else -1.0)
+    return e + c * gt * l, (ed + c * (gtd * l + gt * ld)) if rate else ed
+
+
+@njit(cache=True, inline="always")
 def groove_strain(K, X, XD, ie, end, rate):
     """(strain, its rate if rate else 0) of the rope of element ie where it meets a sheave (end 0:
     start, 1: end), as it lies on the groove: the element's strain; for a tension-only rope the
@@ -126,6 +158,8 @@ def groove_strain(K, X, XD, ie, end, rate):
     else:
         e = end_strain(K, X, ie, end)
         ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
+    if K.el_type != 1 and K.el_rhoA[ie] > 0.0:
+        e, ed = _weight_graded(K, X, XD, ie, end, rate, e, ed)
     if K.el_tonly[ie] == 0:
         return e, ed
     if K.el_type == 1:
