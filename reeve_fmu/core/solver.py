@@ -1184,7 +1184,9 @@ class Simulator:
 
     def energy(self, st: State):
         """(kinetic, gravity, strain) energy [J]; a creep sheave's rim moves at kappa times the
-        material rate."""
+        material rate. The strain energy of rope stored on a creep drum (EA eps^2/2 per unit material,
+        eps as wound) depends on its winding history and is not included: its force on the drum's s is
+        EA eps^2/2 at the drum."""
         return energy_u(self.model.KJ, st.c, st.q, st.v, self._kernel_inputs_at(st))
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,

@@ -108,6 +108,38 @@ def end_strain_rate(K, X, XD, ie, end):
 
 
 @njit(cache=True, inline="always")
+def _weight_graded(K, X, XD, ie, end, rate, e, ed):
+    """A linear element's strain e is its mean; the rope's weight grades the tension along it (at rest
+    dT/ds = -rhoA g.t, t the unit tangent towards the element's end), so at its start the rope is
+    strained rhoA (g.t) l / (2 EA) more and at its end as much less: exact for a rope at rest on any
+    mesh, and what the creep kinematics need where a long heavy span meets the groove."""
+    nd = K.nd
+    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
+    ld = XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]
+    if nd == 1:
+        gt = K.el_g[ie, 0] if X[ie, 1] >= X[ie, 0] else -K.el_g[ie, 0]
+        gtd = 0.0
+    else:
+        n2 = 0.0
+        gd = 0.0
+        dd = 0.0
+        gdd = 0.0
+        for k in range(nd):
+            dk = X[ie, nd + k] - X[ie, k]
+            n2 += dk * dk
+            gd += K.el_g[ie, k] * dk
+            if rate:
+                vk = XD[ie, nd + k] - XD[ie, k]
+                dd += dk * vk
+                gdd += K.el_g[ie, k] * vk
+        inv = 1.0 / math.sqrt(n2)
+        gt = gd * inv
+        gtd = (gdd - gt * dd * inv) * inv if rate else 0.0
+    c = 0.5 * K.el_rhoA[ie] / K.el_EA[ie] * (1.0 if end == 0 else -1.0)
+    return e + c * gt * l, (ed + c * (gtd * l + gt * ld)) if rate else ed
+
+
+@njit(cache=True, inline="always")
 def groove_strain(K, X, XD, ie, end, rate):
     """(strain, its rate if rate else 0) of the rope of element ie where it meets a sheave (end 0:
     start, 1: end), as it lies on the groove: the element's strain; for a tension-only rope the
@@ -126,6 +158,8 @@ def groove_strain(K, X, XD, ie, end, rate):
     else:
         e = end_strain(K, X, ie, end)
         ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
+    if K.el_type != 1 and K.el_rhoA[ie] > 0.0:
+        e, ed = _weight_graded(K, X, XD, ie, end, rate, e, ed)
     if K.el_tonly[ie] == 0:
         return e, ed
     if K.el_type == 1:
@@ -151,17 +185,22 @@ def creep_terms(K, QE, VE, v, k, kw):
     eo = K.crp_el_out[k]
     x = v[K.crp_s[k]] / K.crp_vreg
     th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
-    if ei < 0:   # a drum (always a route's first stop)
+    if ei < 0:   # a drum (always a route's first stop; its stored rope is s in [0, sigma])
         e, ed = groove_strain(K, QE, VE, eo, 0, True)
+        EA = K.el_EA[eo]
+        # The stored rope keeps the strain it was wound with: its strain energy EA eps^2/2 per unit
+        # material (eps at the drum's boundary) pulls on sigma like the span does. With it the drum
+        # torque is R T exactly; without it R T (1 - eps/2).
         if kw <= 0.0:
-            return 1.0 + e, ed, 0.0
+            return 1.0 + e, ed, -0.5 * EA * e * e
         # paying out (sigma dot < 0) returns the rope at the kappa it was wound with (wound_kappa);
         # the strain changes to the span's in a creep arc at the exit: force as on a sheave, weighted
         # by the paying-out part of the blend so that it vanishes at rest and while winding
         w = 0.5 * (1.0 - th)
         d = kw - 1.0 - e
+        ew = kw - 1.0
         return (w * kw + (1.0 - w) * (1.0 + e), (1.0 - w) * ed,
-                -th * w * 0.5 * K.el_EA[eo] * d * d)
+                -th * w * 0.5 * EA * d * d - 0.5 * EA * (w * ew * ew + (1.0 - w) * e * e))
     if eo < 0:
         e, ed = groove_strain(K, QE, VE, ei, 1, True)
         return 1.0 + e, ed, 0.0

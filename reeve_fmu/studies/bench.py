@@ -123,15 +123,19 @@ def _ale_run(scene, t_end, out_dt, eps=1, method="gen-alpha", step=1e-3, rho_inf
                      n_dof=int(model.nq), wall_s=wall, setup_s=setup)
 
 
-def _lag_run(scene, t_end, out_dt, element_length, step=1e-3, rho_inf=None, newton_tol=1e-3, **build_kw):
+def _lag_run(scene, t_end, out_dt, element_length, step=1e-3, rho_inf=None, newton_tol=1e-3, max_iter=30,
+             **build_kw):
+    """One run of the Lagrangian baseline. max_iter = 30: with the R1 groove (U-undercut, equivalent
+    friction above the plain mu) the stick/slip transitions of the finer meshes need more than the
+    simulator's default 12 Newton iterations in a few steps (l = 0.05 m failed at t = 2.739 s)."""
     from .lagrangian import LagrangianSimulator, build_lagrangian
     t0 = time.perf_counter()
     model = build_lagrangian(scene, element_length=element_length, t_end=t_end, **build_kw)
-    sim = LagrangianSimulator(model, step=step, rho_inf=rho_inf, newton_tol=newton_tol)
+    sim = LagrangianSimulator(model, step=step, rho_inf=rho_inf, newton_tol=newton_tol, max_iter=max_iter)
     st = sim.initial_state()
     setup = time.perf_counter() - t0
     rec = dict(method="lagrangian", integrator="gen-alpha", element_length_m=element_length, step_s=step,
-               rho_inf=sim.rho_inf, newton_tol=newton_tol, n_dof=int(model.n_dof),
+               rho_inf=sim.rho_inf, newton_tol=newton_tol, max_iter=max_iter, n_dof=int(model.n_dof),
                n_elements=int(model.n_elements), n_fine_elements=int(model.n_fine), setup_s=setup)
     t0 = time.perf_counter()
     try:
