@@ -73,7 +73,7 @@ def _run_script(code: str, tmp_path, name: str, env=None, timeout=300) -> subpro
 # ------------------------------------------------------------------------------------------------
 def _dynamic_symbols(path) -> set:
     p = subprocess.run(["nm", "-D", "--defined-only", str(path)], capture_output=True, text=True,
-                       encoding="utf-8", errors="replace", timeout=60)
+                       encoding="utf-8", errors="replace", timeout=600)
     assert p.returncode == 0, p.stderr
     return {line.split()[-1] for line in p.stdout.splitlines() if line.strip()}
 
@@ -327,7 +327,7 @@ def test_fmpy_container_runs_in_the_c_host_like_the_jacobi_master(fmus, host, tm
 
     fmu = make_container(fmus["plant"], fmus["drive"], tmp_path / "ReevingSystem.fmu")
     p = subprocess.run([sys.executable, "-m", "fmpy", "validate", str(fmu)], capture_output=True, text=True,
-                       encoding="utf-8", errors="replace", timeout=120)
+                       encoding="utf-8", errors="replace", timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
     ident, guid, v = chost.model_info(fmu)
     d = chost.extract(fmu, tmp_path / "container")

@@ -31,7 +31,7 @@ JOBS = str(ROOT / "tests" / "fmu_toy" / "toy_jobs.py")
 SCENE = "# toy scene\nmass = 500.0\n"
 
 
-def job(name, *args, cache=None, timeout=90.0):
+def job(name, *args, cache=None, timeout=900.0):
     env = dict(os.environ)
     env["REEVE_FMU_CACHE_DIR"] = str(cache)
     return run_in_subprocess(f"{JOBS}:{name}", *args, env=env, timeout=timeout)
@@ -53,7 +53,7 @@ def toy(tmp_path_factory):
 # ------------------------------------------------------------------------------------------------
 def test_fmpy_validate_cli_reports_no_problems(toy):
     p = subprocess.run([sys.executable, "-m", "fmpy", "validate", toy["fmu"]],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "No problems found" in p.stdout
 
@@ -306,7 +306,7 @@ def test_fmu_package_copy_loads_the_kernels_its_source_compiled(toy, tmp_path):
     code = "import json; from reeve_fmu.fmu.jitcheck import jit_cache_probe as p; print(json.dumps(p()))"
     env = dict(os.environ, REEVE_FMU_CACHE_DIR=str(cache), PYTHONPATH=toy["snap"])
     p = subprocess.run([sys.executable, "-c", code], cwd=toy["snap"], env=env, capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     direct = json.loads(p.stdout)
     assert direct["module_file"].startswith(toy["snap"])

@@ -27,7 +27,7 @@ def test_sample_covers_every_kind_and_scene():
 
 @pytest.mark.parametrize("case", SAMPLE, ids=lambda c: f"{Path(c['scene']).stem}: {c['label']}")
 def test_physically_wrong_scene_runs_or_stops_clearly(case):
-    r = run_case(case, timeout=60.0)
+    r = run_case(case, timeout=600.0)   # a hang guard only: generous so a loaded machine cannot fail it
     assert r["outcome"] in ("run", "error"), f"{r['outcome']}: {r['message']}\n{r.get('traceback', '')}"
     if r["outcome"] == "error":
         assert r["message"].startswith(case["scene"]) or "[" in r["message"] or "t = " in r["message"], r

@@ -56,7 +56,7 @@ def test_build_writes_both_fmus_and_fmpy_validate_finds_no_problems(fmus):
     assert "ReevingPlant.fmu" in fmus["build_log"] and "ElectricDrive.fmu" in fmus["build_log"]
     for key in ("plant", "drive"):
         p = subprocess.run([sys.executable, "-m", "fmpy", "validate", fmus[key]],
-                           capture_output=True, text=True, timeout=120)
+                           capture_output=True, text=True, timeout=600)
         assert p.returncode == 0, p.stdout + p.stderr
         assert "No problems found" in p.stdout
 
@@ -148,7 +148,7 @@ def test_build_with_scene_and_name(tmp_path):
     v = _vars(root)
     assert float(v["car.load"]["t_start"]) == 1600.0            # R2 rated load
     q = subprocess.run([sys.executable, "-m", "fmpy", "validate", str(fmu)], capture_output=True, text=True,
-                       timeout=120)
+                       timeout=600)
     assert q.returncode == 0, q.stdout
     bad = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--dest", str(tmp_path),
                           "--name", "not a name"], cwd=ROOT, capture_output=True, text=True, timeout=600)
