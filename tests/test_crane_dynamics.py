@@ -89,7 +89,10 @@ def test_torsion_forces_are_the_energy_gradient():
 def test_costello_needs_a_positive_definite_energy():
     text = open(SCENE).read().replace('law = "torque-factor", diameter = 0.022, k0 = 0.08',
                                       'law = "costello", diameter = 0.022, k0 = 0.08, GJ0 = 50.0')
-    import tomllib
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
     with pytest.raises(SceneError, match=r"ropes\[0\].torsion.GJ0\] the costello law needs GJ0 EA"):
         parse_scene(tomllib.loads(text), "crane.toml")   # needs GJ0 > 70.6 N m^2
 
