@@ -119,21 +119,28 @@ def drum_hoist(mode, V, EA=1e7):
     }
 
 
+def steady_drum(mode, V, EA):
+    """The drum hoist at rest (statics), then moving steadily at rim speed V: (model, simulator,
+    state, kappa)."""
+    eps = M_CAR * G / EA
+    m = build(drum_hoist(mode, V, EA))
+    sim = Simulator(m)
+    st = sim.initial_state()
+    kap = 1.0 + eps if mode == "creep" else 1.0
+    st.v[m.sheave_dof["drum"]] = -V / kap
+    st.v[m.body_dofs["hook"]["z"]] = -V * (1 + eps) / kap
+    sim._consistent_acceleration(st)
+    return m, sim, st, kap
+
+
 @pytest.mark.parametrize("mode,V", [("creep", 1.0), ("creep", -1.0), ("rigid", 1.0)])
 def test_drum_stored_length_against_angle_and_arriving_strain(mode, V):
     """The rope stored on a drum (its unstretched length, the drum's s coordinate) changes by
     -R dtheta / (1 + eps) paying out and winding at the span strain eps = m g / EA (creep; measured
     1e-13 m over 3 m) and by -R dtheta with the rigid rim; the hook moves R dtheta with creep."""
     EA, T = 1e7, 3.0
-    eps = M_CAR * G / EA
-    m = build(drum_hoist(mode, V, EA))
-    sim = Simulator(m)
-    st = sim.initial_state()
-    kap = 1.0 + eps if mode == "creep" else 1.0
+    m, sim, st, kap = steady_drum(mode, V, EA)
     j, jz = m.sheave_dof["drum"], m.body_dofs["hook"]["z"]
-    st.v[j] = -V / kap
-    st.v[jz] = -V * (1 + eps) / kap
-    sim._consistent_acceleration(st)
     s0, z0 = st.q[j], st.q[jz]
     res = sim.advance(st, T, out_dt=0.01)
     th = res["drum.angle"]
@@ -178,14 +185,7 @@ def test_drum_torque_is_radius_times_tension(mode, V):
     assumption creep replaces; 1.44 N m high, that formula measured to 2.0e-11)."""
     EA = 1e7
     eps = M_CAR * G / EA
-    m = build(drum_hoist(mode, V, EA))
-    sim = Simulator(m)
-    st = sim.initial_state()
-    kap = 1.0 + eps if mode == "creep" else 1.0
-    j, jz = m.sheave_dof["drum"], m.body_dofs["hook"]["z"]
-    st.v[j] = -V / kap
-    st.v[jz] = -V * (1 + eps) / kap
-    sim._consistent_acceleration(st)
+    m, sim, st, _ = steady_drum(mode, V, EA)
     res = sim.advance(st, 2.0, out_dt=0.01)
     RT = R * res["rope.tension_start"]
     expect = RT if mode == "creep" else RT * (1 + eps / 2)
