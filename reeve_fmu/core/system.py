@@ -614,8 +614,7 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
-        _nl_convect_all(K, MEs, QEs, Q)
-        wrap_weight(K, Q, q, False)
+        _nl_convect_all(K, MEs, QEs, Q, q)
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         rigid_terms(K, q, v, M, Q)
@@ -628,9 +627,11 @@ def assemble_ws(K, W, c, q, v, t, u):
 
 
 @njit(cache=True)
-def _nl_convect_all(K, MEs, QEs, Q):
+def _nl_convect_all(K, MEs, QEs, Q, q):
     """Convective terms of the nonlinear rows (bodies.nl_convect) for every element: QEs[ie] gets
-    them as before, and Q the change, scattered like the element forces."""
+    them as before, and Q the change, scattered like the element forces; then the W1 wraps' rope
+    weight (bodies.wrap_weight). Called here, not from assemble_ws, so that the residual of models
+    without nonlinear rows compiles as before (the call in assemble_ws cost the 1D trip ~10 %)."""
     el_map = K.el_map
     el_coef = K.el_coef
     ne = QEs.shape[1]
@@ -646,6 +647,7 @@ def _nl_convect_all(K, MEs, QEs, Q):
                 ba = el_coef[ie, a, wa]
                 if ba != 0.0:
                     Q[el_map[ie, a, wa]] += ba * d
+    wrap_weight(K, Q, q, False)
 
 
 @njit(cache=True)
