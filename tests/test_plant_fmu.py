@@ -274,13 +274,15 @@ def test_plant_accepts_any_communication_step(fmus):
     r = job("plant_step_sizes", fmus["plant"])
     assert r["status"] == [0] * 9 and r["fine_status"] == [0]
     assert r["errors_odd"] == [] and r["errors_fine"] == []
-    assert math.isclose(r["t_odd"], r["t_fine"], rel_tol=1e-12)
+    assert math.isclose(r["t_odd"], r["t_fine"], rel_tol=5e-13)      # sums of steps: measured 6.8e-14
     # same held inputs, different partition of the time into steps: the same motion up to the
-    # integration error of the internal generalized-alpha steps (<= 1 ms in both runs)
-    for i in (0, 1, 3, 4):                                        # position, velocity, motor angle, speed
+    # integration error of the internal generalized-alpha steps (<= 1 ms in both runs). Bounds relative
+    # to the change since the start (position, velocity, motor angle, speed; measured 3.7e-6, 2.4e-5,
+    # 2.3e-5, 7.4e-4) and to the rope force (traction sheave in / out; measured 1.7e-6, 4.4e-5)
+    for i, tol in ((0, 3e-5), (1, 2e-4), (3, 2e-4), (4, 1.5e-3)):
         a, b, a0 = r["odd"][i], r["fine"][i], r["start"][i]
-        assert abs(a - b) <= 1e-3 * abs(b - a0) + 1e-9, (cosim_jobs.PLANT_OUTS[i], a, b, a0)
-    for i in (5, 6):                                              # rope forces at the traction sheave
+        assert abs(a - b) <= tol * abs(b - a0) + 1e-9, (cosim_jobs.PLANT_OUTS[i], a, b, a0)
+    for i, tol in ((5, 1.5e-5), (6, 2e-4)):
         a, b = r["odd"][i], r["fine"][i]
-        assert abs(a - b) <= 1e-4 * abs(b), (cosim_jobs.PLANT_OUTS[i], a, b)
+        assert abs(a - b) <= tol * abs(b), (cosim_jobs.PLANT_OUTS[i], a, b)
     assert r["odd"][0] > r["start"][0] + 0.01                     # the car moved up
