@@ -194,10 +194,10 @@ def test_lockstep_virtual_fmu_reproduces_inprocess_cosimulation(plant_fmu, tmp_p
     assert s["commands_valid"] == 5499 and s["final_state"] == "OPERATION ENABLED"
     assert s["reference"]["max_abs_diff_car_position"] == 0.0
     assert s["reference"]["max_abs_diff_motor_speed"] == 0.0
-    assert s["vs_demo_scheme"]["max_abs_diff_car_position"] < 1e-3
+    assert s["vs_demo_scheme"]["max_abs_diff_car_position"] < 1e-4      # measured 1.1e-5 m
     x = np.asarray(r["columns"]["car.position"])
-    assert abs(x[-1] - 1.0) < 0.01                               # stopped at the landing (±10 mm)
-    assert np.max(x) > 0.99
+    assert abs(x[-1] - 1.0) < 5e-4             # stopped at the landing: measured -9.7e-5 m (EN 81-20: ±10 mm)
+    assert abs(np.max(x) - 1.0) < 1e-3         # overshoot: measured 1.6e-4 m
     assert (out / "summary.json").is_file() and (out / "timing.csv").is_file()
     assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["steps"] == 5500
 
@@ -241,15 +241,16 @@ def test_frame_loss_holds_the_setpoint_then_trips_the_watchdog(tmp_path):
     from reeve_fmu.core.results import read_csv
 
     light = _run(tmp_path, inject=["loss=0.02", "seed=3"])
-    assert light["frames_injected"]["lost"] > 20
+    assert light["frames_injected"]["lost"] > 20                        # measured 60
     assert light["commands_missing"] > 0 and light["watchdog_trips"] == 0 and light["fault"] is None
     # single lost commands are bridged by holding the last set-point: the trip barely changes
     x = read_csv(tmp_path / "hil" / "results.csv")["car.position"]
     ref = reference_run(3000, drive_values=SHORT, plant_values=PLANT)["car.position"]
-    assert 0.0 < np.max(np.abs(x - ref)) < 1e-3
+    assert 0.0 < np.max(np.abs(x - ref)) < 5e-6                         # measured 7.5e-7 m
     heavy = _run(inject=["loss=0.6@2.0"], t_end=3.0)
     assert heavy["watchdog_trips"] == 1 and heavy["fault"]["code"] == "0x8250"
-    assert 2.0 < heavy["brake_engaged_at"] < 2.05
+    # three missing commands at the earliest: SYNC 2003; measured 2.005 s (seed-dependent)
+    assert 2.003 - 1e-9 <= heavy["brake_engaged_at"] < 2.05
     assert heavy["brake_closed_at"] > heavy["brake_engaged_at"]
     assert heavy["machine_stopped_at"] is not None and heavy["final_state"] == "FAULT"
     assert heavy["controller_stats"]["fault_seen_at"] is not None
@@ -271,8 +272,10 @@ def test_dead_controller_safe_stop_and_bounded_waits():
     assert s["controller_stats"]["died_at"] == pytest.approx(2.0)
     assert s["watchdog_trips"] == 1 and s["fault"]["reason"].startswith("command watchdog")
     assert s["brake_engaged_at"] == pytest.approx(2.003, abs=1e-9)     # 3 missing SYNC periods at 1 ms
-    assert s["car_speed_at_fault_m_s"] > 0.3                            # it was moving
-    assert s["machine_stopped_at"] < 2.3 and s["stop_distance_m"] < 0.2
+    assert s["car_speed_at_fault_m_s"] > 0.3                            # it was moving: measured 0.519 m/s
+    # the brake stops it (its deceleration is tested against the closed form in tests/test_brake.py):
+    # measured at 2.151 s, after 0.046 m
+    assert s["machine_stopped_at"] < 2.3 and s["stop_distance_m"] < 0.1
     assert s["lockstep_timeouts"] == 3                                  # then the bench stops waiting
     # nobody starts the drive: the bench gives up after start_timeout (instead of waiting forever)
     with pytest.raises(HilError, match="no controller started"):
@@ -597,7 +600,7 @@ def test_canopen_basenode402_enables_the_drive_and_runs_a_short_move():
         node.rpdo[1]["Brake command"].raw = 0
         node.check_statusword()
         moved = (node.tpdo_values[0x6064] - x0) * P.RAD_PER_INC
-        assert 0.6 * 2.5 < moved < 1.2 * 2.5          # the velocity profile integrates to 2.5 rad
+        assert 0.6 * 2.5 < moved < 1.2 * 2.5          # the velocity profile integrates to 2.5 rad; measured 2.02
         node.state = "SWITCH ON DISABLED"
         assert node.state == "SWITCH ON DISABLED"
     finally:
@@ -706,7 +709,7 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     assert cp["status"] == "PASS" and r["coupling"]["coupling_stable"] and cp["limit"] == 1.0
     assert cp["value"] == pytest.approx(max(r["coupling"]["torque_chatter_max"] / 0.05,
                                             r["coupling"]["energy_residual_max_ratio"]), rel=1e-12)
-    assert r["coupling"]["torque_chatter_max"] < 0.05, r["coupling"]["torque_chatter_max"]
+    assert r["coupling"]["torque_chatter_max"] < 1.5e-3, r["coupling"]["torque_chatter_max"]   # measured 1.6e-4
     assert vs["stopping accuracy"]["status"] == "PASS" and vs["HIL drive fault (watchdog, heartbeat, SYNC, plant)"]["status"] == "PASS"
     out = tmp_path / "hil"
     md = (out / "report.md").read_text(encoding="utf-8")
@@ -741,7 +744,7 @@ def test_hil_drive_is_sized_from_the_scene_and_its_torque_limit_reaches_the_benc
     r = _run(t_end=0.8, drive_values=dv)          # pre-torque ramp 0.5 .. 0.7 s with the brake applied
     assert r["frames_rejected"] == 0 and r["watchdog_trips"] == 0
     # measured 1049.4 N m (the ramp's last quantized step, 0.55 N m per unit); the old clamp gave 1000.45
-    assert 1045.0 < r["motor_torque_peak_Nm"] <= 1050.0 + 0.55
+    assert 1050.0 - 2 * 0.55 < r["motor_torque_peak_Nm"] <= 1050.0 + 0.55
 
 
 def test_hil_coupling_check_flags_an_alternating_torque():
