@@ -116,17 +116,32 @@ def test_every_single_key_mutation_is_handled():
     assert counts["error"] > 1000 and counts["built"] > 0
 
 
+# max |acceleration| (m/s^2) at the start of each shipped scene: (bound, measured). Tension-only ropes
+# (buffer_impact, slack_hard_stop) start near, not at, equilibrium: the statics is solved with the
+# bilateral law, and the smoothed tension-only law differs from it by ~EA delta.
+STATICS_RESIDUAL = {
+    "buffer_impact.toml": (2e-2, 4.1e-3),
+    "elevator_1to1_highrise.toml": (1.5e-8, 1.6e-9),
+    "elevator_2to1.toml": (3e-7, 3.4e-8),
+    "emergency_stop.toml": (1e-4, 1.4e-5),              # 64 elements per span
+    "hanging_rope.toml": (4e-12, 4.1e-13),
+    "slack_hard_stop.toml": (6e-2, 1.2e-2),
+    "traction_en81.toml": (1.2e-11, 1.3e-12),
+    "vanishing_span.toml": (3e-7, 3.4e-8),
+}
+
+
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.name)
 def test_shipped_scenes_solve_statics(path):
     """Unmutated scenes: the initial statics converges to an equilibrium: the bodies and free material
-    coordinates start at rest with (near) zero acceleration. Measured max |acceleration|: <= 3.4e-8 for
-    bilateral ropes, 1.4e-5 (emergency_stop, 64 elements), 1.2e-2 m/s^2 with tension-only ropes (the
-    statics is solved with the bilateral law; the smoothed tension-only law differs by ~EA delta)."""
+    coordinates start at rest with (near) zero acceleration, each scene within 10x of its measured
+    residual (STATICS_RESIDUAL; a new scene needs its measured value there)."""
     from reeve_fmu.core.scene import load_scene
+    assert path.name in STATICS_RESIDUAL, f"{path.name}: measure its statics residual, add it to STATICS_RESIDUAL"
     sc = load_scene(path)
     m = build_model(sc)
     st = Simulator(m).initial_state()
     eq = list(m.statics_equations)
     assert np.all(st.v == 0.0)
-    tol = 0.1 if any(r.tension_only for r in sc.ropes) else 1.4e-4
+    tol, _measured = STATICS_RESIDUAL[path.name]
     assert np.max(np.abs(st.qdd[eq])) < tol, (path.name, np.max(np.abs(st.qdd[eq])))
