@@ -107,3 +107,14 @@ def solver_failure(plant_fmu):
         st2 = h.do_step(len(statuses) * 5e-3, 5e-3)
         h.set("motor.torque", float("nan"))
         return {"statuses": statuses, "after": st2, "log": [(m.status, m.message) for m in h.messages]}
+
+
+def cosim(plant_fmu, drive_fmu, drive_values, t_end, record):
+    """fmpy's crane co-simulation (reeve_fmu.fmu.crane.cosimulate_crane, 5 ms, slew by speed): time and
+    the recorded plant outputs, the reference of the C host's run (tests/test_fmu_hosts.py)."""
+    _host()
+    from reeve_fmu.fmu.crane import cosimulate_crane
+
+    res = cosimulate_crane(plant_fmu, drive_fmu, step=5e-3, t_end=t_end, slew_input="speed",
+                           drive_values=drive_values, record=tuple(record))
+    return {"time": res.time.tolist(), **{n: res[n].tolist() for n in record}}

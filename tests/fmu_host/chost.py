@@ -50,22 +50,28 @@ def model_info(fmu):
             {v.name: (v.type, v.valueReference) for v in md.modelVariables})
 
 
+#: the elevator pair's links, (input, output it takes): drive <- plant and plant <- drive
+ELEVATOR_TO_DRIVE = (("motor.speed", "motor.speed"), ("motor.angle", "motor.angle"))
+ELEVATOR_TO_PLANT = (("motor.torque", "motor.torque"), ("brake.command", "brake.command"))
+
+
 def cosim_plan(plant_fmu, drive_fmu, plant_dir, drive_dir, *, step: float, steps: int,
                drive_values: Optional[Mapping[str, float]] = None, record: Sequence[str] = (),
                drive_record: Sequence[str] = (), stop_time: Optional[float] = None,
-               logging: bool = False) -> str:
-    """The plan of reeve_fmu.fmu.cosim's Gauss-Seidel co-simulation: the drive steps first with the plant's
-    motor.speed/angle, then the plant with the drive's motor.torque/brake.command."""
+               logging: bool = False, plant_values: Optional[Mapping[str, float]] = None,
+               to_drive: Sequence[tuple] = ELEVATOR_TO_DRIVE, to_plant: Sequence[tuple] = ELEVATOR_TO_PLANT) -> str:
+    """The plan of a Gauss-Seidel co-simulation like reeve_fmu.fmu.cosim's (and fmu.crane's): the drive
+    steps first with the plant's outputs (to_drive), then the plant with the drive's new outputs
+    (to_plant); start values by name (Integer or Real, from the modelDescription)."""
     pid, pguid, pv = model_info(plant_fmu)
     did, dguid, dv = model_info(drive_fmu)
     lines = [f"fmu drive {drive_dir} {did} {dguid}", f"fmu plant {plant_dir} {pid} {pguid}"]
-    for name, value in (drive_values or {}).items():
-        typ, vr = dv[name]
-        lines.append(f"{'integer' if typ == 'Integer' else 'real'} drive {vr} {value!r}")
-    for a, b in (("motor.speed", "motor.speed"), ("motor.angle", "motor.angle")):
-        lines.append(f"input drive {dv[a][1]} plant {pv[b][1]}")
-    for a in ("motor.torque", "brake.command"):
-        lines.append(f"input plant {pv[a][1]} drive {dv[a][1]}")
+    for inst, values, v in (("drive", drive_values, dv), ("plant", plant_values, pv)):
+        for name, value in (values or {}).items():
+            typ, vr = v[name]
+            lines.append(f"{'integer' if typ == 'Integer' else 'real'} {inst} {vr} {value!r}")
+    lines += [f"input drive {dv[a][1]} plant {pv[b][1]}" for a, b in to_drive]
+    lines += [f"input plant {pv[a][1]} drive {dv[b][1]}" for a, b in to_plant]
     lines += [f"output plant {pv[n][1]}" for n in record]
     lines += [f"output drive {dv[n][1]}" for n in drive_record]
     lines += [f"step {step!r}", f"steps {int(steps)}", f"logging {int(bool(logging))}"]
