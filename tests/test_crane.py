@@ -180,7 +180,7 @@ def test_two_falls_against_the_closed_form():
 def test_eight_falls_large_crane():
     """docs/reference-sets.md §5.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
     m = load_crane(EIGHT)
-    assert m.S_eff == pytest.approx(0.80, abs=0.01)
+    assert m.S_eff == pytest.approx(0.80, abs=3e-3)              # measured 0.80031 m
     res = sweep(m)
     c = res.columns
     W, n = m.weight, len(m.falls)
@@ -235,7 +235,8 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
     data = np.genfromtxt(out / "rotation.csv", delimiter=",", skip_header=1)
     assert data.shape == (40, len(header))
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-    assert s["critical_height"] == pytest.approx(35.5, rel=0.01)
+    # cabling at a b / (4 k d) (test_two_falls_against_the_closed_form): measured -8.7e-5 on 40 heights
+    assert s["critical_height"] == pytest.approx(0.5 * 0.5 / (4 * 0.08 * 0.022), rel=5e-4)
     assert (out / "rotation.png").stat().st_size > 10_000
     assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
 
@@ -307,6 +308,6 @@ def test_three_falls_dead_end_on_the_block_and_crossed_sheave_axes(tmp_path):
     c = res.columns
     assert res.critical_height is None
     for i in (1, 2, 3):
-        assert np.allclose(c[f"fall{i}.tension"], m.weight / 3, rtol=0.02)
+        assert np.allclose(c[f"fall{i}.tension"], m.weight / 3, rtol=0.02)   # + the rope's weight: measured 0.78 %
     psi = c["block.yaw"]
     assert psi[0] > 0 and np.all(np.diff(psi) > 0)
