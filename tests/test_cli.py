@@ -31,7 +31,8 @@ def test_simulate_writes_csv_and_png(tmp_path, capsys):
     tr = vs["traction ratio during the trip"]
     # results.csv carries 10 significant digits
     assert abs(tr["value"] - float(np.max(cols["traction.traction_ratio"]))) < 1e-9 * tr["value"]
-    # EN 81-50 emergency braking, the ZAlift check vector's 1.5990 (4 decimals; tests/test_traction.py): measured +1.7e-5
+    # EN 81-50 emergency braking: the ZAlift check vector's 1.5990 (4 decimals; tests/test_traction.py),
+    # measured +1.7e-5
     assert abs(tr["limit"] - 1.5990) < 1e-4
     printed = capsys.readouterr().out
     assert all(f"[{v['status']}] {c}: " in printed for c, v in vs.items()) and f"overall: {s['verdict']}" in printed

@@ -172,7 +172,8 @@ def test_c_host_runs_the_crane_plant_and_drive_like_fmpy(crane_fmus, host, tmp_p
     plan = chost.cosim_plan(crane_fmus["plant"], crane_fmus["drive"], dirs["plant"], dirs["drive"], step=h,
                             steps=steps, drive_values=crane_fmus["drive_values"], plant_values={"slew.input": 1},
                             record=CRANE_RECORD, stop_time=steps * h,
-                            to_drive=(("motor.speed", "motor.speed"), ("slew.angular_velocity", "jib.angular_velocity")),
+                            to_drive=(("motor.speed", "motor.speed"),
+                                      ("slew.angular_velocity", "jib.angular_velocity")),
                             to_plant=(("motor.torque", "motor.torque"), ("slew.speed", "slew.speed")))
     r = chost.run_host(host, plan, tmp_path)
     assert r["returncode"] == 0, r["stdout"] + r["stderr"]
