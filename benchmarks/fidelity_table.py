@@ -7,9 +7,9 @@
 For every row: the fidelity selection (`studies.fidelity.select`) with the row's outputs and tolerance
 (the default ladder, or the elements rungs of `--elements`), then the whole run of the chosen
 configuration against a fine full run (n = 64 elements per span and h = output step / 16 on the two
-elevators, banded Newton matrix; n = 16, h = output step / 16 on the hanging rope), the error per output in units of the tolerance. The fine full run's own mesh error is
-estimated against n = 32 at the same step (`reference_check` in the JSON). Prints the markdown rows and
-writes the JSON.
+elevators, banded Newton matrix; n = 16, h = output step / 16 on the hanging rope), the error per
+output in units of the tolerance. The fine full run's own mesh error is estimated against half its
+elements at the same step (`reference_check` in the JSON). Prints the markdown rows and writes the JSON.
 """
 import argparse
 from dataclasses import replace
