@@ -38,12 +38,8 @@ ROW_TANGENT, ROW_WRAP, ROW_SLOPE = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
-def _basis(a0, a1, a2):
-    """Two unit vectors u, v with (u, v, a) right-handed (as geometry._basis)."""
-    if abs(a0) < 0.9:
-        h0, h1, h2 = 1.0, 0.0, 0.0
-    else:
-        h0, h1, h2 = 0.0, 0.0, 1.0
+def _basis_from(a0, a1, a2, h0, h1, h2):
+    """u = the helper h projected on the plane normal to the unit axis a, v = a x u."""
     d = h0 * a0 + h1 * a1 + h2 * a2
     u0, u1, u2 = h0 - a0 * d, h1 - a1 * d, h2 - a2 * d
     n = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
@@ -52,19 +48,21 @@ def _basis(a0, a1, a2):
 
 
 @njit(cache=True, inline="always")
+def _basis(a0, a1, a2):
+    """Two unit vectors u, v with (u, v, a) right-handed (as geometry._basis)."""
+    if abs(a0) < 0.9:
+        return _basis_from(a0, a1, a2, 1.0, 0.0, 0.0)
+    return _basis_from(a0, a1, a2, 0.0, 0.0, 1.0)
+
+
+@njit(cache=True, inline="always")
 def _basis_z(a0, a1, a2):
     """u, v with (u, v, a) right-handed, u from the vertical unless the axis is within 26 deg of it:
     continuous while an axis turns about the vertical (a hook block's yaw), so the contact angles
     tangent_spatial keeps as its warm start stay on the tangent they follow."""
     if abs(a2) < 0.9:
-        h0, h1, h2 = 0.0, 0.0, 1.0
-    else:
-        h0, h1, h2 = 1.0, 0.0, 0.0
-    d = h0 * a0 + h1 * a1 + h2 * a2
-    u0, u1, u2 = h0 - a0 * d, h1 - a1 * d, h2 - a2 * d
-    n = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-    u0, u1, u2 = u0 / n, u1 / n, u2 / n
-    return u0, u1, u2, a1 * u2 - a2 * u1, a2 * u0 - a0 * u2, a0 * u1 - a1 * u0
+        return _basis_from(a0, a1, a2, 0.0, 0.0, 1.0)
+    return _basis_from(a0, a1, a2, 1.0, 0.0, 0.0)
 
 
 @njit(cache=True)

@@ -148,7 +148,7 @@ def _rotation_matrix(v):
 
 def _route_parts(scene, spec, r):
     """Route geometry of the hoist rope in the scene's configuration: falls, span names, fall ends
-    (block points as offsets from the block's position) and the tangent points."""
+    (block points as offsets from the block's position) and the falls' (top, bottom) tangent points."""
     rope = next(rp for rp in scene.ropes if rp.name == spec.rope)
     rpath = f"ropes[{[rp.name for rp in scene.ropes].index(rope.name)}]"
     sheaves = {s.name: s for s in scene.sheaves}
@@ -169,11 +169,12 @@ def _route_parts(scene, spec, r):
     p0 = np.asarray(next(b for b in scene.bodies if b.name == spec.block).position, float)
     on = [(sheaves[st.sheave].body if st.sheave is not None else st.anchor) == spec.block for st in stops]
     point = [(spec.block, g[0] - p0) if o else (None, g[0]) for g, o in zip(geo, on)]
-    falls, ends, names, lead = [], [], [], 0
+    falls, ends, touch, names, lead = [], [], [], [], 0
     for k in range(len(stops) - 1):
-        if on[k] != on[k + 1]:
+        if on[k] != on[k + 1]:      # a fall: its top is the end off the block
             falls.append(k)
             ends.append((point[k], point[k + 1]) if on[k + 1] else (point[k + 1], point[k]))
+            touch.append(T[k] if on[k + 1] else T[k][::-1])
             names.append(f"fall{len(falls)}")
         else:
             lead += 1
@@ -183,20 +184,18 @@ def _route_parts(scene, spec, r):
     tension = tuple((f"{stops[k].sheave}.tension_out",
                      f"{stops[k + 1].sheave}.tension_in" if stops[k + 1].sheave is not None else f"{rope.name}.tension_end")
                     for k in range(len(stops) - 1))
-    return rope, falls, ends, names, tension, T, p0
+    return rope, falls, ends, names, tension, touch, p0
 
 
-def _critical_height_estimate(T, falls, ends, p0, torsion):
+def _critical_height_estimate(touch, p0, torsion):
     """Effective spacing and the torque-factor estimate of the critical height (docs/crane.md):
     sum over falls of the moment (W/n)(p_b(psi) x p_t)_z / h = -(W/(n h)) (P sin psi - Q cos psi)."""
     P = Q = 0.0
-    for k, (top, _) in zip(falls, ends):
-        a, b = T[k]
-        ttop, tbot = (a, b) if top[0] is None and abs(top[1][2] - a[2]) <= abs(top[1][2] - b[2]) else (b, a)
-        pt, pb = ttop[:2] - p0[:2], tbot[:2] - p0[:2]
+    for top, bottom in touch:
+        pt, pb = top[:2] - p0[:2], bottom[:2] - p0[:2]
         P += pt @ pb
         Q += pb[0] * pt[1] - pb[1] * pt[0]
-    n = len(falls)
+    n = len(touch)
     S_eff = 2.0 * math.sqrt(max(P, 0.0) / n)
     k0, d = torsion.k0, torsion.diameter
     H_est = math.hypot(P, Q) / (n * abs(k0) * d) if k0 != 0 and d > 0 else math.nan
@@ -207,10 +206,10 @@ def build_crane(scene: Scene) -> Crane:
     """The dynamic model of a crane scene and the crane's parts in it."""
     spec = parse_sweep(scene)
     r = _Reader(scene.source)
-    rope, falls, ends, names, tension, T, p0 = _route_parts(scene, spec, r)
+    rope, falls, ends, names, tension, touch, p0 = _route_parts(scene, spec, r)
     sim = Simulator(build_model(scene))
     block = next(b for b in scene.bodies if b.name == spec.block)
-    S_eff, H_est = _critical_height_estimate(T, falls, ends, p0, rope.torsion)
+    S_eff, H_est = _critical_height_estimate(touch, p0, rope.torsion)
     return Crane(scene=scene, spec=spec, sim=sim, drum=rope.route[0].sheave, falls=tuple(falls),
                  span_names=tuple(names), tension_outputs=tension, ends=ends,
                  weight=block.mass * float(np.linalg.norm(scene.gravity)), S_eff=S_eff, H_est=H_est)
@@ -270,7 +269,7 @@ class Statics:
     def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
-        the tangent solver's warm start is restored on failure."""
+        the tangent solver's warm start is restored on failure or when it jumped (_branch_jump)."""
         m = self.crane.model
         ang = m.K.nl_ANG.copy()
         unk = self.unknowns(mode)
@@ -287,7 +286,7 @@ class Statics:
             if err < tol:
                 if _branch_jump(ang, m.K.nl_ANG):
                     break
-                return q, (J if fresh else self.jacobian(q, unk, mode, value, r))
+                return q, self.jacobian(q, unk, mode, value, r)
             if J is None or (it > 0 and err > 0.25 * err_prev and not fresh):
                 J, fresh = self.jacobian(q, unk, mode, value, r), True
                 if J is None:
@@ -308,11 +307,12 @@ class Statics:
 
 
 def _branch_jump(before, after, limit=0.5) -> bool:
-    """A contact angle of the exact tangents moved by more than `limit` rad in one solve: its Newton
-    (core/bodies.tangent_spatial, warm-started) left the tangent it followed for another one (near
-    90 deg of yaw the falls' tangent points on a block sheave are nearly degenerate)."""
+    """A contact angle of the exact tangents moved by more than `limit` rad (modulo 2 pi) in one solve:
+    its warm-started Newton (core/bodies.tangent_spatial) left the tangent it followed for another
+    one, an equilibrium of a different rope path. A continuation step moves them by far less."""
     ok = np.isfinite(before) & np.isfinite(after)
-    return bool(np.any(np.abs(after[ok] - before[ok]) > limit))
+    d = np.remainder(after[ok] - before[ok] + math.pi, 2 * math.pi) - math.pi
+    return bool(np.any(np.abs(d) > limit))
 
 
 @dataclass
