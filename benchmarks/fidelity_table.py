@@ -2,12 +2,17 @@
 
     python benchmarks/fidelity_table.py [--out docs/img/fidelity_table.json] [--only elevator_2to1]
 
-For every row: the fidelity selection (`studies.fidelity.select`) with the row's outputs and tolerance,
-then the whole run of the chosen configuration against a fine full run (n = 16 elements per span and
-h = output step / 16 on the 2:1 and the hanging rope, n = 8 and h = output step / 8 on the high-rise),
-the error per output in units of the tolerance. Prints the markdown rows and writes the JSON.
+    python benchmarks/fidelity_table.py --elements 1,2,4,8     # the former default ladder
+
+For every row: the fidelity selection (`studies.fidelity.select`) with the row's outputs and tolerance
+(the default ladder, or the elements rungs of `--elements`), then the whole run of the chosen
+configuration against a fine full run (n = 64 elements per span and h = output step / 16 on the two
+elevators, banded Newton matrix; n = 16, h = output step / 16 on the hanging rope), the error per
+output in units of the tolerance. The fine full run's own mesh error is estimated against half its
+elements at the same step (`reference_check` in the JSON). Prints the markdown rows and writes the JSON.
 """
 import argparse
+from dataclasses import replace
 import json
 import os
 from pathlib import Path
@@ -23,10 +28,10 @@ from reeve_fmu.core.model import build_model  # noqa: E402
 from reeve_fmu.core.solver import Simulator  # noqa: E402
 from reeve_fmu.studies.fidelity import Config, accuracy_for, configure, resolve_output, select  # noqa: E402
 
-# scene, outputs, tolerances, (reference elements, reference step divisor)
+# scene, outputs, tolerances, (full-run reference elements, reference step divisor)
 ROWS = [
-    ("elevator_2to1", ["car.position", "traction.tension_in"], [1e-3, 1e-4, 1e-5], (16, 16)),
-    ("elevator_1to1_highrise", ["car.position", "traction.tension_in"], [1e-3, 1e-4], (8, 8)),
+    ("elevator_2to1", ["car.position", "traction.tension_in"], [1e-3, 1e-4, 1e-5], (64, 16)),
+    ("elevator_1to1_highrise", ["car.position", "traction.tension_in"], [1e-3, 1e-4], (64, 16)),
     ("hanging_rope", ["mass.position", "rope.tension_start"], [1e-3, 1e-4], (16, 16)),
 ]
 
@@ -46,8 +51,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(ROOT / "docs" / "img" / "fidelity_table.json"))
     ap.add_argument("--only", default=None, help="one scene name")
+    ap.add_argument("--elements", default=None, help="elements rungs, e.g. 1,2,4,8 (default: the selection's)")
     args = ap.parse_args(argv)
-    records, refs = [], {}
+    records, refs, ref_checks = [], {}, {}
     for name, outputs, tols, (n_ref, div) in ROWS:
         if args.only and name != args.only:
             continue
@@ -55,6 +61,8 @@ def main(argv=None):
         ref_cfg = Config(scene.model, n_ref, "W1", scene.output_step / div)
         for tol in tols:
             acc = accuracy_for(scene, outputs=outputs, tol=tol)
+            if args.elements:
+                acc = replace(acc, elements=tuple(int(x) for x in args.elements.split(",")))
             t0 = time.perf_counter()
             rep = select(scene, acc)
             sel_wall = time.perf_counter() - t0
@@ -62,6 +70,15 @@ def main(argv=None):
             res, wall = full_run(scene, cfg)
             if name not in refs:
                 refs[name] = full_run(scene, ref_cfg)
+                check_cfg = replace(ref_cfg, elements=n_ref // 2)
+                check = columns(full_run(scene, check_cfg)[0], outputs)
+                fine = columns(refs[name][0], outputs)
+                ref_checks[name] = dict(against=check_cfg.label(), **{
+                    n: dict(abs=float(np.max(np.abs(check[n] - fine[n]))),
+                            rel_peak=float(np.max(np.abs(check[n] - fine[n])) / np.max(np.abs(fine[n]))))
+                    for n in outputs})
+                print(f"{name}: reference {ref_cfg.label()} ({refs[name][1]:.0f} s) vs {check_cfg.label()}: "
+                      f"{ref_checks[name]}", flush=True)
             ref, ref_wall = refs[name]
             a, b = columns(res, outputs), columns(ref, outputs)
             errs = {}
@@ -71,8 +88,9 @@ def main(argv=None):
                 errs[o["name"]] = dict(abs=err, tol_units=err / allowed)
             est = max(rep.chosen.ratios.values()) if rep.chosen.ratios else None   # None: the reference
             rec = dict(scene=name, tol=tol, chosen=cfg.label(), estimate_tol=est, full_run_error=errs,
-                       selection_wall_s=sel_wall, chosen_full_run_wall_s=wall, reference=ref_cfg.label(),
-                       reference_wall_s=ref_wall, why=rep.why, reliable=rep.reliable, load=os.getloadavg())
+                       ladder_elements=list(acc.elements), selection_wall_s=sel_wall,
+                       chosen_full_run_wall_s=wall, reference=ref_cfg.label(), reference_wall_s=ref_wall,
+                       reference_check=ref_checks[name], why=rep.why, reliable=rep.reliable, load=os.getloadavg())
             records.append(rec)
             worst = max(errs.values(), key=lambda e: e["tol_units"])
             print(f"| {name} | {tol:g} | {cfg.label()} | {'-' if est is None else f'{est:.2g} tol'} | {worst['tol_units']:.2g} tol "

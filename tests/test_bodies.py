@@ -151,8 +151,9 @@ def _nodes(m, st):
     return X
 
 
-def _check_geometry(m, sim, st):
-    """Tangent points against geometry.tangent at the current poses; material conservation."""
+def _beam_tangents(m, sim, st):
+    """(tangent points (TA, TB) of the three spans from geometry.tangent at the current poses, the
+    two wraps' material lengths) of the beam scene, after an assembly at st."""
     sim.energy(st)                       # an assembly at st.q: c and the maps follow the poses
     q = dict(zip(m.q_names, st.q))
     th = q["beam.theta"]
@@ -161,16 +162,18 @@ def _check_geometry(m, sim, st):
     a = np.array([0.0, -1.0, 0.0])
     stops = [(np.array([-1.0, 0.0, 1.0]), 0.0, -1.0), (tip, 0.2, -1.0), (blk, 0.15, 1.0),
              (np.array([2.8, 0.0, 1.0]), 0.0, 1.0)]
-    X = _nodes(m, st)
-    T = []
-    for k in range(3):
-        (cA, RA, sA), (cB, RB, sB) = stops[k], stops[k + 1]
-        TA, TB = tangent(cA, RA, a, sA, cB, RB, a, sB)
-        T.append((TA, TB))
-        assert np.max(np.abs(X[k, :4] - np.r_[TA[[0, 2]], TB[[0, 2]]])) < 1e-12
+    T = [tangent(cA, RA, a, sA, cB, RB, a, sB) for (cA, RA, sA), (cB, RB, sB) in zip(stops, stops[1:])]
     wraps = [0.2 * wrap_angle(tip, a, -1.0, T[0][1], T[1][0]), 0.15 * wrap_angle(blk, a, 1.0, T[1][1], T[2][0])]
-    material = sum(X[k, 5] - X[k, 4] for k in range(3)) + sum(wraps)
-    return material
+    return T, wraps
+
+
+def _check_geometry(m, sim, st):
+    """Tangent points against geometry.tangent at the current poses; material conservation."""
+    T, wraps = _beam_tangents(m, sim, st)
+    X = _nodes(m, st)
+    for k, (TA, TB) in enumerate(T):
+        assert np.max(np.abs(X[k, :4] - np.r_[TA[[0, 2]], TB[[0, 2]]])) < 1e-12
+    return sum(X[k, 5] - X[k, 4] for k in range(3)) + sum(wraps)
 
 
 def _run_beam(m, h, check=None):

@@ -15,14 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reeve_fmu.core.geometry import tangent, wrap_angle
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.core.solver import Simulator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from linearise import linearised  # noqa: E402
-from test_bodies import _beam_scene, _nodes, _run_beam  # noqa: E402
+from test_bodies import _beam_scene, _beam_tangents, _nodes, _run_beam  # noqa: E402
 
 
 def _cubic(text, n=2, extra=""):
@@ -32,27 +31,16 @@ def _cubic(text, n=2, extra=""):
 def _beam_geometry(m, sim, st):
     """(largest end-node distance from geometry.tangent, largest sine between an end slope at a
     sheave and the span direction, rope material) at st; element layout [r1, d1, s1, r2, d2, s2]."""
-    sim.energy(st)                       # an assembly at st.q: c and the maps follow the poses
-    q = dict(zip(m.q_names, st.q))
-    th = q["beam.theta"]
-    tip = np.array([2.0 * math.cos(th), 0.0, 2.0 * math.sin(th)])
-    blk = np.array([q["block.x"], 0.0, q["block.z"]])
-    a = np.array([0.0, -1.0, 0.0])
-    stops = [(np.array([-1.0, 0.0, 1.0]), 0.0, -1.0), (tip, 0.2, -1.0), (blk, 0.15, 1.0),
-             (np.array([2.8, 0.0, 1.0]), 0.0, 1.0)]
+    T, wraps = _beam_tangents(m, sim, st)
     X = _nodes(m, st)
-    T, dist, sine = [], 0.0, 0.0
-    for k in range(3):
-        (cA, RA, sA), (cB, RB, sB) = stops[k], stops[k + 1]
-        TA, TB = tangent(cA, RA, a, sA, cB, RB, a, sB)
-        T.append((TA, TB))
+    dist, sine = 0.0, 0.0
+    for k, (TA, TB) in enumerate(T):
         first, last = X[2 * k], X[2 * k + 1]
         dist = max(dist, np.max(np.abs(first[0:2] - TA[[0, 2]])), np.max(np.abs(last[5:7] - TB[[0, 2]])))
         u = (TB - TA)[[0, 2]] / np.linalg.norm(TB - TA)
         for d, at_sheave in ((first[2:4], k > 0), (last[7:9], k < 2)):
             if at_sheave:
                 sine = max(sine, abs(d[0] * u[1] - d[1] * u[0]) / np.linalg.norm(d))
-    wraps = [0.2 * wrap_angle(tip, a, -1.0, T[0][1], T[1][0]), 0.15 * wrap_angle(blk, a, 1.0, T[1][1], T[2][0])]
     return dist, sine, sum(X[2 * k + 1, 9] - X[2 * k, 4] for k in range(3)) + sum(wraps)
 
 

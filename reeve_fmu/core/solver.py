@@ -27,8 +27,8 @@ from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_input_set, creep_inputs, creep_terms, creep_wound, energy_u, outputs, outputs_ws,
-                     set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
+                     creep_input_set, creep_inputs, creep_terms, creep_terms_1d, creep_wound, energy_u, outputs,
+                     outputs_ws, set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
                      wound_record)
 
 
@@ -365,6 +365,17 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
     return 1
 
 
+@njit(cache=True, inline="always")
+def _creep_close(K, q, ue, info, kr, k, terms):
+    """Close a step for creep sheave k: keep its (kappa, rate) for the next step's inputs (kr) and
+    integrate its angle (info)."""
+    kap, rate, _ = terms
+    kr[0, k] = kap
+    kr[1, k] = rate
+    if K.crp_kind[k] == 0:
+        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
+
+
 @njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
@@ -511,12 +522,14 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
-                for k in range(ncrp):   # W holds the converged iterate's element arrays
-                    kap, rate, _ = creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k))
-                    kr[0, k] = kap
-                    kr[1, k] = rate
-                    if K.crp_kind[k] == 0:
-                        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
+                # W holds the converged iterate's element arrays; the element kind is chosen
+                # outside the loop (system.groove_strain_1d says why)
+                if K.nd == 1 and K.el_type != 1:
+                    for k in range(ncrp):
+                        _creep_close(K, q, ue, info, kr, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
+                else:
+                    for k in range(ncrp):
+                        _creep_close(K, q, ue, info, kr, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
             if status == 0:
                 for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
                     if K.crp_el_in[k] < 0:
