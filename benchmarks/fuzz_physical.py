@@ -177,10 +177,10 @@ def _run(case):
     doc = mutated(case)
     scene = parse_scene(doc, f"{case['scene']} ({case['label']})")
     warnings = check_or_raise(scene)
-    if scene.model == "spatial-torsion":
+    if "crane" in scene.extra:
         from reeve_fmu.studies.crane import build_crane, sweep
-        model = build_crane(scene)
-        r = sweep(model, np.linspace(model.spec.height_min, model.spec.height_max, CRANE_HEIGHTS))
+        crane = build_crane(scene)
+        r = sweep(crane, np.linspace(crane.spec.height_min, crane.spec.height_max, CRANE_HEIGHTS))
         yaw = r.columns["block.yaw"]
         # NaN marks heights with no equilibrium (docs/crane.md); at the first height only a
         # plausibility warning may explain it

@@ -183,15 +183,16 @@ def test_internal_error_is_one_line_and_debug_shows_the_traceback(tmp_path, caps
 
 ONE_FALL = """[scene]
 name = "crane_one_fall"
-model = "spatial-torsion"
+model = "spatial"
 gravity = [0.0, 0.0, -9.81]
 [initial]
-statics = "none"
+statics = "rope-length"
 [[bodies]]
 name = "block"
-mass = 500.0
-position = [0.0, 0.0, -5.0]
-free = ["x", "y", "z"]
+mass = 15500.0
+inertia = [500.0, 500.0, 300.0]
+position = [0.0, 0.0, -5.5]
+free = ["x", "y", "z", "rotation"]
 [[sheaves]]
 name = "drum"
 kind = "drum"
@@ -206,18 +207,18 @@ radius = 0.25
 name = "hoist"
 EA = 2.28e7
 rhoA = 2.4
+length = 158.0
+torsion = { law = "torque-factor", diameter = 0.022, k0 = 0.0, GJ0 = 0.0 }
 route = [
   { sheave = "drum", wrap = "cw" },
   { sheave = "tip", wrap = "cw" },
-  { anchor = "block", at = [0.0, 0.0, 0.0] },
+  { anchor = "block", at = [0.0, 0.0, 0.5] },
 ]
+[drive]
+kind = "speed"
+sheave = "drum"
 [crane]
 block = "block"
-payload = 15000.0
-diameter = 0.022
-law = "torque-factor"
-k0 = 0.0
-GJ0 = 0.0
 height_min = 2.0
 height_max = 40.0
 heights = 20

@@ -38,17 +38,31 @@ ROW_TANGENT, ROW_WRAP, ROW_SLOPE = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
-def _basis(a0, a1, a2):
-    """Two unit vectors u, v with (u, v, a) right-handed (as geometry._basis)."""
-    if abs(a0) < 0.9:
-        h0, h1, h2 = 1.0, 0.0, 0.0
-    else:
-        h0, h1, h2 = 0.0, 0.0, 1.0
+def _basis_from(a0, a1, a2, h0, h1, h2):
+    """u = the helper h projected on the plane normal to the unit axis a, v = a x u."""
     d = h0 * a0 + h1 * a1 + h2 * a2
     u0, u1, u2 = h0 - a0 * d, h1 - a1 * d, h2 - a2 * d
     n = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     u0, u1, u2 = u0 / n, u1 / n, u2 / n
     return u0, u1, u2, a1 * u2 - a2 * u1, a2 * u0 - a0 * u2, a0 * u1 - a1 * u0
+
+
+@njit(cache=True, inline="always")
+def _basis(a0, a1, a2):
+    """Two unit vectors u, v with (u, v, a) right-handed (as geometry._basis)."""
+    if abs(a0) < 0.9:
+        return _basis_from(a0, a1, a2, 1.0, 0.0, 0.0)
+    return _basis_from(a0, a1, a2, 0.0, 0.0, 1.0)
+
+
+@njit(cache=True, inline="always")
+def _basis_z(a0, a1, a2):
+    """u, v with (u, v, a) right-handed, u from the vertical unless the axis is within 26 deg of it:
+    continuous while an axis turns about the vertical (a hook block's yaw), so the contact angles
+    tangent_spatial keeps as its warm start stay on the tangent they follow."""
+    if abs(a2) < 0.9:
+        return _basis_from(a0, a1, a2, 0.0, 0.0, 1.0)
+    return _basis_from(a0, a1, a2, 1.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -134,8 +148,8 @@ def tangent_spatial(P, iA, iB, RA, sA, RB, sB, aA, aB, ang, out):
     if (RA == 0.0 and RB == 0.0) or (par and abs(D0 * ref[0] + D1 * ref[1] + D2 * ref[2]) < 1e-12 * scale):
         tangent_planar(P, iA, iB, RA, sA, RB, sB, ref, out)
         return
-    uA0, uA1, uA2, vA0, vA1, vA2 = _basis(aA[0], aA[1], aA[2])
-    uB0, uB1, uB2, vB0, vB1, vB2 = _basis(aB[0], aB[1], aB[2])
+    uA0, uA1, uA2, vA0, vA1, vA2 = _basis_z(aA[0], aA[1], aA[2])
+    uB0, uB1, uB2, vB0, vB1, vB2 = _basis_z(aB[0], aB[1], aB[2])
     if not (ang[0] == ang[0]):
         tangent_planar(P, iA, iB, RA, sA, RB, sB, ref, out)
         x0, x1, x2 = out[0] - P[iA, 0], out[1] - P[iA, 1], out[2] - P[iA, 2]

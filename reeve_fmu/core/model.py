@@ -135,10 +135,6 @@ def build_model(scene: Scene) -> Model:
 
 def _build(scene: Scene) -> Model:
     """The build steps in order (builder/__init__.py lists them)."""
-    if scene.model == "spatial-torsion":
-        raise SceneError(f"{scene.source}: [scene.model] 'spatial-torsion' (axial-torsion coupling, hook-block "
-                         f"yaw) is solved quasi-statically by `reeve-fmu crane`; the dynamic engine "
-                         f"models 'axial-1d', 'planar' and 'spatial'")
     bs = start(scene)
     add_body_coordinates(bs)
     for ir, rope in enumerate(scene.ropes):

@@ -152,12 +152,6 @@ def _falls(scene):
     return falls
 
 
-def _payload(scene, body):
-    crane = scene.extra.get("crane", {}) if isinstance(scene.extra, dict) else {}
-    p = crane.get("payload", 0.0) if crane.get("block") == body else 0.0
-    return float(p) if isinstance(p, (int, float)) and not isinstance(p, bool) else 0.0
-
-
 def _rope_lengths(scene, geo):
     out = []
     for rope, (spans, circles) in zip(scene.ropes, geo):
@@ -171,7 +165,7 @@ def _rope_lengths(scene, geo):
 
 
 def _check_masses(scene, geo, add):
-    masses = {b.name: b.mass + _payload(scene, b.name) for b in scene.bodies}
+    masses = {b.name: b.mass for b in scene.bodies}
     if not masses:
         return
     heaviest = max(masses, key=masses.get)
@@ -209,7 +203,7 @@ def _tension_estimate(scene, geo):
             body = sheave_body[st.sheave] if st.sheave is not None else st.anchor
             for b in scene.bodies:
                 if b.name == body and falls[body] > 0:
-                    T = max(T, (b.mass + _payload(scene, body)) * g / falls[body])
+                    T = max(T, b.mass * g / falls[body])
         if math.isfinite(L):
             T += rope.rhoA * L * g
         out.append(T)
@@ -258,13 +252,8 @@ def _check_ropes(scene, geo, add):
 
 
 def _rope_diameter(scene, rope):
-    """(diameter [m], estimated?) of a rope: [crane].diameter if given, else from rhoA for a steel
-    wire rope."""
-    crane = scene.extra.get("crane", {}) if isinstance(scene.extra, dict) else {}
-    d = crane.get("diameter")
-    if isinstance(d, (int, float)) and not isinstance(d, bool) and d > 0 \
-            and crane.get("rope", scene.ropes[0].name) == rope.name:
-        return float(d), False
+    """(diameter [m], estimated?) of a rope: its torsion table's diameter if given, else from rhoA for a
+    steel wire rope."""
     if rope.torsion is not None and rope.torsion.diameter > 0:   # the torsion table states the diameter
         return float(rope.torsion.diameter), False
     return math.sqrt(rope.rhoA / STEEL_ROPE_DENSITY), True
@@ -272,7 +261,7 @@ def _rope_diameter(scene, rope):
 
 def _check_sheave_diameters(scene, add):
     # a rope with a torsion table is a crane hoist rope (elevator ropes are modelled without twist)
-    crane = "crane" in scene.extra or scene.model == "spatial-torsion" or \
+    crane = "crane" in scene.extra or \
         any(r.torsion is not None for r in scene.ropes)
     limit, rule = (DD_CRANE, "ISO 16625 (cranes)") if crane else (DD_ELEVATOR, "EN 81-50")
     index = {s.name: i for i, s in enumerate(scene.sheaves)}

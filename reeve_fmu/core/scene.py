@@ -18,7 +18,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-MODELS = ("axial-1d", "planar", "spatial", "spatial-torsion")
+MODELS = ("axial-1d", "planar", "spatial")
 AXES = ("x", "y", "z")
 BODY_COORDS = AXES + ("theta", "rotation")   # theta: planar rotation (counter-clockwise in the x-z
 #                                               drawing); rotation: spatial rotation vector (3 coordinates)
@@ -345,6 +345,9 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
         r.fail(unknown[0], f"unknown section; allowed: {', '.join(sorted(TOP_LEVEL | EXTRA_SECTIONS))}")
 
     sc = r.table(data.get("scene", {}), "scene", SCHEMA_KEYS["scene"])
+    if sc.get("model") == "spatial-torsion":
+        r.fail("scene.model", "'spatial-torsion' is no longer a model: a crane scene is a 'spatial' scene with the "
+                              "hook block's 'rotation' free and the rope's torsion table (docs/crane.md)")
     model = r.string(sc, "scene", "model", "axial-1d", MODELS)
     gravity = r.vector(sc, "scene", "gravity", default=(0.0, 0.0, -9.81))
     t_end = r.number(sc, "scene", "t_end", 10.0, positive=True)

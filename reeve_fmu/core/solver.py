@@ -905,7 +905,11 @@ class Simulator:
             dx = 1e-7 * (1.0 + np.abs(x[g]))
             xp = x.copy()
             xp[g] += dx
-            d = resid(xp)[0] - r
+            rp = resid(xp)[0]
+            if rp is None:   # the perturbation collapses a span: the statics has left the scene
+                raise SolverError(f"{self.model.scene.source}: initial statics: a span is shorter than "
+                                  f"solver.min_span = {self.model.scene.solver.min_span:g} m")
+            d = rp - r
             for j, dj in zip(g, dx):
                 if rows is None:
                     J[:, j] = d / dj

@@ -8,7 +8,7 @@ report      thinned CSV/Parquet, trip plots, one-page Markdown report
 sweep       grid/list studies of trips on Dask, Parquet results
 bench       work-precision study (ALE against the Lagrangian baseline) and trip timing
 fidelity    pick the cheapest model configuration that meets an accuracy target
-crane       quasi-static crane hoist: hook-block rotation, cabling height (continuation)
+crane       crane hoist sweep on the dynamic model's statics: hook-block rotation, cabling height (continuation)
 lagrangian  Lagrangian finite-element baseline (material mesh, contact, friction) and its kernels
 snapload    exact wave solution of the emergency-stop snap load (rope with an end mass), lumped-chain check
 """

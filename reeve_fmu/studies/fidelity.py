@@ -28,7 +28,7 @@ import numpy as np
 
 from ..core.scene import AXES, MODELS, Scene, SceneError, _Reader
 
-DYNAMIC_MODELS = MODELS[:3]                      # spatial-torsion is quasi-static (reeve-fmu crane)
+DYNAMIC_MODELS = MODELS
 MODEL_RANK = {m: i for i, m in enumerate(DYNAMIC_MODELS)}
 ABS_QUANTITIES = ("position", "angle", "slip")   # absolute tolerance [m or rad]; everything else relative
 # up to 16 elements per span (probe reference at 32): the banded Newton matrix makes those cheap, and
@@ -215,9 +215,6 @@ def model_limits(scene: Scene) -> dict:
 
 
 def candidate_models(scene: Scene, acc: Accuracy) -> tuple:
-    if scene.model not in DYNAMIC_MODELS:
-        raise SceneError(f"{scene.source}: [scene.model] {scene.model!r} is solved quasi-statically by "
-                         f"`reeve-fmu crane`; fidelity selection covers {', '.join(DYNAMIC_MODELS)}")
     limits = model_limits(scene)
     if acc.models is None:   # the scene's model is the ceiling; cheaper models where they fit
         return tuple(m for m in DYNAMIC_MODELS

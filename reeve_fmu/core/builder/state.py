@@ -75,9 +75,8 @@ class BuildState:
 
 
 def start(scene: Scene) -> BuildState:
-    """An empty build of a scene (spatial-torsion scenes: the crane statics uses the supports and
-    routes steps)."""
-    nd = {"axial-1d": 1, "planar": 2, "spatial": 3, "spatial-torsion": 3}[scene.model]
+    """An empty build of a scene."""
+    nd = {"axial-1d": 1, "planar": 2, "spatial": 3}[scene.model]
     cubic = bool(scene.ropes) and scene.ropes[0].element == "cubic"
     comps_nd = [0] if nd == 1 else ([0, 2] if nd == 2 else [0, 1, 2])
     return BuildState(scene=scene, nd=nd, g=np.asarray(scene.gravity, float),
