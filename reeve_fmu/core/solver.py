@@ -377,6 +377,18 @@ def _creep_close(K, q, ue, info, kr, k, terms):
 
 
 @njit(cache=True)
+def _creep_close_all(K, W, q, v, ue, info, kr):
+    """_creep_close for every creep sheave, the element kind chosen once outside the loop
+    (system.groove_strain_1d says why); not inlined, like system.creep_forces."""
+    if K.nd == 1 and K.el_type != 1:
+        for k in range(K.crp_s.shape[0]):
+            _creep_close(K, q, ue, info, kr, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
+    else:
+        for k in range(K.crp_s.shape[0]):
+            _creep_close(K, q, ue, info, kr, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
+
+
+@njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
     Newton iteration fails is redone as 4, 16 and 64 substeps (sharp events: slack -> taut, buffer
@@ -522,14 +534,8 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
-                # W holds the converged iterate's element arrays; the element kind is chosen
-                # outside the loop (system.groove_strain_1d says why)
-                if K.nd == 1 and K.el_type != 1:
-                    for k in range(ncrp):
-                        _creep_close(K, q, ue, info, kr, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
-                else:
-                    for k in range(ncrp):
-                        _creep_close(K, q, ue, info, kr, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
+                if ncrp > 0:   # W holds the converged iterate's element arrays
+                    _creep_close_all(K, W, q, v, ue, info, kr)
             if status == 0:
                 for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
                     if K.crp_el_in[k] < 0:

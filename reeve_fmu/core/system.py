@@ -214,8 +214,9 @@ def creep_terms_1d(K, QE, VE, v, k, kw):
 def creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the groove strains (and their rates)
     of its arriving and leaving elements; kappa = 1 + the arriving strain (groove_strain). The
-    arriving side is the in-span while material runs along the route (sigma dot < 0), the out-span when it runs back; a tanh blend over crp_vreg
-    makes a reversal smooth (at rest kappa is the mean of both sides). A drum winds at its span's
+    arriving side is the in-span while material runs along the route (sigma dot < 0), the out-span
+    when it runs back; a tanh blend over crp_vreg makes a reversal smooth (at rest kappa is the mean
+    of both sides). A drum winds at its span's
     strain and pays out at kw, the kappa its outermost stored rope was wound with (wound_kappa; kw = 0:
     no record, the span's strain either way).
     The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
@@ -538,6 +539,23 @@ def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
     return status, True
 
 
+@njit(cache=True)
+def creep_forces(K, W, v, u, gain):
+    """q_terms of the creep sheaves: creep forces and rim inertia added to W.Q and W.Md; returns the
+    motor gain times the motor sheave's kappa. A function of its own, not inlined, so that its code
+    stays out of the residual of models without creep sheaves (inlined, the rigid rim's 1D trip ran
+    ~9 % slower). The element kind is chosen once, outside the loop (groove_strain_1d says why)."""
+    Q = W.Q
+    Md = W.Md
+    if K.nd == 1 and K.el_type != 1:
+        for k in range(K.crp_s.shape[0]):
+            gain = _creep_rim(K, Q, Md, v, u, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
+    else:
+        for k in range(K.crp_s.shape[0]):
+            gain = _creep_rim(K, Q, Md, v, u, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
+    return gain
+
+
 @njit(cache=True, inline="always")
 def _creep_rim(K, Q, Md, v, u, k, terms, gain):
     """Add creep sheave k's terms (creep_terms: kappa, its rate, creep force) to Q and the diagonal
@@ -577,15 +595,7 @@ def q_terms(K, W, q, v, t, u):
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
     gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
     if K.crp_s.shape[0] > 0:
-        # the element kind is chosen once, outside the loop (groove_strain_1d says why)
-        if K.nd == 1 and K.el_type != 1:
-            for k in range(K.crp_s.shape[0]):
-                terms = creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(u, k))
-                gain = _creep_rim(K, Q, Md, v, u, k, terms, gain)
-        else:
-            for k in range(K.crp_s.shape[0]):
-                terms = creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k))
-                gain = _creep_rim(K, Q, Md, v, u, k, terms, gain)
+        gain = creep_forces(K, W, v, u, gain)
     if K.nl_on & 2:   # joints: torque (force) tables, gravity moments of revolute bodies
         for k in range(K.jt_dof.shape[0]):
             Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
