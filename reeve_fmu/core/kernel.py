@@ -30,6 +30,8 @@ Kernel = namedtuple("Kernel", [
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
+    # the creep sheaves' constants as one table (system.CT_*): what the residual reads per sheave
+    "crp_tab",
     # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
     # rows, bit 2: joints or spatial rigid bodies; 0: none of them
     "nl_on", "nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_BR", "nl_ANG", "nl_AX", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa",
@@ -49,6 +51,13 @@ Kernel = namedtuple("Kernel", [
     # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs
     "tq_el", "tq_phi", "tq_phic", "tq_vb", "tq_v0", "tq_p", "tq_dref", "tq_out",
 ])
+
+# Columns of Kernel.crp_tab, one row per creep sheave: its sigma coordinate, arriving (in) and leaving
+# (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, and for linear 1D
+# elements the weight grading of the groove strain at the in element's end and the out element's start
+# (system.groove_strain_1d) and their tension-only flags.
+CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_WIN, CT_WOUT, CT_TIN, CT_TOUT = range(10)
+CT_SIZE = 10
 
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
 # mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as the kernel (one refcount per call).
@@ -131,6 +140,7 @@ if JIT:
         ("crp_kind", types.int64[::1]),
         ("mot_crp", types.int64),
         ("crp_vreg", types.float64),
+        ("crp_tab", types.float64[:, ::1]),
         ("nl_on", types.int64),
         ("nl_bq", types.int64[:, ::1]),
         ("nl_b0", types.float64[:, ::1]),
@@ -256,7 +266,7 @@ else:
 
 if JIT:
     @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, nl_grp, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
+    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, crp_tab, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, nl_grp, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
         k = structref.new(KERNEL_TYPE)
         k.nd = nd
         k.nq = nq
@@ -319,6 +329,7 @@ if JIT:
         k.crp_kind = crp_kind
         k.mot_crp = mot_crp
         k.crp_vreg = crp_vreg
+        k.crp_tab = crp_tab
         k.nl_on = nl_on
         k.nl_bq = nl_bq
         k.nl_b0 = nl_b0

@@ -23,11 +23,12 @@ import numpy as np
 
 from ._jit import entry_point, njit
 from .jacobian import jacobian_analytic
+from .kernel import CT_KIND
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
 from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
-                     creep_input_set, creep_inputs, creep_terms, creep_terms_1d, creep_wound, energy_u, outputs,
+                     creep_input_set, creep_inputs, energy_u, outputs,
                      outputs_ws, set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
                      wound_record)
 
@@ -365,27 +366,19 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
     return 1
 
 
-@njit(cache=True, inline="always")
-def _creep_close(K, q, ue, info, kr, k, terms):
-    """Close a step for creep sheave k: keep its (kappa, rate) for the next step's inputs (kr) and
-    integrate its angle (info)."""
-    kap, rate, _ = terms
-    kr[0, k] = kap
-    kr[1, k] = rate
-    if K.crp_kind[k] == 0:
-        info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
-
-
 @njit(cache=True)
-def _creep_close_all(K, W, q, v, ue, info, kr):
-    """_creep_close for every creep sheave, the element kind chosen once outside the loop
-    (system.groove_strain_1d says why); not inlined, like system.creep_forces."""
-    if K.nd == 1 and K.el_type != 1:
-        for k in range(K.crp_s.shape[0]):
-            _creep_close(K, q, ue, info, kr, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
-    else:
-        for k in range(K.crp_s.shape[0]):
-            _creep_close(K, q, ue, info, kr, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(ue, k)))
+def _creep_close_all(K, q, ue, info, kr):
+    """Close a step for every creep sheave: keep its (kappa, rate) for the next step's inputs (kr)
+    and integrate its angle (info). The step's last residual, at its end, left them in ue
+    (system.creep_forces). Not inlined, like system.creep_forces."""
+    T = K.crp_tab
+    for k in range(T.shape[0]):
+        i = UE_CREEP + UE_STRIDE * k
+        kap = ue[i + 6]
+        kr[0, k] = kap
+        kr[1, k] = ue[i + 7]
+        if T[k, CT_KIND] == 0.0:
+            info[INFO_CREEP + k] = creep_angle(K, q, ue, k, kap)
 
 
 @njit(cache=True)
@@ -534,8 +527,8 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                 if K.trac_s >= 0:
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
-                if ncrp > 0:   # W holds the converged iterate's element arrays
-                    _creep_close_all(K, W, q, v, ue, info, kr)
+                if ncrp > 0:   # the last residual left the creep sheaves' (kappa, rate) in ue
+                    _creep_close_all(K, q, ue, info, kr)
             if status == 0:
                 for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
                     if K.crp_el_in[k] < 0:
@@ -800,13 +793,15 @@ class Simulator:
             eqs = [j for j in eqs if m.q_kind[j] != "twist"]
             unknowns = [(k, i) for k, i in unknowns if k != "q" or m.q_kind[i] != "twist"]
         par = m.par0.copy()
+        from .builder.assemble import creep_table
         from .kernel import compiled_kernel
         KB = m.K if torsion else m.K._replace(nl_on=m.K.nl_on & 3)
         KS = m.KJ if KB is m.K else compiled_kernel(KB)
         if np.any(m.K.el_tonly):
             # tension-only ropes have a kink at zero strain, where the geometric guess starts: solve the
             # statics with the bilateral law and check below that every span ends up in tension
-            KS = compiled_kernel(KB._replace(el_tonly=np.zeros_like(m.K.el_tonly)))
+            KB = KB._replace(el_tonly=np.zeros_like(m.K.el_tonly))
+            KS = compiled_kernel(KB._replace(crp_tab=creep_table(KB)))
         q = st.q.copy()
         M = np.empty((nq, nq))
         Q = np.empty(nq)

@@ -17,13 +17,13 @@ from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_
                               linear_element_at)
 from .bodies import nl_convect, nl_update, rigid_terms, wrap_weight
 from .elements.torsion import torsion_energy, torsion_terms
-from .kernel import new_work
+from .kernel import CT_EA, CT_IN, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, new_work
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
 UE_CREEP = 8      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (creep_inputs)
-UE_STRIDE = 6
+UE_STRIDE = 8     # per creep sheave: creep_inputs' six, then the last residual's (kappa, rate) (creep_forces)
 
 
 @njit(cache=True, inline="always")
@@ -160,7 +160,13 @@ def groove_strain(K, X, XD, ie, end, rate):
 def _tension_strain(K, ie, e, ed):
     """A linear element's strain as its tension carries it: e itself, or for a tension-only rope the
     smoothed positive part of axial_law."""
-    if K.el_tonly[ie] == 0:
+    return _carried_strain(K.el_tonly[ie], e, ed)
+
+
+@njit(cache=True, inline="always")
+def _carried_strain(tonly, e, ed):
+    """_tension_strain of an element with tension-only flag tonly."""
+    if tonly == 0:
         return e, ed
     d = SLACK_STRAIN
     r = math.sqrt(e * e + d * d)
@@ -169,10 +175,11 @@ def _tension_strain(K, ie, e, ed):
 
 
 @njit(cache=True, inline="always")
-def groove_strain_1d(K, X, XD, ie, end):
-    """groove_strain of a linear 1D element, with its rate, weight-graded (_weight_graded), written
-    out without the general path's branches on nd and element type: numba keeps reference-count
-    calls at the joins of those branches, and called per creep sheave per residual they cost more
+def groove_strain_1d(X, XD, ie, w, tonly):
+    """groove_strain of a linear 1D element, with its rate, weight-graded (_weight_graded; w its
+    coefficient at this end, kernel.CT_WIN / CT_WOUT), written out without the general path's branches
+    on nd and element type and without the kernel: numba keeps reference-count calls at the joins of
+    those branches and at kernel array reads, and called per creep sheave per residual they cost more
     than the arithmetic (measured ~0.8 us a call against ~3 ns written out)."""
     dk = X[ie, 1] - X[ie, 0]
     l = X[ie, 3] - X[ie, 2]
@@ -180,13 +187,9 @@ def groove_strain_1d(K, X, XD, ie, end):
     il = 1.0 / l
     ad = abs(dk)
     sg = 1.0 if dk >= 0.0 else -1.0
-    e = ad * il - 1.0
-    ed = (sg * (XD[ie, 1] - XD[ie, 0]) - ad * ld * il) * il
-    if K.el_rhoA[ie] > 0.0:
-        c = 0.5 * K.el_rhoA[ie] / K.el_EA[ie] * sg * K.el_g[ie, 0] * (1.0 if end == 0 else -1.0)
-        e += c * l
-        ed += c * ld
-    return _tension_strain(K, ie, e, ed)
+    c = sg * w
+    return _carried_strain(tonly, ad * il - 1.0 + c * l,
+                           (sg * (XD[ie, 1] - XD[ie, 0]) - ad * ld * il) * il + c * ld)
 
 
 @njit(cache=True, inline="always")
@@ -201,13 +204,14 @@ def creep_terms(K, QE, VE, v, k, kw):
 
 
 @njit(cache=True, inline="always")
-def creep_terms_1d(K, QE, VE, v, k, kw):
-    """creep_terms of a model of linear 1D elements (groove_strain_1d)."""
-    ei = K.crp_el_in[k]
-    eo = K.crp_el_out[k]
-    e_in, r_in = groove_strain_1d(K, QE, VE, ei, 1) if ei >= 0 else (0.0, 0.0)
-    e_out, r_out = groove_strain_1d(K, QE, VE, eo, 0) if eo >= 0 else (0.0, 0.0)
-    return creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out)
+def creep_terms_1d(T, QE, VE, v, k, kw, vreg):
+    """creep_terms of a model of linear 1D elements from its creep table T (kernel.crp_tab) and
+    vreg = kernel.crp_vreg (groove_strain_1d)."""
+    ei = int(T[k, CT_IN])
+    eo = int(T[k, CT_OUT])
+    e_in, r_in = groove_strain_1d(QE, VE, ei, T[k, CT_WIN], T[k, CT_TIN]) if ei >= 0 else (0.0, 0.0)
+    e_out, r_out = groove_strain_1d(QE, VE, eo, T[k, CT_WOUT], T[k, CT_TOUT]) if eo >= 0 else (0.0, 0.0)
+    return _blend(ei, eo, T[k, CT_EA], v[int(T[k, CT_S])] / vreg, kw, e_in, r_in, e_out, r_out)
 
 
 @njit(cache=True, inline="always")
@@ -222,13 +226,17 @@ def creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out):
     The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
     -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
     arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
-    ei = K.crp_el_in[k]
-    eo = K.crp_el_out[k]
-    x = v[K.crp_s[k]] / K.crp_vreg
+    return _blend(K.crp_el_in[k], K.crp_el_out[k], K.crp_tab[k, CT_EA], v[K.crp_s[k]] / K.crp_vreg, kw,
+                  e_in, r_in, e_out, r_out)
+
+
+@njit(cache=True, inline="always")
+def _blend(ei, eo, EA, x, kw, e_in, r_in, e_out, r_out):
+    """creep_blend of a sheave with arriving element ei and leaving element eo (-1: none), EA of its
+    creep force (kernel.CT_EA) and x = sigma dot / vreg."""
     th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
     if ei < 0:   # a drum (always a route's first stop; its stored rope is s in [0, sigma])
         e, ed = e_out, r_out
-        EA = K.el_EA[eo]
         # The stored rope keeps the strain it was wound with: its strain energy EA eps^2/2 per unit
         # material (eps at the drum's boundary) pulls on sigma like the span does. With it the drum
         # torque is R T exactly; without it R T (1 - eps/2).
@@ -247,7 +255,7 @@ def creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out):
     w = 0.5 * (1.0 - th)
     d = e_in - e_out
     return (1.0 + w * e_in + (1.0 - w) * e_out, w * r_in + (1.0 - w) * r_out,
-            -th * 0.5 * K.el_EA[ei] * d * d)
+            -th * 0.5 * EA * d * d)
 
 
 @njit(cache=True, inline="always")
@@ -260,7 +268,10 @@ def creep_input_set(K, q, info, ue, h, k, kap, rate):
     ue[i + 2] = q[K.crp_s[k]]
     ue[i + 3] = rate
     ue[i + 4] = kap + 0.5 * h * rate
-    ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0)   # started by the first step
+    # started by the first step; only drums keep a record (model._info_with_wound_records)
+    ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if K.crp_el_in[k] < 0 else 0.0
+    ue[i + 6] = kap
+    ue[i + 7] = rate
 
 
 @njit(cache=True)
@@ -542,35 +553,52 @@ def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
 @njit(cache=True)
 def creep_forces(K, W, v, u, gain):
     """q_terms of the creep sheaves: creep forces and rim inertia added to W.Q and W.Md; returns the
-    motor gain times the motor sheave's kappa. A function of its own, not inlined, so that its code
-    stays out of the residual of models without creep sheaves (inlined, the rigid rim's 1D trip ran
-    ~9 % slower). The element kind is chosen once, outside the loop (groove_strain_1d says why)."""
+    motor gain times the motor sheave's kappa. With the creep kernel inputs in u it also keeps each
+    sheave's (kappa, rate) there (u[UE_CREEP + UE_STRIDE k + 6, 7]): the last residual of a converged
+    step is at its end, so the step's close reads them instead of computing them again.
+    A function of its own, not inlined, so that its code stays out of the residual of models without
+    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). The 1D path reads the creep
+    table and no other kernel array (groove_strain_1d says why); the element kind is chosen once,
+    outside the loop."""
     Q = W.Q
     Md = W.Md
+    T = K.crp_tab
+    full = u.shape[0] > UE_CREEP   # the kernel inputs carry the creep part (else: rigid-rim inertia)
+    mot = K.mot_crp
     if K.nd == 1 and K.el_type != 1:
-        for k in range(K.crp_s.shape[0]):
-            gain = _creep_rim(K, Q, Md, v, u, k, creep_terms_1d(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
+        QE = W.QE
+        VE = W.VE
+        vreg = K.crp_vreg
+        for k in range(T.shape[0]):
+            gain = _creep_rim(T, Q, Md, v, u, k, mot, full,
+                              creep_terms_1d(T, QE, VE, v, k, creep_wound(u, k), vreg), gain)
     else:
-        for k in range(K.crp_s.shape[0]):
-            gain = _creep_rim(K, Q, Md, v, u, k, creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
+        for k in range(T.shape[0]):
+            gain = _creep_rim(T, Q, Md, v, u, k, mot, full,
+                              creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
     return gain
 
 
 @njit(cache=True, inline="always")
-def _creep_rim(K, Q, Md, v, u, k, terms, gain):
+def _creep_rim(T, Q, Md, v, u, k, mot, full, terms, gain):
     """Add creep sheave k's terms (creep_terms: kappa, its rate, creep force) to Q and the diagonal
-    mass Md; returns the motor gain times kappa if k carries the motor."""
+    mass Md (T: the creep table); keep (kappa, rate) in u when full; returns the motor gain times
+    kappa if k carries the motor."""
     kap, rate, fc = terms
-    j = K.crp_s[k]
+    j = int(T[k, CT_S])
     Q[j] += fc
-    if K.crp_kind[k] == 0 and u.shape[0] > UE_CREEP:
-        # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
-        # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
-        iR2 = 1.0 / (K.crp_R[k] * K.crp_R[k])
-        Md[j] += K.crp_J[k] * (kap * kap - 1.0) * iR2
-        Q[j] -= K.crp_J[k] * kap * rate * v[j] * iR2
-        if k == K.mot_crp:
-            return gain * kap
+    if full:
+        i = UE_CREEP + UE_STRIDE * k
+        u[i + 6] = kap
+        u[i + 7] = rate
+        if T[k, CT_KIND] == 0.0:
+            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
+            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
+            jr2 = T[k, CT_JR2]
+            Md[j] += jr2 * (kap * kap - 1.0)
+            Q[j] -= jr2 * kap * rate * v[j]
+            if k == mot:
+                return gain * kap
     return gain
 
 

@@ -6,7 +6,8 @@ import math
 import numpy as np
 
 from ..bodies import rigid_fields
-from ..kernel import Kernel
+from ..kernel import (CT_EA, CT_IN, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZE, CT_TIN, CT_TOUT, CT_WIN,
+                      CT_WOUT, Kernel)
 from ..sparse import dense_groups
 from ..traction import equivalent_friction
 from .coordinates import Arrays
@@ -68,11 +69,33 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         crp_s=np.array(crp["s"], np.int64), crp_el_in=np.array(crp["el_in"], np.int64),
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
-        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG,
+        mot_crp=int(mot_crp), crp_vreg=CREEP_VREG, crp_tab=np.zeros((0, CT_SIZE)),
         **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs), torsion_fields(bs)), **d.joints,
         **rigid_fields(scene, bs.body_dofs), **torsion_fields(bs),
     )
-    return K._replace(nl_grp=dense_groups(K))
+    return K._replace(nl_grp=dense_groups(K), crp_tab=creep_table(K))
+
+
+def creep_table(K: Kernel) -> np.ndarray:
+    """Kernel.crp_tab from the kernel's creep and element fields (columns kernel.CT_*). The weight
+    grading: at rest a linear element's tension grows by rhoA (g.t) l / 2 from its mean towards its
+    start (t the unit tangent towards its end), so its groove strain there is its mean strain plus
+    sign(t) rhoA g l / (2 EA) with g the element's gravity component along the route; at its end minus
+    as much."""
+    n = K.crp_s.shape[0]
+    tab = np.zeros((n, CT_SIZE))
+    one_d = K.nd == 1 and K.el_type != 1
+    for k in range(n):
+        ei, eo = int(K.crp_el_in[k]), int(K.crp_el_out[k])
+        tab[k, CT_S], tab[k, CT_IN], tab[k, CT_OUT], tab[k, CT_KIND] = K.crp_s[k], ei, eo, K.crp_kind[k]
+        tab[k, CT_JR2] = K.crp_J[k] / (K.crp_R[k] * K.crp_R[k])
+        tab[k, CT_EA] = K.el_EA[eo if ei < 0 else ei]
+        for e, col, tcol, end in ((ei, CT_WIN, CT_TIN, 1), (eo, CT_WOUT, CT_TOUT, 0)):
+            if e >= 0:
+                tab[k, tcol] = K.el_tonly[e]
+                if one_d:
+                    tab[k, col] = 0.5 * K.el_rhoA[e] / K.el_EA[e] * K.el_g[e, 0] * (1.0 if end == 0 else -1.0)
+    return tab
 
 
 def _flagged(nl: dict, joints: dict, rigid: dict, torsion: dict) -> dict:
