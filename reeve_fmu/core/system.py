@@ -175,21 +175,18 @@ def _carried_strain(tonly, e, ed):
 
 
 @njit(cache=True, inline="always")
-def groove_strain_1d(X, XD, ie, w, tonly):
-    """groove_strain of a linear 1D element, with its rate, weight-graded (_weight_graded; w its
-    coefficient at this end, kernel.CT_WIN / CT_WOUT), written out without the general path's branches
-    on nd and element type and without the kernel: numba keeps reference-count calls at the joins of
-    those branches and at kernel array reads, and called per creep sheave per residual they cost more
-    than the arithmetic (measured ~0.8 us a call against ~3 ns written out)."""
-    dk = X[ie, 1] - X[ie, 0]
-    l = X[ie, 3] - X[ie, 2]
-    ld = XD[ie, 3] - XD[ie, 2]
+def groove_strain_1d(dx, l, dxd, ld, w, tonly):
+    """groove_strain of a linear 1D element, with its rate, weight-graded (_weight_graded), from
+    scalars: dx = x_2 - x_1 and l = s_2 - s_1 of the element, dxd and ld their rates, w the weight
+    coefficient at this end (kernel.CT_WIN / CT_WOUT), tonly its tension-only flag. Scalars, not
+    arrays, and none of the general path's branches on nd and element type: numba keeps
+    reference-count calls (atomic) for every array an inlined function receives and at the joins of
+    such branches, and per creep sheave per residual they cost more than the arithmetic (creep_forces)."""
     il = 1.0 / l
-    ad = abs(dk)
-    sg = 1.0 if dk >= 0.0 else -1.0
+    ad = abs(dx)
+    sg = 1.0 if dx >= 0.0 else -1.0
     c = sg * w
-    return _carried_strain(tonly, ad * il - 1.0 + c * l,
-                           (sg * (XD[ie, 1] - XD[ie, 0]) - ad * ld * il) * il + c * ld)
+    return _carried_strain(tonly, ad * il - 1.0 + c * l, (sg * dxd - ad * ld * il) * il + c * ld)
 
 
 @njit(cache=True, inline="always")
@@ -201,17 +198,6 @@ def creep_terms(K, QE, VE, v, k, kw):
     e_in, r_in = groove_strain(K, QE, VE, ei, 1, True) if ei >= 0 else (0.0, 0.0)
     e_out, r_out = groove_strain(K, QE, VE, eo, 0, True) if eo >= 0 else (0.0, 0.0)
     return creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out)
-
-
-@njit(cache=True, inline="always")
-def creep_terms_1d(T, QE, VE, v, k, kw, vreg):
-    """creep_terms of a model of linear 1D elements from its creep table T (kernel.crp_tab) and
-    vreg = kernel.crp_vreg (groove_strain_1d)."""
-    ei = int(T[k, CT_IN])
-    eo = int(T[k, CT_OUT])
-    e_in, r_in = groove_strain_1d(QE, VE, ei, T[k, CT_WIN], T[k, CT_TIN]) if ei >= 0 else (0.0, 0.0)
-    e_out, r_out = groove_strain_1d(QE, VE, eo, T[k, CT_WOUT], T[k, CT_TOUT]) if eo >= 0 else (0.0, 0.0)
-    return _blend(ei, eo, T[k, CT_EA], v[int(T[k, CT_S])] / vreg, kw, e_in, r_in, e_out, r_out)
 
 
 @njit(cache=True, inline="always")
@@ -270,8 +256,6 @@ def creep_input_set(K, q, info, ue, h, k, kap, rate):
     ue[i + 4] = kap + 0.5 * h * rate
     # started by the first step; only drums keep a record (model._info_with_wound_records)
     ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if K.crp_el_in[k] < 0 else 0.0
-    ue[i + 6] = kap
-    ue[i + 7] = rate
 
 
 @njit(cache=True)
@@ -557,49 +541,76 @@ def creep_forces(K, W, v, u, gain):
     sheave's (kappa, rate) there (u[UE_CREEP + UE_STRIDE k + 6, 7]): the last residual of a converged
     step is at its end, so the step's close reads them instead of computing them again.
     A function of its own, not inlined, so that its code stays out of the residual of models without
-    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). The 1D path reads the creep
-    table and no other kernel array (groove_strain_1d says why); the element kind is chosen once,
-    outside the loop."""
+    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). The 1D path is written out on
+    scalars from the creep table (groove_strain_1d says why): this function is called per residual."""
+    if K.nd != 1 or K.el_type == 1:
+        return creep_forces_general(K, W, v, u, gain)
     Q = W.Q
     Md = W.Md
+    QE = W.QE
+    VE = W.VE
     T = K.crp_tab
-    full = u.shape[0] > UE_CREEP   # the kernel inputs carry the creep part (else: rigid-rim inertia)
+    vreg = K.crp_vreg
     mot = K.mot_crp
-    if K.nd == 1 and K.el_type != 1:
-        QE = W.QE
-        VE = W.VE
-        vreg = K.crp_vreg
-        for k in range(T.shape[0]):
-            gain = _creep_rim(T, Q, Md, v, u, k, mot, full,
-                              creep_terms_1d(T, QE, VE, v, k, creep_wound(u, k), vreg), gain)
-    else:
-        for k in range(T.shape[0]):
-            gain = _creep_rim(T, Q, Md, v, u, k, mot, full,
-                              creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k)), gain)
+    full = u.shape[0] > UE_CREEP   # the kernel inputs carry the creep part (else: rigid-rim inertia)
+    for k in range(T.shape[0]):
+        ei = int(T[k, CT_IN])
+        eo = int(T[k, CT_OUT])
+        j = int(T[k, CT_S])
+        e_in = 0.0
+        r_in = 0.0
+        e_out = 0.0
+        r_out = 0.0
+        if ei >= 0:
+            e_in, r_in = groove_strain_1d(QE[ei, 1] - QE[ei, 0], QE[ei, 3] - QE[ei, 2], VE[ei, 1] - VE[ei, 0],
+                                          VE[ei, 3] - VE[ei, 2], T[k, CT_WIN], T[k, CT_TIN])
+        if eo >= 0:
+            e_out, r_out = groove_strain_1d(QE[eo, 1] - QE[eo, 0], QE[eo, 3] - QE[eo, 2], VE[eo, 1] - VE[eo, 0],
+                                            VE[eo, 3] - VE[eo, 2], T[k, CT_WOUT], T[k, CT_TOUT])
+        i = UE_CREEP + UE_STRIDE * k
+        kap, rate, fc = _blend(ei, eo, T[k, CT_EA], v[j] / vreg, u[i + 5] if full else 0.0,
+                               e_in, r_in, e_out, r_out)
+        Q[j] += fc
+        if full:
+            u[i + 6] = kap
+            u[i + 7] = rate
+            if T[k, CT_KIND] == 0.0:
+                dm, f = _rim_terms(T[k, CT_JR2], kap, rate, v[j])
+                Md[j] += dm
+                Q[j] += f
+                if k == mot:
+                    gain *= kap
+    return gain
+
+
+@njit(cache=True)
+def creep_forces_general(K, W, v, u, gain):
+    """creep_forces of planar, spatial and cubic models (creep_terms)."""
+    T = K.crp_tab
+    full = u.shape[0] > UE_CREEP
+    for k in range(T.shape[0]):
+        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k))
+        j = K.crp_s[k]
+        W.Q[j] += fc
+        if full:
+            i = UE_CREEP + UE_STRIDE * k
+            u[i + 6] = kap
+            u[i + 7] = rate
+            if K.crp_kind[k] == 0:
+                dm, f = _rim_terms(T[k, CT_JR2], kap, rate, v[j])
+                W.Md[j] += dm
+                W.Q[j] += f
+                if k == K.mot_crp:
+                    gain *= kap
     return gain
 
 
 @njit(cache=True, inline="always")
-def _creep_rim(T, Q, Md, v, u, k, mot, full, terms, gain):
-    """Add creep sheave k's terms (creep_terms: kappa, its rate, creep force) to Q and the diagonal
-    mass Md (T: the creep table); keep (kappa, rate) in u when full; returns the motor gain times
-    kappa if k carries the motor."""
-    kap, rate, fc = terms
-    j = int(T[k, CT_S])
-    Q[j] += fc
-    if full:
-        i = UE_CREEP + UE_STRIDE * k
-        u[i + 6] = kap
-        u[i + 7] = rate
-        if T[k, CT_KIND] == 0.0:
-            # rim inertia J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R (M0 holds J / R^2)
-            # and J theta_ddot = -J (kappa sigma_ddot + kappa_dot sigma_dot) / R
-            jr2 = T[k, CT_JR2]
-            Md[j] += jr2 * (kap * kap - 1.0)
-            Q[j] -= jr2 * kap * rate * v[j]
-            if k == mot:
-                return gain * kap
-    return gain
+def _rim_terms(jr2, kap, rate, sd):
+    """(mass, force) on sigma of a creep sheave's rim inertia beyond the rigid rim's J / R^2 (in M0):
+    J theta_dot^2 / 2 with theta_dot = -kappa sigma_dot / R and J theta_ddot = -J (kappa sigma_ddot +
+    kappa_dot sigma_dot) / R; jr2 = J / R^2, sd = sigma_dot."""
+    return jr2 * (kap * kap - 1.0), -jr2 * kap * rate * sd
 
 
 @njit(cache=True, inline="always")

@@ -6,8 +6,8 @@ import math
 import numpy as np
 
 from ..bodies import rigid_fields
-from ..kernel import (CT_EA, CT_IN, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZE, CT_TIN, CT_TOUT, CT_WIN,
-                      CT_WOUT, Kernel)
+from ..kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZE, CT_TIN, CT_TOUT,
+                      CT_WIN, CT_WOUT, Kernel)
 from ..sparse import dense_groups
 from ..traction import equivalent_friction
 from .coordinates import Arrays
@@ -89,6 +89,7 @@ def creep_table(K: Kernel) -> np.ndarray:
         ei, eo = int(K.crp_el_in[k]), int(K.crp_el_out[k])
         tab[k, CT_S], tab[k, CT_IN], tab[k, CT_OUT], tab[k, CT_KIND] = K.crp_s[k], ei, eo, K.crp_kind[k]
         tab[k, CT_JR2] = K.crp_J[k] / (K.crp_R[k] * K.crp_R[k])
+        tab[k, CT_IR] = 1.0 / K.crp_R[k]
         tab[k, CT_EA] = K.el_EA[eo if ei < 0 else ei]
         for e, col, tcol, end in ((ei, CT_WIN, CT_TIN, 1), (eo, CT_WOUT, CT_TOUT, 0)):
             if e >= 0:
