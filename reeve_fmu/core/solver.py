@@ -455,6 +455,10 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     t = t0
     row = 0
     wfresh = False     # W holds the element arrays of the current (q, v) (creep_inputs)
+    drums = False      # creep drums: their wound rope is recorded per step
+    for k in range(ncrp):
+        if K.crp_el_in[k] < 0:
+            drums = True
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
         # start of the step (kept for a retry with substeps)
@@ -496,8 +500,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     ue[6] = q[K.trac_th]
                     ue[7] = info[9]
                 if wfresh:     # computed once at the end of the last step (below)
-                    for k in range(ncrp):
-                        creep_input_set(K, q, info, ue, hs, k, kr[0, k], kr[1, k])
+                    creep_input_set(K, q, info, ue, hs, kr)
                 elif ncrp > 0:
                     # fresh = False as a runtime bool (ncrp > 0 here), not the literal False: numba
                     # then compiles one creep_inputs for this call and the Python callers' (a
@@ -532,7 +535,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     info[9] = traction_slip(K, q, ue)
                 if ncrp > 0:   # the last residual left the creep sheaves' (kappa, rate) in ue
                     _creep_close_all(K, q, ue, info, kr)
-            if status == 0:
+            if status == 0 and drums:
                 for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
                     if K.crp_el_in[k] < 0:
                         wound_record(K, info, k, q1[K.crp_s[k]], q[K.crp_s[k]], th1[k], info[INFO_CREEP + k])

@@ -244,35 +244,43 @@ def _blend(ei, eo, EA, x, kw, e_in, r_in, e_out, r_out):
             -th * 0.5 * EA * d * d)
 
 
-@njit(cache=True, inline="always")
-def creep_input_set(K, q, info, ue, h, k, kap, rate):
-    """Write the kernel inputs of creep sheave k at the start of a step of size h (creep_inputs) from
-    its kappa and kappa rate there."""
-    i = UE_CREEP + UE_STRIDE * k
-    ue[i] = kap
-    ue[i + 1] = info[INFO_CREEP + k]
-    ue[i + 2] = q[K.crp_s[k]]
-    ue[i + 3] = rate
-    ue[i + 4] = kap + 0.5 * h * rate
-    # started by the first step; only drums keep a record (model._info_with_wound_records)
-    ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if K.crp_el_in[k] < 0 else 0.0
+@njit(cache=True)
+def creep_input_set(K, q, info, ue, h, kr):
+    """Write the kernel inputs of every creep sheave at the start of a step of size h (creep_inputs)
+    from kr[0], kr[1] = its kappa and kappa rate there. One call for all sheaves, on scalars: an
+    inlined function per sheave costs reference-count calls for every array it receives
+    (groove_strain_1d)."""
+    T = K.crp_tab
+    for k in range(T.shape[0]):
+        i = UE_CREEP + UE_STRIDE * k
+        kap = kr[0, k]
+        ue[i] = kap
+        ue[i + 1] = info[INFO_CREEP + k]
+        ue[i + 2] = q[int(T[k, CT_S])]
+        ue[i + 3] = kr[1, k]
+        ue[i + 4] = kap + 0.5 * h * kr[1, k]
+        # started by the first step; only drums keep a record (model._info_with_wound_records)
+        ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if T[k, CT_IN] < 0.0 else 0.0
 
 
 @njit(cache=True)
 def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
     """Kernel inputs of the creep sheaves at the start of a step of size h:
     ue[UE_CREEP + UE_STRIDE k ...] = (kappa, angle, sigma, kappa rate, kappa over the step predicted
-    to its middle, for a speed-driven sigma). QE, VE: element work arrays; with fresh = True they hold
-    (q, v) already (the last residual of the step that ended here: its kappa closed that step's angle),
-    else they are gathered."""
-    for k in range(K.crp_s.shape[0]):
+    to its middle, for a speed-driven sigma, the kappa a drum pays out at (wound_kappa)); the
+    residuals then keep (kappa, rate) in the last two (creep_forces). QE, VE: element work arrays;
+    with fresh = True they hold (q, v) already (the last residual of the step that ended here: its
+    kappa closed that step's angle), else they are gathered."""
+    n = K.crp_s.shape[0]
+    kr = np.empty((2, n))
+    for k in range(n):
         if not fresh:
             if K.crp_el_in[k] >= 0:
                 gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             if K.crp_el_out[k] >= 0:
                 gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-        kap, rate, _ = creep_terms(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
-        creep_input_set(K, q, info, ue, h, k, kap, rate)
+        kr[0, k], kr[1, k], _ = creep_terms(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
+    creep_input_set(K, q, info, ue, h, kr)
 
 
 # A drum's wound rope, last in first out: rope wound at kappa = 1 + eps occupies kappa x its material
