@@ -101,8 +101,8 @@ def lu_solve(LU, piv, b):
 
 # --------------------------------------------------------------------------------- generalized-alpha
 # From this many free coordinates on the Newton matrix is banded (core/sparse.py); below, the dense
-# path is faster (measured in benchmarks/scaling.py, docs/performance.md).
-SPARSE_MIN_FREE = 40
+# path is as fast or faster (benchmarks/dense_cutoff.py, docs/performance.md).
+SPARSE_MIN_FREE = 16
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
 # A Newton tolerance at or below TOL_ROUNDOFF asks for convergence to round-off: the round-off exit
 # (position change <= 1e-14 (1 + |q|)) then also waits until the correction stops shrinking, since
