@@ -53,11 +53,11 @@ Kernel = namedtuple("Kernel", [
 ])
 
 # Columns of Kernel.crp_tab, one row per creep sheave: its sigma coordinate, arriving (in) and leaving
-# (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, for linear 1D
-# elements the weight grading of the groove strain at the in element's end and the out element's start
-# (system.groove_strain_1d), the two elements' tension-only flags, and 1 / R.
-CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_WIN, CT_WOUT, CT_TIN, CT_TOUT, CT_IR = range(11)
-CT_SIZE = 11
+# (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, the two elements'
+# tension-only flags, 1 / R, and for linear elements the weight grading of the groove strain (x, y, z)
+# at the in element's end and at the out element's start (system.groove_strains).
+CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_TIN, CT_TOUT, CT_IR, CT_WIN, CT_WOUT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12
+CT_SIZE = 15
 
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
 # mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as the kernel (one refcount per call).

@@ -63,109 +63,9 @@ def _elastoplastic(z, zmax):
 # dissipation enters as a force (creep_terms).
 
 @njit(cache=True, inline="always")
-def end_strain(K, X, ie, end):
-    """Axial strain at an end (0: start, 1: end) of element ie from its coordinates X[ie]: linear
-    elements |r2 - r1| / (s2 - s1) - 1, cubic elements |d| - 1 at the node."""
-    nd = K.nd
-    acc = 0.0
-    if K.el_type == 1:
-        o = nd if end == 0 else 3 * nd + 1      # [r1, d1, s1, r2, d2, s2]
-        for k in range(nd):
-            acc += X[ie, o + k] * X[ie, o + k]
-        return math.sqrt(acc) - 1.0
-    if nd == 1:   # no square root on the 1D path (the residual evaluates this per creep sheave)
-        return abs(X[ie, 1] - X[ie, 0]) / (X[ie, 3] - X[ie, 2]) - 1.0
-    for k in range(nd):
-        dk = X[ie, nd + k] - X[ie, k]
-        acc += dk * dk
-    return math.sqrt(acc) / (X[ie, 2 * nd + 1] - X[ie, 2 * nd]) - 1.0
-
-
-@njit(cache=True, inline="always")
-def end_strain_rate(K, X, XD, ie, end):
-    """Time derivative of end_strain at coordinates X[ie] moving at XD[ie]."""
-    nd = K.nd
-    n2 = 0.0
-    dd = 0.0
-    if K.el_type == 1:
-        o = nd if end == 0 else 3 * nd + 1
-        for k in range(nd):
-            n2 += X[ie, o + k] * X[ie, o + k]
-            dd += X[ie, o + k] * XD[ie, o + k]
-        return dd / math.sqrt(n2)
-    if nd == 1:
-        dk = X[ie, 1] - X[ie, 0]
-        l = X[ie, 3] - X[ie, 2]
-        sg = 1.0 if dk >= 0.0 else -1.0
-        return sg * (XD[ie, 1] - XD[ie, 0]) / l - abs(dk) * (XD[ie, 3] - XD[ie, 2]) / (l * l)
-    for k in range(nd):
-        dk = X[ie, nd + k] - X[ie, k]
-        n2 += dk * dk
-        dd += dk * (XD[ie, nd + k] - XD[ie, k])
-    d = math.sqrt(n2)
-    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
-    return dd / (d * l) - d * (XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]) / (l * l)
-
-
-@njit(cache=True, inline="always")
-def _weight_graded(K, X, XD, ie, end, rate, e, ed):
-    """A linear element's strain e is its mean; the rope's weight grades the tension along it (at rest
-    dT/ds = -rhoA g.t, t the unit tangent towards the element's end), so at its start the rope is
-    strained rhoA (g.t) l / (2 EA) more and at its end as much less: exact for a rope at rest on any
-    mesh, and what the creep kinematics need where a long heavy span meets the groove."""
-    nd = K.nd
-    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
-    ld = XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]
-    if nd == 1:
-        gt = K.el_g[ie, 0] if X[ie, 1] >= X[ie, 0] else -K.el_g[ie, 0]
-        gtd = 0.0
-    else:
-        n2 = 0.0
-        gd = 0.0
-        dd = 0.0
-        gdd = 0.0
-        for k in range(nd):
-            dk = X[ie, nd + k] - X[ie, k]
-            n2 += dk * dk
-            gd += K.el_g[ie, k] * dk
-            if rate:
-                vk = XD[ie, nd + k] - XD[ie, k]
-                dd += dk * vk
-                gdd += K.el_g[ie, k] * vk
-        inv = 1.0 / math.sqrt(n2)
-        gt = gd * inv
-        gtd = (gdd - gt * dd * inv) * inv if rate else 0.0
-    c = 0.5 * K.el_rhoA[ie] / K.el_EA[ie] * (1.0 if end == 0 else -1.0)
-    return e + c * gt * l, (ed + c * (gtd * l + gt * ld)) if rate else ed
-
-
-@njit(cache=True, inline="always")
-def groove_strain(K, X, XD, ie, end, rate):
-    """(strain, its rate if rate else 0) of the rope of element ie where it meets a sheave (end 0:
-    start, 1: end), as it lies on the groove: the element's strain; for a tension-only rope the
-    strain its tension carries, N / EA of the element's law (linear: the smoothed positive part of
-    axial_law; cubic: max(eps, 0)). A slack rope arrives on the groove unstrained: its chord strain
-    (negative while the span sags or a slack rope piles up) is no strain of the rope.
-    Linear 1D elements: groove_strain_1d (the callers choose it once per pass)."""
-    e = end_strain(K, X, ie, end)
-    ed = end_strain_rate(K, X, XD, ie, end) if rate else 0.0
-    if K.el_type != 1 and K.el_rhoA[ie] > 0.0:
-        e, ed = _weight_graded(K, X, XD, ie, end, rate, e, ed)
-    if K.el_type == 1 and K.el_tonly[ie] != 0:
-        return (e, ed) if e > 0.0 else (0.0, 0.0)
-    return _tension_strain(K, ie, e, ed)
-
-
-@njit(cache=True, inline="always")
-def _tension_strain(K, ie, e, ed):
-    """A linear element's strain as its tension carries it: e itself, or for a tension-only rope the
-    smoothed positive part of axial_law."""
-    return _carried_strain(K.el_tonly[ie], e, ed)
-
-
-@njit(cache=True, inline="always")
 def _carried_strain(tonly, e, ed):
-    """_tension_strain of an element with tension-only flag tonly."""
+    """A linear element's strain e (rate ed) as its tension carries it: e itself, or for a
+    tension-only rope (tonly != 0) the smoothed positive part of axial_law."""
     if tonly == 0:
         return e, ed
     d = SLACK_STRAIN
@@ -174,14 +74,23 @@ def _carried_strain(tonly, e, ed):
     return 0.5 * sp, 0.5 * (1.0 + e / r) * ed
 
 
+# The groove strain: the strain of the rope of an element where it meets a sheave, as it lies on the
+# groove, with its rate. A linear element's strain is its mean; the rope's weight grades the tension
+# along it (at rest dT/ds = -rhoA g.t, t the unit tangent towards the element's end), so at its start
+# the rope is strained rhoA (g.t) l / (2 EA) more and at its end as much less: exact for a rope at rest
+# on any mesh, and what the creep kinematics need where a long heavy span meets the groove. w is that
+# coefficient at the end, +-rhoA g / (2 EA) (kernel.CT_WIN / CT_WOUT). A cubic element's strain is
+# |d| - 1 at its node. For a tension-only rope: the strain its tension carries (linear: the smoothed
+# positive part of axial_law; cubic: max(eps, 0)); a slack rope arrives on the groove unstrained, its
+# chord strain (negative while the span sags or piles up) is no strain of the rope.
+# The functions take scalars, not arrays: numba keeps reference-count calls (atomic) for every array
+# an inlined function receives and reads at the joins of branches, and per creep sheave per residual
+# they cost more than the arithmetic (creep_forces).
+
 @njit(cache=True, inline="always")
 def groove_strain_1d(dx, l, dxd, ld, w, tonly):
-    """groove_strain of a linear 1D element, with its rate, weight-graded (_weight_graded), from
-    scalars: dx = x_2 - x_1 and l = s_2 - s_1 of the element, dxd and ld their rates, w the weight
-    coefficient at this end (kernel.CT_WIN / CT_WOUT), tonly its tension-only flag. Scalars, not
-    arrays, and none of the general path's branches on nd and element type: numba keeps
-    reference-count calls (atomic) for every array an inlined function receives and at the joins of
-    such branches, and per creep sheave per residual they cost more than the arithmetic (creep_forces)."""
+    """Groove strain and rate of a linear 1D element: dx = x_2 - x_1, l = s_2 - s_1, dxd and ld their
+    rates, w the weight coefficient at this end."""
     il = 1.0 / l
     ad = abs(dx)
     sg = 1.0 if dx >= 0.0 else -1.0
@@ -190,36 +99,88 @@ def groove_strain_1d(dx, l, dxd, ld, w, tonly):
 
 
 @njit(cache=True, inline="always")
-def creep_terms(K, QE, VE, v, k, kw):
-    """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly
-    (creep_blend of the groove strains; creep_terms_1d for linear 1D elements)."""
-    ei = K.crp_el_in[k]
-    eo = K.crp_el_out[k]
-    e_in, r_in = groove_strain(K, QE, VE, ei, 1, True) if ei >= 0 else (0.0, 0.0)
-    e_out, r_out = groove_strain(K, QE, VE, eo, 0, True) if eo >= 0 else (0.0, 0.0)
-    return creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out)
+def groove_strain_linear(d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly):
+    """Groove strain and rate of a linear 2D/3D element: d = r_2 - r_1 (d2 = 0 in 2D), v its rate,
+    l = s_2 - s_1, ld its rate, w the weight coefficient vector at this end."""
+    d = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    dd = d0 * v0 + d1 * v1 + d2 * v2
+    inv = 1.0 / d
+    il = 1.0 / l
+    gt = (w0 * d0 + w1 * d1 + w2 * d2) * inv
+    gtd = (w0 * v0 + w1 * v1 + w2 * v2 - gt * dd * inv) * inv
+    return _carried_strain(tonly, d * il - 1.0 + gt * l, dd * inv * il - d * ld * il * il + gtd * l + gt * ld)
 
 
 @njit(cache=True, inline="always")
-def creep_blend(K, v, k, kw, e_in, r_in, e_out, r_out):
-    """(kappa, d kappa/dt, creep force) of creep sheave k from the groove strains (and their rates)
-    of its arriving and leaving elements; kappa = 1 + the arriving strain (groove_strain). The
-    arriving side is the in-span while material runs along the route (sigma dot < 0), the out-span
-    when it runs back; a tanh blend over crp_vreg makes a reversal smooth (at rest kappa is the mean
-    of both sides). A drum winds at its span's
-    strain and pays out at kw, the kappa its outermost stored rope was wound with (wound_kappa; kw = 0:
-    no record, the span's strain either way).
-    The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
-    -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
-    arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
-    return _blend(K.crp_el_in[k], K.crp_el_out[k], K.crp_tab[k, CT_EA], v[K.crp_s[k]] / K.crp_vreg, kw,
+def groove_strain_cubic(d0, d1, d2, v0, v1, v2, tonly):
+    """Groove strain and rate of a cubic element at its node: slope d (d2 = 0 in 2D), its rate v."""
+    n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    e = n - 1.0
+    if tonly != 0 and not e > 0.0:
+        return 0.0, 0.0
+    return e, (d0 * v0 + d1 * v1 + d2 * v2) / n
+
+
+@njit(cache=True, inline="always")
+def groove_strains(T, X, XD, k, nd, cubic):
+    """(e_in, r_in, e_out, r_out): the groove strains and rates of creep sheave k's arriving element
+    at its end and leaving element at its start (0 where there is none), from the creep table T and
+    the element arrays X, XD (coordinates, velocities)."""
+    ei = int(T[k, CT_IN])
+    eo = int(T[k, CT_OUT])
+    e_in, r_in = _groove_end(X, XD, ei, 1, nd, cubic, T[k, CT_WIN], T[k, CT_WIN + 1], T[k, CT_WIN + 2],
+                             T[k, CT_TIN])
+    e_out, r_out = _groove_end(X, XD, eo, 0, nd, cubic, T[k, CT_WOUT], T[k, CT_WOUT + 1],
+                               T[k, CT_WOUT + 2], T[k, CT_TOUT])
+    return e_in, r_in, e_out, r_out
+
+
+@njit(cache=True, inline="always")
+def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
+    """Groove strain and rate of element ie at its start (end 0) or end (1); (0, 0) for ie < 0.
+    Element coordinates: linear [r_1, r_2, s_1, s_2], cubic [r_1, d_1, s_1, r_2, d_2, s_2]."""
+    if ie < 0:
+        return 0.0, 0.0
+    if cubic:
+        o = nd if end == 0 else 3 * nd + 1
+        return groove_strain_cubic(X[ie, o], X[ie, o + 1] if nd > 1 else 0.0, X[ie, o + 2] if nd > 2 else 0.0,
+                                   XD[ie, o], XD[ie, o + 1] if nd > 1 else 0.0,
+                                   XD[ie, o + 2] if nd > 2 else 0.0, tonly)
+    l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
+    ld = XD[ie, 2 * nd + 1] - XD[ie, 2 * nd]
+    d0 = X[ie, nd] - X[ie, 0]
+    v0 = XD[ie, nd] - XD[ie, 0]
+    if nd == 1:
+        return groove_strain_1d(d0, l, v0, ld, w0, tonly)
+    d1 = X[ie, nd + 1] - X[ie, 1]
+    v1 = XD[ie, nd + 1] - XD[ie, 1]
+    d2 = X[ie, nd + 2] - X[ie, 2] if nd > 2 else 0.0
+    v2 = XD[ie, nd + 2] - XD[ie, 2] if nd > 2 else 0.0
+    return groove_strain_linear(d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly)
+
+
+@njit(cache=True, inline="always")
+def creep_terms(K, QE, VE, v, k, kw):
+    """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly
+    (the groove strains, _blend)."""
+    T = K.crp_tab
+    e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, K.nd, K.el_type == 1)
+    return _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[int(T[k, CT_S])] / K.crp_vreg, kw,
                   e_in, r_in, e_out, r_out)
 
 
 @njit(cache=True, inline="always")
 def _blend(ei, eo, EA, x, kw, e_in, r_in, e_out, r_out):
-    """creep_blend of a sheave with arriving element ei and leaving element eo (-1: none), EA of its
-    creep force (kernel.CT_EA) and x = sigma dot / vreg."""
+    """(kappa, d kappa/dt, creep force) of a creep sheave with arriving element ei and leaving element
+    eo (-1: none), EA of its creep force (kernel.CT_EA) and x = sigma dot / vreg, from the groove
+    strains (and their rates) of the two elements; kappa = 1 + the arriving strain. The arriving side
+    is the in-span while material runs along the route (sigma dot < 0), the out-span when it runs
+    back; a tanh blend over crp_vreg makes a reversal smooth (at rest kappa is the mean of both sides).
+    A drum winds at its span's strain and pays out at kw, the kappa its outermost stored rope was
+    wound with (wound_kappa; kw = 0: no record, the span's strain either way).
+    The creep force on sigma, -tanh(sigma dot / vreg) EA (eps_in - eps_out)^2 / 2, has the power
+    -|sigma dot| EA d_eps^2 / 2: the friction work in the creep arc, where the strain changes from the
+    arriving to the leaving span's. It makes the rim torque R (T_in - T_out) exact."""
     th = -1.0 if x < -20.0 else (1.0 if x > 20.0 else math.tanh(x))
     if ei < 0:   # a drum (always a route's first stop; its stored rope is s in [0, sigma])
         e, ed = e_out, r_out
@@ -549,10 +510,8 @@ def creep_forces(K, W, v, u, gain):
     sheave's (kappa, rate) there (u[UE_CREEP + UE_STRIDE k + 6, 7]): the last residual of a converged
     step is at its end, so the step's close reads them instead of computing them again.
     A function of its own, not inlined, so that its code stays out of the residual of models without
-    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). The 1D path is written out on
-    scalars from the creep table (groove_strain_1d says why): this function is called per residual."""
-    if K.nd != 1 or K.el_type == 1:
-        return creep_forces_general(K, W, v, u, gain)
+    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). It reads the creep table and the
+    element arrays, computes on scalars (groove_strains) and is called per residual."""
     Q = W.Q
     Md = W.Md
     QE = W.QE
@@ -560,24 +519,15 @@ def creep_forces(K, W, v, u, gain):
     T = K.crp_tab
     vreg = K.crp_vreg
     mot = K.mot_crp
+    nd = K.nd
+    cubic = K.el_type == 1
     full = u.shape[0] > UE_CREEP   # the kernel inputs carry the creep part (else: rigid-rim inertia)
     for k in range(T.shape[0]):
-        ei = int(T[k, CT_IN])
-        eo = int(T[k, CT_OUT])
+        e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, nd, cubic)
         j = int(T[k, CT_S])
-        e_in = 0.0
-        r_in = 0.0
-        e_out = 0.0
-        r_out = 0.0
-        if ei >= 0:
-            e_in, r_in = groove_strain_1d(QE[ei, 1] - QE[ei, 0], QE[ei, 3] - QE[ei, 2], VE[ei, 1] - VE[ei, 0],
-                                          VE[ei, 3] - VE[ei, 2], T[k, CT_WIN], T[k, CT_TIN])
-        if eo >= 0:
-            e_out, r_out = groove_strain_1d(QE[eo, 1] - QE[eo, 0], QE[eo, 3] - QE[eo, 2], VE[eo, 1] - VE[eo, 0],
-                                            VE[eo, 3] - VE[eo, 2], T[k, CT_WOUT], T[k, CT_TOUT])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = _blend(ei, eo, T[k, CT_EA], v[j] / vreg, u[i + 5] if full else 0.0,
-                               e_in, r_in, e_out, r_out)
+        kap, rate, fc = _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[j] / vreg,
+                               u[i + 5] if full else 0.0, e_in, r_in, e_out, r_out)
         Q[j] += fc
         if full:
             u[i + 6] = kap
@@ -587,28 +537,6 @@ def creep_forces(K, W, v, u, gain):
                 Md[j] += dm
                 Q[j] += f
                 if k == mot:
-                    gain *= kap
-    return gain
-
-
-@njit(cache=True)
-def creep_forces_general(K, W, v, u, gain):
-    """creep_forces of planar, spatial and cubic models (creep_terms)."""
-    T = K.crp_tab
-    full = u.shape[0] > UE_CREEP
-    for k in range(T.shape[0]):
-        kap, rate, fc = creep_terms(K, W.QE, W.VE, v, k, creep_wound(u, k))
-        j = K.crp_s[k]
-        W.Q[j] += fc
-        if full:
-            i = UE_CREEP + UE_STRIDE * k
-            u[i + 6] = kap
-            u[i + 7] = rate
-            if K.crp_kind[k] == 0:
-                dm, f = _rim_terms(T[k, CT_JR2], kap, rate, v[j])
-                W.Md[j] += dm
-                W.Q[j] += f
-                if k == K.mot_crp:
                     gain *= kap
     return gain
 

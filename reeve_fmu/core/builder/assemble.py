@@ -80,11 +80,10 @@ def creep_table(K: Kernel) -> np.ndarray:
     """Kernel.crp_tab from the kernel's creep and element fields (columns kernel.CT_*). The weight
     grading: at rest a linear element's tension grows by rhoA (g.t) l / 2 from its mean towards its
     start (t the unit tangent towards its end), so its groove strain there is its mean strain plus
-    sign(t) rhoA g l / (2 EA) with g the element's gravity component along the route; at its end minus
-    as much."""
+    rhoA (g.t) l / (2 EA); at its end minus as much. The table holds +-rhoA g / (2 EA)."""
     n = K.crp_s.shape[0]
     tab = np.zeros((n, CT_SIZE))
-    one_d = K.nd == 1 and K.el_type != 1
+    linear = K.el_type != 1
     for k in range(n):
         ei, eo = int(K.crp_el_in[k]), int(K.crp_el_out[k])
         tab[k, CT_S], tab[k, CT_IN], tab[k, CT_OUT], tab[k, CT_KIND] = K.crp_s[k], ei, eo, K.crp_kind[k]
@@ -94,8 +93,9 @@ def creep_table(K: Kernel) -> np.ndarray:
         for e, col, tcol, end in ((ei, CT_WIN, CT_TIN, 1), (eo, CT_WOUT, CT_TOUT, 0)):
             if e >= 0:
                 tab[k, tcol] = K.el_tonly[e]
-                if one_d:
-                    tab[k, col] = 0.5 * K.el_rhoA[e] / K.el_EA[e] * K.el_g[e, 0] * (1.0 if end == 0 else -1.0)
+                if linear:
+                    w = 0.5 * K.el_rhoA[e] / K.el_EA[e] * (1.0 if end == 0 else -1.0)
+                    tab[k, col:col + K.nd] = w * K.el_g[e, :K.nd]
     return tab
 
 
