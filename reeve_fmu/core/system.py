@@ -83,9 +83,10 @@ def _carried_strain(tonly, e, ed):
 # |d| - 1 at its node. For a tension-only rope: the strain its tension carries (linear: the smoothed
 # positive part of axial_law; cubic: max(eps, 0)); a slack rope arrives on the groove unstrained, its
 # chord strain (negative while the span sags or piles up) is no strain of the rope.
-# The functions take scalars, not arrays: numba keeps reference-count calls (atomic) for every array
-# an inlined function receives and reads at the joins of branches, and per creep sheave per residual
-# they cost more than the arithmetic (creep_forces).
+# They read the creep table and the element arrays, not kernel fields, and compute on scalars: numba
+# keeps reference-count calls (atomic) for every kernel field a compiled function reads and at the
+# joins of branches that hold arrays, and per creep sheave per residual these cost more than the
+# arithmetic (creep_forces).
 
 @njit(cache=True, inline="always")
 def groove_strain_1d(dx, l, dxd, ld, w, tonly):
