@@ -30,7 +30,7 @@ Kernel = namedtuple("Kernel", [
     "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
     "el_type", "el_EI",
     "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
-    # the creep sheaves' constants as one table (system.CT_*): what the residual reads per sheave
+    # the creep sheaves' constants as one table (columns CT_* below): what the residual reads per sheave
     "crp_tab",
     # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
     # rows, bit 2: joints or spatial rigid bodies; 0: none of them

@@ -27,7 +27,7 @@ from .kernel import CT_IR, CT_KIND, CT_S
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
-from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle,
+from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection,
                      creep_input_set, creep_inputs, energy_u, outputs,
                      outputs_ws, set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
                      wound_record)
