@@ -27,7 +27,7 @@ from .kernel import CT_IR, CT_KIND, CT_S
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
-from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection,
+from .system import (INFO_CREEP, UE_CREEP, UE_STRIDE, assemble, assemble_ws, brake_deflection, creep_angle_at,
                      creep_input_set, creep_inputs, energy_u, outputs,
                      outputs_ws, set_prescribed, set_prescribed_creep, traction_deflection, traction_slip, workspace,
                      wound_record)
@@ -369,9 +369,8 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
 @njit(cache=True)
 def _creep_close_all(K, q, ue, info, kr):
     """Close a step for every creep sheave: keep its (kappa, rate) for the next step's inputs (kr)
-    and integrate its angle (info, system.creep_angle written out on scalars). The step's last
-    residual, at its end, left them in ue (system.creep_forces). Not inlined, like
-    system.creep_forces."""
+    and integrate its angle (info, system.creep_angle). The step's last residual, at its end, left
+    them in ue (system.creep_forces). Not inlined, like system.creep_forces."""
     T = K.crp_tab
     mot = K.mot_crp if K.presc.shape[0] > 0 else -1
     for k in range(T.shape[0]):
@@ -380,8 +379,7 @@ def _creep_close_all(K, q, ue, info, kr):
         kr[0, k] = kap
         kr[1, k] = ue[i + 7]
         if T[k, CT_KIND] == 0.0:
-            kb = ue[i + 4] if k == mot else 0.5 * (ue[i] + kap)
-            info[INFO_CREEP + k] = ue[i + 1] - kb * (q[int(T[k, CT_S])] - ue[i + 2]) * T[k, CT_IR]
+            info[INFO_CREEP + k] = creep_angle_at(ue, k, kap, q[int(T[k, CT_S])], T[k, CT_IR], k == mot)
 
 
 @njit(cache=True)

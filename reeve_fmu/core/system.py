@@ -17,7 +17,8 @@ from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_
                               linear_element_at)
 from .bodies import nl_convect, nl_update, rigid_terms, wrap_weight
 from .elements.torsion import torsion_energy, torsion_terms
-from .kernel import CT_EA, CT_IN, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, new_work
+from .kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT,
+                     new_work)
 from .profiles import profile_eval
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
@@ -163,10 +164,16 @@ def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
 @njit(cache=True, inline="always")
 def creep_terms(K, QE, VE, v, k, kw):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly
-    (the groove strains, _blend)."""
-    T = K.crp_tab
-    e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, K.nd, K.el_type == 1)
-    return _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[int(T[k, CT_S])] / K.crp_vreg, kw,
+    (sheave_terms)."""
+    return sheave_terms(K.crp_tab, QE, VE, v, k, kw, K.crp_vreg, K.nd, K.el_type == 1)
+
+
+@njit(cache=True, inline="always")
+def sheave_terms(T, QE, VE, v, k, kw, vreg, nd, cubic):
+    """creep_terms from the creep table T and the kernel's crp_vreg, nd and element kind (what
+    creep_forces reads once per residual): the groove strains, blended (_blend)."""
+    e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, nd, cubic)
+    return _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[int(T[k, CT_S])] / vreg, kw,
                   e_in, r_in, e_out, r_out)
 
 
@@ -209,9 +216,8 @@ def _blend(ei, eo, EA, x, kw, e_in, r_in, e_out, r_out):
 @njit(cache=True)
 def creep_input_set(K, q, info, ue, h, kr):
     """Write the kernel inputs of every creep sheave at the start of a step of size h (creep_inputs)
-    from kr[0], kr[1] = its kappa and kappa rate there. One call for all sheaves, on scalars: an
-    inlined function per sheave costs reference-count calls for every array it receives
-    (groove_strain_1d)."""
+    from kr[0], kr[1] = its kappa and kappa rate there. One call for all sheaves: each call of a
+    compiled function pays atomic reference counts for the arrays it receives (creep_forces)."""
     T = K.crp_tab
     for k in range(T.shape[0]):
         i = UE_CREEP + UE_STRIDE * k
@@ -321,11 +327,16 @@ def creep_angle(K, q, u, k, kap):
     angle - kappa_mean (sigma - sigma_start) / R with the trapezoidal mean of kappa (the mean of the
     forces the generalized-alpha step applies, so the drive's work is torque x angle), or the
     predicted kappa of a speed-driven sheave (its angle is the profile's)."""
+    T = K.crp_tab
+    return creep_angle_at(u, k, kap, q[int(T[k, CT_S])], T[k, CT_IR], k == K.mot_crp and K.presc.shape[0] > 0)
+
+
+@njit(cache=True, inline="always")
+def creep_angle_at(u, k, kap, sigma, ir, driven):
+    """creep_angle from sheave k's sigma and 1 / R; driven: speed-driven (the predicted kappa)."""
     i = UE_CREEP + UE_STRIDE * k
-    kb = 0.5 * (u[i] + kap)
-    if k == K.mot_crp and K.presc.shape[0] > 0:
-        kb = u[i + 4]
-    return u[i + 1] - kb * (q[K.crp_s[k]] - u[i + 2]) / K.crp_R[k]
+    kb = u[i + 4] if driven else 0.5 * (u[i] + kap)
+    return u[i + 1] - kb * (sigma - u[i + 2]) * ir
 
 
 @njit(cache=True)
@@ -524,11 +535,9 @@ def creep_forces(K, W, v, u, gain):
     cubic = K.el_type == 1
     full = u.shape[0] > UE_CREEP   # the kernel inputs carry the creep part (else: rigid-rim inertia)
     for k in range(T.shape[0]):
-        e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, nd, cubic)
         j = int(T[k, CT_S])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[j] / vreg,
-                               u[i + 5] if full else 0.0, e_in, r_in, e_out, r_out)
+        kap, rate, fc = sheave_terms(T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
         Q[j] += fc
         if full:
             u[i + 6] = kap
