@@ -231,6 +231,8 @@ def _cfg_build(p):
                    "(a body on a revolute joint and a hoist drive) builds CranePlant.fmu and CraneDrive.fmu")
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
+    p.add_argument("--standalone", action="store_true", help="FMUs that carry their Python runtime (libpython, "
+                   "stdlib, numpy, numba): a native host runs them on a machine without Python (docs/fmu-hosts.md)")
     _add_set(p)
 
 

@@ -231,7 +231,7 @@ def cli_demo(args) -> int:
     return 0
 
 
-def _build_crane(dest: Path, scene: Path) -> int:
+def _build_crane(dest: Path, scene: Path, standalone: bool = False) -> int:
     """A crane scene (a revolute joint and a hoist drive): CranePlant.fmu, CraneDrive.fmu and
     DEST/CraneDrive.json, the drive parameters sized from the scene."""
     import json
@@ -239,7 +239,7 @@ def _build_crane(dest: Path, scene: Path) -> int:
     from .fmu.crane import build_crane_fmus
 
     t0 = time.perf_counter()
-    plant, drive, values = build_crane_fmus(dest, scene)
+    plant, drive, values = build_crane_fmus(dest, scene, standalone=standalone)
     print(f"built {plant} and {drive} ({time.perf_counter() - t0:.1f} s)")
     p = dest / "CraneDrive.json"
     p.write_text(json.dumps({"drive": values}, indent=1) + "\n", encoding="utf-8")
@@ -259,6 +259,7 @@ def cli_build(args) -> int:
 
     dest = Path(getattr(args, "dest", None) or "fmus")
     name = getattr(args, "name", None) or cosim.PLANT_NAME
+    standalone = bool(getattr(args, "standalone", False))
     scene = Path(getattr(args, "scene", None) or cosim.default_scene_path())
     scene_sets, drive_sets, load = split(parse_sets(getattr(args, "set", None)))
     sc, _ = scene_with(scene, scene_sets)
@@ -269,12 +270,12 @@ def cli_build(args) -> int:
         scene = path
     from .fmu.crane import is_crane_scene
     if is_crane_scene(sc):
-        return _build_crane(dest, scene)
+        return _build_crane(dest, scene, standalone)
     t0 = time.perf_counter()
-    plant, _ = cosim.build_plant_fmu(dest, scene, name)
+    plant, _ = cosim.build_plant_fmu(dest, scene, name, standalone=standalone)
     print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
-    drive, _ = cosim.build_drive_fmu(dest)
+    drive, _ = cosim.build_drive_fmu(dest, standalone=standalone)
     print(f"built {drive} ({time.perf_counter() - t0:.1f} s)")
     if "elevator" in sc.extra:
         from .studies.trip import trip_case

@@ -62,6 +62,54 @@ def source_hash() -> str:
     return h.hexdigest()[:16]
 
 
+def cache_root() -> str:
+    """$REEVE_FMU_CACHE_DIR, else the user's cache directory + reeve_fmu (the FMU bootstrap's
+    `cache_root` is the same rule: an FMU seeds its precompiled kernels where this package looks)."""
+    env = os.environ.get("REEVE_FMU_CACHE_DIR")
+    if env:
+        return env
+    if os.name == "nt":
+        return os.path.join(os.environ.get("LOCALAPPDATA") or os.path.expanduser("~"), "reeve_fmu", "cache")
+    return os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"),
+                        "reeve_fmu")
+
+
+def _generic_target(numba) -> str:
+    """Compile for a generic x86-64 CPU unless told otherwise: machine code cached that way loads on
+    any x86-64 machine, so an FMU can carry its kernels (the per-step cost is that of host-tuned code
+    for these small dense kernels; docs/performance.md). REEVE_FMU_CPU=host, or NUMBA_CPU_NAME set by
+    the user, keeps numba's host tuning. Only possible before numba's CPU target is created in this
+    process (the first compile or dispatcher); returns the CPU name in use."""
+    from numba.core import config, registry
+    started = "_toplevel_target_context" in vars(registry.cpu_target)
+    if (os.environ.get("REEVE_FMU_CPU", "generic") == "generic" and not os.environ.get("NUMBA_CPU_NAME")
+            and not started):
+        config.CPU_NAME = "generic"
+        config.CPU_FEATURES = ""
+    return config.CPU_NAME or "host"
+
+
+def _record_index_reads(path: str) -> None:
+    """Append the path of every cache index numba reads or writes to `path` (one per line): what an
+    FMU's warm-up run used is what the FMU carries (reeve_fmu.fmu.kernels). Set by the build through
+    REEVE_FMU_RECORD_KERNELS; appended at once, so nothing depends on a clean exit."""
+    try:
+        from numba.core.caching import IndexDataCacheFile
+    except ImportError:  # pragma: no cover - numba moved its internals
+        return
+    load = IndexDataCacheFile._load_index
+
+    def _load_index(self):
+        try:
+            with open(path, "a", encoding="utf-8") as fh:
+                fh.write(self._index_path + "\n")
+        except OSError:
+            pass
+        return load(self)
+
+    IndexDataCacheFile._load_index = _load_index
+
+
 def _cache_dir():
     """numba keys a cached function only on its own file's timestamp: after an edit (or a partial
     upgrade) of a module whose functions are inlined elsewhere, the dependents' stale machine code
@@ -71,7 +119,7 @@ def _cache_dir():
     or environments on one machine each keep their current cache, and edits do not pile up gigabytes). NUMBA_CACHE_DIR set by the user wins."""
     from pathlib import Path
     import shutil
-    base = Path(os.environ.get("REEVE_FMU_CACHE_DIR") or Path.home() / ".cache" / "reeve_fmu") / "numba"
+    base = Path(cache_root()) / "numba"
     target = base / source_hash()
     try:
         target.mkdir(parents=True, exist_ok=True)
@@ -135,6 +183,12 @@ def _install_package_locator(cache_dir: str) -> None:
 
 
 _LOCK_DIR = None   # where compile locks live (None: no cross-process locking)
+CPU_TARGET = None  # the CPU numba compiles for: "generic" (portable caches), or another name / "host"
+
+if _numba is not None:
+    CPU_TARGET = _generic_target(_numba)
+    if os.environ.get("REEVE_FMU_RECORD_KERNELS"):
+        _record_index_reads(os.environ["REEVE_FMU_RECORD_KERNELS"])
 
 if _numba is not None and not os.environ.get("NUMBA_CACHE_DIR"):
     _dir = _cache_dir()

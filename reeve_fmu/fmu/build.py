@@ -41,7 +41,7 @@ from . import _bootstrap
 from ._bootstrap import PACKAGE, STAMP_NAME, VENDOR_DIR, copy_package, package_files, package_hash
 
 __all__ = ["build_fmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
-           "FmuBuildError", "DEFAULT_REQUIREMENTS", "NUMPY", "NUMBA", "TOMLI", "requirements_txt"]
+           "FmuBuildError", "DEFAULT_REQUIREMENTS", "NUMPY", "SCIPY", "NUMBA", "TOMLI", "requirements_txt"]
 
 #: what the model code of an FMU imports (module, pip requirement, optional?, only below Python X.Y)
 NUMPY = {"module": "numpy", "requirement": "numpy>=1.24", "optional": False}
@@ -49,9 +49,11 @@ NUMBA = {"module": "numba", "requirement": "numba>=0.59", "optional": True,
          "why": "without numba the kernels run as plain Python (identical results, ~100x slower)"}
 TOMLI = {"module": "tomli", "requirement": "tomli>=2.0; python_version < '3.11'", "optional": False,
          "python_below": "3.11"}
-#: default: everything the package's model code may import (the plant FMU needs all three; the
-#: drive FMU passes (NUMPY, NUMBA): it reads no TOML)
-DEFAULT_REQUIREMENTS = (NUMPY, NUMBA, TOMLI)
+#: the model compiler's sparsity patterns and orderings (scipy.sparse, csgraph, splu)
+SCIPY = {"module": "scipy", "requirement": "scipy>=1.10", "optional": False}
+#: default: everything the package's model code may import (the plant FMU needs all four; the
+#: drive FMU passes (NUMPY, NUMBA): it compiles no scene)
+DEFAULT_REQUIREMENTS = (NUMPY, SCIPY, NUMBA, TOMLI)
 
 
 def _requirement_dicts(requirements) -> list:
@@ -81,6 +83,10 @@ _RESERVED = {PACKAGE, f"{PACKAGE}.py", VENDOR_DIR, STAMP_NAME, "requirements.txt
              "slavemodule.txt", "reeve_env.json"}
 _GENERIC_ENTRY_NAMES = {"model", "slave", "fmu", "plant", "drive", "main", "entry", "module", "test",
                         "sim", "simulation", "controller", PACKAGE, "pythonfmu", "fmpy"}
+
+
+#: 2: FMUs carry their precompiled kernels and require scipy (older ones are rebuilt by the CLI)
+STAMP_FORMAT = 2
 
 
 class FmuBuildError(RuntimeError):
@@ -160,7 +166,8 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
               project_files: Iterable[Union[str, Path]] = (),
               resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
               validate: bool = True, requirements: Iterable = DEFAULT_REQUIREMENTS,
-              native_loader="auto", log=None, **options) -> Path:
+              native_loader="auto", log=None, kernels: bool = True, standalone: bool = False,
+              **options) -> Path:
     """Build the FMU of `entry_script` into `dest_dir` and return its path.
 
     entry_script   file defining exactly one deepest ReeveSlave subclass; its module name must be
@@ -175,6 +182,12 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                    compiler is found (reeve_fmu.fmu.native), else keep pythonfmu's binary and report
                    what to install through `log` (default: print to stderr); True: required (raise
                    FmuBuildError without a compiler); False: never.
+    kernels        carry the model's precompiled kernels (reeve_fmu.fmu.kernels): the FMU is run once
+                   in a subprocess, and the cache entries it used go into resources/, so its first
+                   steps on another machine need no compilation
+    standalone     carry the interpreter too (reeve_fmu.fmu.standalone): libpython, the stdlib and
+                   the packages the model imports, so that a native host runs the FMU on a machine
+                   without Python (Linux x86-64 with the native loader only)
     options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
 
     Raises FmuBuildError if pythonfmu fails or `fmpy validate` finds problems; an existing FMU at
@@ -208,6 +221,9 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             loader_note = str(exc)
     elif native_loader is True:
         raise FmuBuildError(f"the native loader is only built on Linux x86-64, not on {sys.platform}")
+    if standalone and compiler is None:
+        raise FmuBuildError("a standalone FMU needs the native loader: a C compiler on Linux x86-64"
+                            + (f" ({loader_note})" if loader_note else ""))
     reqs = _requirement_dicts(requirements)
 
     pkg = package_dir()
@@ -234,7 +250,7 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
         import reeve_fmu
 
         stamp = {
-            "format": 1,
+            "format": STAMP_FORMAT,
             "package": PACKAGE,
             "version": getattr(reeve_fmu, "__version__", None),
             "sha256": digest,
@@ -290,6 +306,19 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             if problems:
                 raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in "
                                     f"{built.name}", problems)
+        # 5. what travels with the FMU: the compiled kernels, the interpreter
+        if kernels:
+            from . import kernels as kernel_bundle
+
+            found = kernel_bundle.collect(built)
+            if found["files"]:
+                kernel_bundle.add_to_fmu(built, found)
+            else:
+                log(f"reeve_fmu build: {built.name} carries no precompiled kernels: {found['why']}")
+        if standalone:
+            from . import standalone as runtime_bundle
+
+            runtime_bundle.add_to_fmu(built, reqs)
         final = dest_dir / built.name
         os.replace(built, final)
     finally:
@@ -328,7 +357,7 @@ def fmu_is_stale(fmu_path: Union[str, Path], entry_script: Optional[Union[str, P
     `resources` differ from what the FMU carries.
     """
     stamp = read_stamp(fmu_path)
-    if stamp is None:
+    if stamp is None or stamp.get("format", 1) < STAMP_FORMAT:
         return True
     if stamp.get("sha256") != current_package_hash():
         return True

@@ -468,8 +468,10 @@ def plant_build_inputs(scene=None, name: str = PLANT_NAME, workdir: Optional[Pat
     return _plant_entry(name, workdir), resources
 
 
-def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True) -> tuple[Path, bool]:
-    """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?)."""
+def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True,
+                    standalone: bool = False) -> tuple[Path, bool]:
+    """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?).
+    standalone: the FMU carries its interpreter (build_fmu)."""
     from .build import build_fmu, fmu_is_stale
 
     dest = Path(dest)
@@ -478,17 +480,17 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
         path = dest / f"{name}.fmu"
         if not force and not fmu_is_stale(path, entry, res):
             return path, False
-        return build_fmu(entry, dest, resources=res), True
+        return build_fmu(entry, dest, resources=res, standalone=standalone), True
 
 
-def build_drive_fmu(dest="fmus", *, force: bool = True) -> tuple[Path, bool]:
+def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False) -> tuple[Path, bool]:
     from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
     if not force and not fmu_is_stale(path, entry):
         return path, False
-    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA)), True   # the drive reads no TOML
+    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA), standalone=standalone), True   # no TOML read
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,

@@ -143,7 +143,7 @@ def _entry(kind: str) -> Path:
     return p
 
 
-def build_crane_fmus(dest, scene) -> tuple[Path, Path, dict]:
+def build_crane_fmus(dest, scene, *, standalone: bool = False) -> tuple[Path, Path, dict]:
     """Build CranePlant.fmu for `scene` (a path) and CraneDrive.fmu into dest; returns their paths
     and the drive parameters sized for the scene (start values for CraneDrive.fmu)."""
     from ..core.scene import load_scene
@@ -153,8 +153,8 @@ def build_crane_fmus(dest, scene) -> tuple[Path, Path, dict]:
     cfg = crane_config(scene_path)
     res = {CRANE_SCENE: scene_path.read_bytes(), CRANE_CONFIG: (json.dumps(cfg, indent=1) + "\n").encode()}
     dest = Path(dest)
-    plant = build_fmu(_entry("crane"), dest, resources=res)
-    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA))
+    plant = build_fmu(_entry("crane"), dest, resources=res, standalone=standalone)
+    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone)
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 

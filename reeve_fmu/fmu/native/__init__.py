@@ -36,6 +36,7 @@ __all__ = ["SOURCE", "ENV_NAME", "NoCompiler", "find_compiler", "compile_loader"
            "environment_record", "libpython_path", "loader_supported"]
 
 SOURCE = Path(__file__).resolve().with_name("fmu_loader.c")
+PYINIT = SOURCE.with_name("pyinit.c")   # the interpreter's start with PyConfig (the build Python's headers)
 ENV_NAME = "reeve_env.json"
 PLATFORM_DIR = "binaries/linux64"
 
@@ -120,6 +121,17 @@ def find_compiler() -> list:
         "(fmpy, libcosimpy) but needs LD_PRELOAD=<libpython> in C hosts and may abort at exit.")
 
 
+def _pyconfig_flags() -> list:
+    """Compiler flags for pyinit.c's PyConfig start: this interpreter's headers, when it has them
+    (a Python without its development files: none, and the loader uses Py_SetPythonHome)."""
+    inc = sysconfig.get_paths().get("include")
+    plat = sysconfig.get_paths().get("platinclude")
+    if not inc or not os.path.isfile(os.path.join(inc, "Python.h")):
+        return []
+    dirs = [inc] + ([plat] if plat and plat != inc else [])
+    return ["-DREEVE_HAVE_PYCONFIG", *(f"-I{d}" for d in dirs)]
+
+
 def _c_string(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -139,13 +151,16 @@ def compile_loader(model_identifier: str, out_dir, *, libpython: Optional[str] =
         py_version = f"{sys.version_info.major}.{sys.version_info.minor}"
     if libpython is None:
         libpython = libpython_path() or ""
+    same_python = py_version == f"{sys.version_info.major}.{sys.version_info.minor}"
+    home = sys.base_prefix if same_python else ""
     common = ["-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wl,-z,nodelete", "-Wl,-Bsymbolic"]
     loader = out / f"{model_identifier}.so"
     helper = out / f"{model_identifier}_pyexit.so"
     jobs = [
         [*cc, *common, f"-DREEVE_MODEL_IDENTIFIER={_c_string(model_identifier)}",
          f"-DREEVE_LIBPYTHON={_c_string(libpython)}", f"-DREEVE_PY_VERSION={_c_string(py_version)}",
-         "-o", str(loader), str(SOURCE), "-ldl", "-lpthread"],
+         f"-DREEVE_PYHOME={_c_string(home)}", *(_pyconfig_flags() if same_python else []),
+         "-o", str(loader), str(SOURCE), str(PYINIT), "-ldl", "-lpthread"],
         [*cc, *common, "-DREEVE_EXIT_HELPER", "-o", str(helper), str(SOURCE)],
     ]
     for argv in jobs:

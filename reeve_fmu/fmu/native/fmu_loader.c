@@ -13,10 +13,17 @@
  *    the process's global symbol scope. If the process has no Python there (a C/C++ host), the loader
  *    promotes a libpython the process already loaded privately, or dlopens one with RTLD_GLOBAL:
  *    $REEVE_FMU_LIBPYTHON if set, else the libpython of the interpreter the FMU was built with
- *    (REEVE_LIBPYTHON, recorded at build time), else the standard sonames libpython3.X.so.1.0. It
- *    checks the version (>= 3.10) and initializes the interpreter itself with Py_InitializeEx(0) (no
- *    signal handlers): pythonfmu then never finalizes it, so there is no interpreter shutdown at exit.
- *    In a Python host (fmpy, libcosimpy, ...) the host's interpreter is used as it is.
+ *    (REEVE_LIBPYTHON, recorded at build time), else the standard sonames libpython3.X.so.1.0. A
+ *    standalone FMU (`reeve-fmu build --standalone`) carries its interpreter in resources/reeve_runtime/
+ *    and that one comes before the build's and the system's. It checks the version (>= 3.10) and
+ *    initializes the interpreter itself, without signal handlers, with its home configured, never
+ *    guessed: $REEVE_FMU_PYTHONHOME, else $PYTHONHOME (read by Python itself), else the prefix the
+ *    loaded libpython lives in (the directory above it holding lib/python3.X/os.py), else the build
+ *    interpreter's prefix. So a PATH whose first python3 is another build does not matter (Python
+ *    would otherwise take its prefix from there). PyConfig (pyinit.c) when the loaded libpython is the
+ *    build's minor version, else Py_SetPythonHome. pythonfmu then never finalizes it, so there is no
+ *    interpreter shutdown at exit. In a Python host (fmpy, libcosimpy, ...) the host's interpreter is
+ *    used as it is.
  *
  * 2. Clean exit. pythonfmu's library destructor calls finalizePythonInterpreter(), which resets a
  *    static std::shared_ptr that a C++ static destructor has already destroyed at exit (double free:
@@ -82,6 +89,10 @@ EXPORT void finalizePythonInterpreter(void) {}
 #ifndef REEVE_PY_VERSION
 #define REEVE_PY_VERSION "3.11"
 #endif
+#ifndef REEVE_PYHOME
+#define REEVE_PYHOME ""
+#endif
+#define REEVE_RUNTIME_DIR "reeve_runtime"
 #define REEVE_MIN_PY_MINOR 10
 
 /* ------------------------------------------------------------------ FMI 2.0 types (fmi2TypesPlatform) */
@@ -258,6 +269,8 @@ static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
 static int loaded;                /* 1: Python + pythonfmu ready */
 static int we_initialized;        /* the loader started the interpreter (a non-Python host) */
 static char python_where[2048];   /* where Python came from, for messages */
+static char python_home[4096];    /* the home the loader gave the interpreter ("" none) */
+static char runtime_dir[4096];    /* the FMU's runtime bundle in use ("" none) */
 static char load_error[8192];     /* sticky reason when loading failed */
 static __thread int thread_ready; /* this host thread has a Python thread state */
 
@@ -407,12 +420,178 @@ static int resolve_python(char *err, size_t esize)
     return 0;
 }
 
-static int load_python(char *err, size_t esize)
+/* ELF checks before dlopen of a file the FMU carries: a truncated or foreign-architecture library gets a
+ * reason a user can act on (dlopen's "invalid ELF header" does not say which). */
+static unsigned long long le(const unsigned char *b, int n)
+{
+    unsigned long long v = 0;
+    while (n--) v = (v << 8) | b[n];
+    return v;
+}
+
+static int check_elf(const char *path, char *err, size_t esize)
+{
+    unsigned char h[64], ph[56];
+    unsigned long long size, phoff, shoff, end, i;
+    unsigned phnum, phentsize, shnum, shentsize;
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        snprintf(err, esize, "%s is missing or unreadable", path);
+        return -1;
+    }
+    if (fread(h, 1, sizeof h, f) < sizeof h || memcmp(h, "\177ELF", 4) != 0) {
+        fclose(f);
+        snprintf(err, esize, "%s is not a shared library (truncated or corrupted)", path);
+        return -1;
+    }
+    if (h[4] != 2 || h[18] != 62 || h[19] != 0) { /* ELFCLASS64, EM_X86_64 */
+        fclose(f);
+        snprintf(err, esize, "%s is built for another architecture (ELF class %d, machine %d); this "
+                 "process is x86-64 (machine 62)", path, h[4], h[18] | (h[19] << 8));
+        return -1;
+    }
+    /* every segment and the section table inside the file: a truncated library would otherwise be
+     * mapped past its end and the first access to it kills the host (SIGBUS) */
+    fseek(f, 0, SEEK_END);
+    size = (unsigned long long)ftell(f);
+    phoff = le(h + 32, 8), shoff = le(h + 40, 8);
+    phentsize = (unsigned)le(h + 54, 2), phnum = (unsigned)le(h + 56, 2);
+    shentsize = (unsigned)le(h + 58, 2), shnum = (unsigned)le(h + 60, 2);
+    end = shoff + (unsigned long long)shnum * shentsize;
+    for (i = 0; i < phnum && end <= size && phentsize >= sizeof ph; i++) {
+        if (fseek(f, (long)(phoff + i * phentsize), SEEK_SET) != 0 || fread(ph, 1, sizeof ph, f) < sizeof ph) {
+            end = size + 1;
+            break;
+        }
+        if (le(ph + 8, 8) + le(ph + 32, 8) > end) end = le(ph + 8, 8) + le(ph + 32, 8);
+    }
+    fclose(f);
+    if (end > size) {
+        snprintf(err, esize, "%s is truncated (%llu bytes; its headers need %llu)", path, size, end);
+        return -1;
+    }
+    return 0;
+}
+
+static int is_file(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    fclose(f);
+    return 1;
+}
+
+/* The prefix a libpython at lib_path belongs to: the nearest of its directory's first three
+ * ancestors holding lib/python<ver>/os.py (pyenv/python.org: <prefix>/lib/libpython..., Debian:
+ * /usr/lib/x86_64-linux-gnu/libpython...). "" when none. */
+static void prefix_of(const char *lib_path, const char *ver, char *out, size_t size)
+{
+    char dir[4096], probe[4400];
+    int up;
+    char *slash;
+    out[0] = 0;
+    snprintf(dir, sizeof dir, "%s", lib_path);
+    for (up = 0; up < 3; up++) {
+        slash = strrchr(dir, '/');
+        if (!slash || slash == dir) return;
+        *slash = 0;
+        if (up == 0) continue; /* the library's own directory is lib/, not the prefix */
+        snprintf(probe, sizeof probe, "%s/lib/python%s/os.py", dir, ver);
+        if (is_file(probe)) {
+            snprintf(out, size, "%s", dir);
+            return;
+        }
+    }
+}
+
+/* the home to configure (see 1. at the top); "" leaves it to Python ($PYTHONHOME or its own search) */
+static void choose_home(const char *ver, char *out, size_t size)
+{
+    const char *env = getenv("REEVE_FMU_PYTHONHOME");
+    Dl_info info;
+    out[0] = 0;
+    if (env && *env) {
+        snprintf(out, size, "%s", env);
+        return;
+    }
+    env = getenv("PYTHONHOME");
+    if (env && *env) return;
+    if (runtime_dir[0]) {
+        snprintf(out, size, "%s", runtime_dir);
+        return;
+    }
+    if (dladdr((void *)py.GetVersion, &info) && info.dli_fname) prefix_of(info.dli_fname, ver, out, size);
+    if (!out[0] && REEVE_PYHOME[0] && strcmp(ver, REEVE_PY_VERSION) == 0) snprintf(out, size, "%s", REEVE_PYHOME);
+}
+
+int reeve_init_configured(const char *home, char *err, size_t esize); /* pyinit.c */
+
+static int initialize_python(const char *ver, char *err, size_t esize)
+{
+    char probe[4400];
+    int rc = -2;
+    choose_home(ver, python_home, sizeof python_home);
+    if (python_home[0]) {
+        snprintf(probe, sizeof probe, "%s/lib/python%s/encodings/__init__.py", python_home, ver);
+        if (!is_file(probe)) {
+            snprintf(err, esize, "Python %s (%s) has no standard library under its home %s (%s is "
+                     "missing)%s", ver, python_where, python_home, probe,
+                     runtime_dir[0] ? ": the FMU's runtime bundle is incomplete; rebuild the FMU"
+                                    : ". Set REEVE_FMU_PYTHONHOME to the prefix of that Python");
+            return -1;
+        }
+    }
+    if (strcmp(ver, REEVE_PY_VERSION) == 0) rc = reeve_init_configured(python_home, err, esize);
+    if (rc == -1) return -1;
+    if (rc == -2) { /* another minor version, or no PyConfig compiled in */
+        void (*set_home)(const wchar_t *) = (void (*)(const wchar_t *))dlsym(RTLD_DEFAULT, "Py_SetPythonHome");
+        wchar_t *(*decode)(const char *, size_t *) =
+            (wchar_t * (*)(const char *, size_t *)) dlsym(RTLD_DEFAULT, "Py_DecodeLocale");
+        if (python_home[0] && set_home && decode) {
+            static wchar_t *home_w; /* must outlive the interpreter */
+            home_w = decode(python_home, NULL);
+            if (home_w) set_home(home_w);
+        }
+        py.InitializeEx(0); /* no signal handlers: the host owns the signals */
+    }
+    if (!py.IsInitialized()) {
+        snprintf(err, esize, "Python (%s, home %s) failed to initialize", python_where,
+                 python_home[0] ? python_home : "not set");
+        return -1;
+    }
+    return 0;
+}
+
+/* resources/reeve_runtime/lib/libpython<build version>.so.1.0 of a standalone FMU: 1 found (path in
+ * out), 0 none, -1 a bundle that cannot be used (reason in err) */
+static int find_runtime(const char *resources, char *out, size_t size, char *err, size_t esize)
+{
+    char dir[4200];
+    if (!resources || !resources[0]) return 0;
+    snprintf(dir, sizeof dir, "%s/%s", resources, REEVE_RUNTIME_DIR);
+    snprintf(out, size, "%s/lib/libpython%s.so.1.0", dir, REEVE_PY_VERSION);
+    snprintf(err, esize, "%s/manifest.json", dir);
+    if (!is_file(err)) {
+        err[0] = 0;
+        return 0;
+    }
+    if (check_elf(out, err, esize) != 0) {
+        char why[4400];
+        snprintf(why, sizeof why, "%s", err);
+        snprintf(err, esize, "the FMU's Python runtime bundle (%s) cannot be used: %s. Rebuild the FMU "
+                 "with 'reeve-fmu build --standalone' on an x86-64 Linux machine", dir, why);
+        return -1;
+    }
+    snprintf(runtime_dir, sizeof runtime_dir, "%s", dir);
+    return 1;
+}
+
+static int load_python(const char *resources, char *err, size_t esize)
 {
     char tried[6000] = "";
-    char cand[1024];
+    char cand[1024], bundled[4400], version[32];
     const char *env = getenv("REEVE_FMU_LIBPYTHON");
-    int major = 0, minor = 0, m;
+    int major = 0, minor = 0, m, in_bundle = 0;
     void *h = NULL;
 
     if (dlsym(RTLD_DEFAULT, "Py_IsInitialized")) {
@@ -429,6 +608,14 @@ static int load_python(char *err, size_t esize)
             return -1;
         }
         snprintf(python_where, sizeof python_where, "%s (REEVE_FMU_LIBPYTHON)", env);
+    } else if ((in_bundle = find_runtime(resources, bundled, sizeof bundled, err, esize)) != 0) {
+        if (in_bundle < 0) return -1;
+        h = dlopen(bundled, RTLD_NOW | RTLD_GLOBAL);
+        if (!h) {
+            snprintf(err, esize, "the FMU's Python runtime bundle cannot be loaded: %s", dlerror());
+            return -1;
+        }
+        snprintf(python_where, sizeof python_where, "%s (the FMU's runtime)", bundled);
     } else {
         /* the build's libpython, then the standard sonames: the build's version first, then
          * 3.17 .. 3.10 (newest first) */
@@ -457,17 +644,16 @@ static int load_python(char *err, size_t esize)
                      "%s) and this process has none. Tried:%s\nInstall Python %s with its shared "
                      "library (e.g. 'apt install libpython%s', or a python.org / pyenv build with "
                      "--enable-shared) and the packages in the FMU's resources/requirements.txt, or "
-                     "set REEVE_FMU_LIBPYTHON to the path of a libpython3.X.so.1.0.",
+                     "set REEVE_FMU_LIBPYTHON to the path of a libpython3.X.so.1.0, or use an FMU "
+                     "that carries its runtime ('reeve-fmu build --standalone').",
                      REEVE_MIN_PY_MINOR, REEVE_PY_VERSION, tried, REEVE_PY_VERSION, REEVE_PY_VERSION);
             return -1;
         }
     }
     if (resolve_python(err, esize) != 0) return -1;
-    if (sscanf(py.GetVersion(), "%d.%d", &major, &minor) != 2 || major != 3 ||
-        minor < REEVE_MIN_PY_MINOR) {
-        char version[32];
-        snprintf(version, sizeof version, "%s", py.GetVersion());
-        version[strcspn(version, " ")] = 0;
+    snprintf(version, sizeof version, "%s", py.GetVersion());
+    version[strcspn(version, " ")] = 0;
+    if (sscanf(version, "%d.%d", &major, &minor) != 2 || major != 3 || minor < REEVE_MIN_PY_MINOR) {
         snprintf(err, esize, "wrong Python version: %s is Python %s, but this FMU needs Python >= "
                  "3.%d (it was built with %s). Use a newer Python (set REEVE_FMU_LIBPYTHON to its "
                  "libpython3.X.so.1.0 in a non-Python host).",
@@ -475,13 +661,13 @@ static int load_python(char *err, size_t esize)
         return -1;
     }
     if (!py.IsInitialized()) {
-        py.InitializeEx(0); /* no signal handlers: the host owns the signals */
-        if (!py.IsInitialized()) {
-            snprintf(err, esize, "Python (%s) failed to initialize", python_where);
-            return -1;
-        }
+        char ver[16];
+        snprintf(ver, sizeof ver, "%d.%d", major, minor);
+        if (initialize_python(ver, err, esize) != 0) return -1;
         we_initialized = 1;
         py.EvalSaveThread(); /* drop the GIL; the main thread state stays with this thread */
+    } else {
+        runtime_dir[0] = 0; /* the host's interpreter: the bundle's packages only by preflight's choice */
     }
     return 0;
 }
@@ -540,7 +726,7 @@ static const char PREFLIGHT[] =
     "    _s = _u.spec_from_file_location('_reeve_fmu_preflight', _p)\n"
     "    _m = _u.module_from_spec(_s)\n"
     "    _s.loader.exec_module(_m)\n"
-    "    ERROR, WARNING = _m.preflight(RESOURCES, EMBEDDED, WHERE)\n";
+    "    ERROR, WARNING = _m.preflight(RESOURCES, EMBEDDED, WHERE, HOME)\n";
 
 static void copy_str(PyObject *o, char *out, size_t size)
 {
@@ -569,6 +755,9 @@ static int preflight(const Wrap *w, const char *resources, char *err, size_t esi
     py.DecRef(o);
     o = py.UnicodeDecodeFSDefault(python_where);
     py.DictSetItemString(g, "WHERE", o);
+    py.DecRef(o);
+    o = py.UnicodeDecodeFSDefault(we_initialized ? python_home : "");
+    py.DictSetItemString(g, "HOME", o);
     py.DecRef(o);
     code = py.CompileString(PREFLIGHT, "<reeve_fmu loader>", PY_FILE_INPUT);
     if (code) r = py.EvalEvalCode(code, g, g);
@@ -743,9 +932,15 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     w->logging_on = loggingOn != 0;
     w->instance_name = strdup(instanceName ? instanceName : "");
 
+    if (uri_to_path(fmuResourceLocation, resources, sizeof resources) != 0) {
+        loader_log(w, fmi2Error, "%s: fmuResourceLocation '%s' is not a local file URI",
+                   REEVE_MODEL_IDENTIFIER, fmuResourceLocation ? fmuResourceLocation : "(null)");
+        free_wrap(w);
+        return NULL;
+    }
     pthread_mutex_lock(&load_lock);
     if (!loaded && !load_error[0]) {
-        if (load_python(err, sizeof err) == 0 && load_pythonfmu(err, sizeof err) == 0) loaded = 1;
+        if (load_python(resources, err, sizeof err) == 0 && load_pythonfmu(err, sizeof err) == 0) loaded = 1;
         else snprintf(load_error, sizeof load_error, "%s", err);
     }
     pthread_mutex_unlock(&load_lock);
@@ -755,13 +950,6 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         return NULL;
     }
     ensure_thread_state();
-
-    if (uri_to_path(fmuResourceLocation, resources, sizeof resources) != 0) {
-        loader_log(w, fmi2Error, "%s: fmuResourceLocation '%s' is not a local file URI",
-                   REEVE_MODEL_IDENTIFIER, fmuResourceLocation ? fmuResourceLocation : "(null)");
-        free_wrap(w);
-        return NULL;
-    }
     if (preflight(w, resources, err, sizeof err) != 0) {
         loader_log(w, fmi2Error, "%s: cannot instantiate: %s", REEVE_MODEL_IDENTIFIER, err);
         free_wrap(w);
