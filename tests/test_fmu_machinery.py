@@ -70,7 +70,8 @@ def test_model_description_units_structure_and_resources(toy):
     assert "resources/reeve_fmu_vendor/reeve_fmu/fmu/slave.py" in names
     assert not any("__pycache__" in n or n.endswith((".pyc", ".nbi", ".nbc")) for n in names)
     assert stamp["sha256"] == toy["hash"] and stamp["entry"]["name"] == "reeve_toy_slave.py"
-    assert "numpy>=1.24" in reqs and "scipy" not in reqs and scene == SCENE   # only what the model imports
+    assert "numpy>=1.24" in reqs and "scipy>=1.10" in reqs and scene == SCENE   # what the model imports ...
+    assert "matplotlib" not in reqs and "fmpy" not in reqs                       # ... and nothing else
     assert "tomli>=2.0; python_version < '3.11'" in reqs
     # capability flags
     cs = xml.find("CoSimulation").attrib

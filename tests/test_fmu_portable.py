@@ -355,3 +355,21 @@ def test_standalone_fmu_with_an_unwritable_cache_runs_and_says_why(standalone, h
     r = chost.run_host(host, _plan(standalone, steps=5), tmp_path, env=env)
     assert r["returncode"] == 0, r["stdout"] + r["stderr"]
     assert "could not use the package cache" in r["stderr"] and len(r["rows"]) == 6
+
+
+def test_standalone_fmu_in_a_python_host_of_another_version_says_why(tmp_path):
+    """A Python host of another minor version than the bundle's lacks a package: the reason says that
+    the bundle cannot serve this Python and what to install into the host's own."""
+    from reeve_fmu.fmu import _bootstrap
+
+    res = tmp_path / "resources"
+    (res / "reeve_runtime").mkdir(parents=True)
+    (res / "reeve_runtime" / "manifest.json").write_text(json.dumps({"python_version": "3.99", "libraries": {}}),
+                                                         encoding="utf-8")
+    (res / "reeve_env.json").write_text(json.dumps({"python_version": "3.99", "requirements": [
+        {"module": "reeve_missing_pkg_xyz", "requirement": "reeve_missing_pkg_xyz>=1", "optional": False}]}),
+        encoding="utf-8")
+    err, warning = _bootstrap.preflight(str(res), embedded=False)
+    assert f"carries its own Python 3.99 runtime, which a Python {VERSION} host cannot use" in err, err
+    assert f"{sys.executable} -m pip install 'reeve_missing_pkg_xyz>=1'" in err, err
+    assert warning is None
