@@ -249,18 +249,11 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             extra, res_hashes = _stage_resources(staging, resources)
         import reeve_fmu
 
-        stamp = {
-            "format": STAMP_FORMAT,
-            "package": PACKAGE,
-            "version": getattr(reeve_fmu, "__version__", None),
-            "sha256": digest,
-            "files": len(package_files(str(pkg))),
-            "entry": {"name": entry.name, "sha256": _sha256_bytes(entry.read_bytes())},
-            "resources": res_hashes,
-            "pythonfmu": pythonfmu_version,
-            "python": sys.version.split()[0],
-            "built_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        }
+        stamp = {"format": STAMP_FORMAT, "package": PACKAGE, "version": getattr(reeve_fmu, "__version__", None),
+                 "sha256": digest, "files": len(package_files(str(pkg))),
+                 "entry": {"name": entry.name, "sha256": _sha256_bytes(entry.read_bytes())},
+                 "resources": res_hashes, "pythonfmu": pythonfmu_version, "python": sys.version.split()[0],
+                 "built_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
         (staging / STAMP_NAME).write_text(json.dumps(stamp, indent=1) + "\n", encoding="utf-8")
         (staging / "requirements.txt").write_text(requirements_txt(reqs), encoding="utf-8")
         env = native.environment_record(reqs)
@@ -307,18 +300,7 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                 raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in "
                                     f"{built.name}", problems)
         # 5. what travels with the FMU: the compiled kernels, the interpreter
-        if kernels:
-            from . import kernels as kernel_bundle
-
-            found = kernel_bundle.collect(built)
-            if found["files"]:
-                kernel_bundle.add_to_fmu(built, found)
-            else:
-                log(f"reeve_fmu build: {built.name} carries no precompiled kernels: {found['why']}")
-        if standalone:
-            from . import standalone as runtime_bundle
-
-            runtime_bundle.add_to_fmu(built, reqs)
+        _carry(built, reqs, kernels=kernels, standalone=standalone, log=log)
         final = dest_dir / built.name
         os.replace(built, final)
     finally:
@@ -329,6 +311,22 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
         shutil.rmtree(staging, ignore_errors=True)
         shutil.rmtree(out_tmp, ignore_errors=True)
     return final
+
+
+def _carry(built: Path, reqs, *, kernels: bool, standalone: bool, log) -> None:
+    """Put what travels with the FMU into it: its precompiled kernels, the interpreter."""
+    if kernels:
+        from . import kernels as kernel_bundle
+
+        found = kernel_bundle.collect(built)
+        if found["files"]:
+            kernel_bundle.add_to_fmu(built, found)
+        else:
+            log(f"reeve_fmu build: {built.name} carries no precompiled kernels: {found['why']}")
+    if standalone:
+        from . import standalone as runtime_bundle
+
+        runtime_bundle.add_to_fmu(built, reqs)
 
 
 def _model_identifier(fmu_path: Path) -> str:

@@ -176,7 +176,6 @@ static const char *py_names[] = {
     X(fmi2Status, fmi2SetupExperiment, (fmi2Component c, fmi2Boolean a, fmi2Real b, fmi2Real d,      \
                                         fmi2Boolean e, fmi2Real f), (W, a, b, d, e, f))                 \
     X(fmi2Status, fmi2EnterInitializationMode, (fmi2Component c), (W))                                \
-    X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component c), (W))                                 \
     X(fmi2Status, fmi2Terminate, (fmi2Component c), (W))                                              \
     X(fmi2Status, fmi2GetInteger, (fmi2Component c, const fmi2ValueReference *v, size_t n,           \
                                    fmi2Integer *x), (W, v, n, x))                                       \
@@ -215,6 +214,7 @@ static const char *py_names[] = {
 /* the functions the loader defines itself (the fast path, 5.), forwarding what it does not handle */
 #define FMI2_OWN(X)                                                                                  \
     X(fmi2Status, fmi2Reset, (fmi2Component c), (W))                                                  \
+    X(fmi2Status, fmi2ExitInitializationMode, (fmi2Component c), (W))                                 \
     X(fmi2Status, fmi2GetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n, fmi2Real *x), \
       (W, v, n, x))                                                                                     \
     X(fmi2Status, fmi2SetReal, (fmi2Component c, const fmi2ValueReference *v, size_t n,              \
@@ -260,6 +260,7 @@ typedef struct {
     /* the fast path (5.): NULL/0 when the model did not link */
     struct ReeveLink *link;
     PyObject *obj, *do_step, *log_queue; /* the Python slave, its bound do_step, its log queue */
+    PyObject *slave;                     /* the Python slave, linked or not (its initialization_failed) */
     double last_ok_time;                 /* fmi2LastSuccessfulTime of the loader's doSteps */
     int stepped, wants_terminate;
 } Wrap;
@@ -817,13 +818,16 @@ static PyObject *open_box(void)
 static void unlink_instance(Wrap *w)
 {
     int gil;
-    if (!w->obj) return;
+    if (!w->obj && !w->slave) return;
     gil = py.GILStateEnsure();
-    py.DecRef(w->do_step);
-    py.DecRef(w->log_queue);
-    py.DecRef(w->obj);
+    if (w->obj) {
+        py.DecRef(w->do_step);
+        py.DecRef(w->log_queue);
+        py.DecRef(w->obj);
+    }
+    if (w->slave) py.DecRef(w->slave);
     py.GILStateRelease(gil);
-    w->obj = w->do_step = w->log_queue = NULL;
+    w->obj = w->do_step = w->log_queue = w->slave = NULL;
     w->link = NULL;
 }
 
@@ -836,6 +840,10 @@ static void close_box(Wrap *w, PyObject *box)
     ReeveLink *L = NULL;
     if (box && py.SysGetObject(LINK_BOX) == box && py.ListSize(box) == 1)
         obj = py.ListGetItem(box, 0); /* borrowed */
+    if (obj) {
+        py.IncRef(obj);
+        w->slave = obj;
+    }
     if (obj && (m = py.ObjectGetAttrString(obj, "_native_link")) != NULL &&
         (r = py.CallFunctionObjArgs(m, NULL)) != NULL)
         L = (ReeveLink *)py.LongAsVoidPtr(r);
@@ -1025,6 +1033,30 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     }
 #define W w->inner
 FMI2_FORWARDED(DEFINE_FORWARD)
+
+/* pythonfmu 0.7.0 returns fmi2OK from exitInitializationMode whatever the model's initialize did (an
+ * exception would be fmi2Fatal and end the instance): a reeve_fmu slave records the failure, logged with
+ * its reason, in initialization_failed, and the host gets fmi2Error here */
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    Wrap *w = (Wrap *)c;
+    fmi2Status s;
+    if (!w) return fmi2Error;
+    ensure_thread_state();
+    s = inner_fmi2ExitInitializationMode(w->inner);
+    if (s < fmi2Error && w->slave) {
+        int gil = py.GILStateEnsure();
+        PyObject *failed = py.ObjectGetAttrString(w->slave, "initialization_failed");
+        if (failed) {
+            if (py.ObjectIsTrue(failed) == 1) s = fmi2Error;
+            py.DecRef(failed);
+        } else {
+            py.ErrClear();
+        }
+        py.GILStateRelease(gil);
+    }
+    return s;
+}
 
 /* pythonfmu constructs a new Python slave: link to that one */
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
