@@ -165,10 +165,29 @@ def test_kernels_in_the_fmu_need_no_compilation_on_an_empty_cache(fmus, tmp_path
                        env=chost.clean_env({"REEVE_FMU_CACHE_DIR": str(cache)}))
     assert p.returncode == 0, p.stdout + p.stderr
     out = json.loads(p.stdout.strip().splitlines()[-1])
-    assert out["boot"]["warning"] is None and out["boot"]["kernels_copied"] == len(shipped)
+    assert out["boot"]["warning"] is None
     kernel_dir = cache / "numba" / manifest["source_hash"]
-    assert _cache_files(kernel_dir) == shipped          # nothing compiled, nothing added
+    assert _cache_files(kernel_dir) == shipped          # all copied; nothing compiled, nothing added
     assert out["z"] == pytest.approx(0.0, abs=0.05)      # the car stays near the landing (brake applied)
+
+
+def _shipped(fmu) -> tuple[str, set]:
+    with zipfile.ZipFile(fmu) as zf:
+        manifest = json.loads(zf.read("resources/reeve_fmu_kernels/manifest.json"))
+        return manifest["source_hash"], {n.split("reeve_fmu_kernels/", 1)[1] for n in zf.namelist()
+                                         if "reeve_fmu_kernels/pkg/" in n}
+
+
+def test_c_host_on_an_empty_cache_compiles_nothing(fmus, host, unzipped, tmp_path):
+    """Both FMUs in one native process with an empty kernel cache: each copies its kernels when it is
+    instantiated (the second one finds the package already imported), and numba compiles nothing."""
+    (h_plant, plant), (h_drive, drive) = _shipped(fmus["plant"]), _shipped(fmus["drive"])
+    assert h_plant == h_drive and plant and drive
+    f = {**fmus, "plant_dir": unzipped["plant"], "drive_dir": unzipped["drive"]}
+    cache = tmp_path / "cache"
+    r = chost.run_host(host, _plan(f, steps=200), tmp_path, env=_minimal_env({"REEVE_FMU_CACHE_DIR": str(cache)}))
+    assert r["returncode"] == 0 and "[WARNING]" not in r["stderr"], r["stdout"] + r["stderr"]
+    assert _cache_files(cache / "numba" / h_plant) == plant | drive
 
 
 def _with_manifest(src, dest, **changes):
@@ -192,8 +211,10 @@ def test_kernels_of_another_python_are_not_used_and_say_so(fmus, tmp_path):
                        env=chost.clean_env({"REEVE_FMU_CACHE_DIR": str(tmp_path / "cache"), "REEVE_FMU_NO_JIT": "1"}))
     assert p.returncode == 0, p.stdout + p.stderr
     boot = json.loads(p.stdout.strip().splitlines()[-1])["boot"]
-    assert boot["kernels_copied"] == 0
-    assert f"precompiled for Python 3.99 with numba" in boot["warning"] and f"this is Python {VERSION}" in boot["warning"]
+    assert boot["kernels_copied"] == 0 and not (tmp_path / "cache" / "numba").exists()
+    warning = "precompiled for Python 3.99 with numba"
+    assert warning in boot["warning"] and f"this is Python {VERSION}" in boot["warning"]
+    assert warning in p.stdout + p.stderr                # the loader's preflight logged it to the host
 
 
 # ------------------------------------------------------------------------------------------------

@@ -270,7 +270,10 @@ def preflight(resources: str, embedded: bool = False, where: str = "", home: str
     * in a Python host of the bundle's version, the bundle's site-packages come last on sys.path
       (the host's packages win, the bundle fills what the host lacks);
     * then every requirement recorded there is imported; a missing one is an error naming the
-      package, the Python in use and what to install on this machine (an optional one only a warning)."""
+      package, the Python in use and what to install on this machine (an optional one only a warning);
+    * last, the FMU's precompiled kernels are copied into the user's kernel cache (`seed_kernels`):
+      here, once per instance, because the second FMU of a process finds the package already imported
+      and never runs the shim."""
     try:
         with open(os.path.join(resources, ENV_NAME), encoding="utf-8") as fh:
             env = json.load(fh)
@@ -311,7 +314,8 @@ def preflight(resources: str, embedded: bool = False, where: str = "", home: str
         warning = "; ".join(f"optional package {r['module']} is not usable in {python} ({why}): "
                             f"{r.get('why') or 'the model runs without it'}" for r, why in optional)
     if not missing:
-        return None, warning
+        _copied, kernel_warning = seed_kernels(resources)
+        return None, "; ".join(w for w in (warning, kernel_warning) if w) or None
     pkgs = ", ".join(r["module"] for r, _ in missing)
     reqs = " ".join(f"'{r['requirement'].split(';')[0].strip()}'" for r, _ in missing)
     lines = [f"the Python package(s) {pkgs} the model needs cannot be imported in {python}:"]
