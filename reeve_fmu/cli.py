@@ -19,7 +19,7 @@ from .core.scene import default_scene  # noqa: E402,F401  (re-exported)
 
 def cmd_simulate(args) -> int:
     from .core.model import build_model
-    from .core.scene import load_scene
+    from .core.plausibility import initial_statics
     from .core.solver import Simulator, SolverError
 
     scene = _scene_with_sets(args.scene, getattr(args, "set", None))
@@ -37,8 +37,10 @@ def cmd_simulate(args) -> int:
     if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
         step = chosen_step if chosen_step is not None else args.step
         sim = Simulator(build_model(scene), method=args.method, step=step)
+        # an equilibrium with a compressed rope is no state to simulate from (exit 2, the rope named)
+        st = initial_statics(sim)
         try:
-            res = sim.run(t_end, dt)
+            res = sim.run(t_end, dt, state=st)
         except SolverError as exc:
             if exc.result is None:      # nothing computed (e.g. the initial statics failed)
                 raise
@@ -47,7 +49,9 @@ def cmd_simulate(args) -> int:
     wall = time.perf_counter() - t0
     cols = res.as_dict()
     time_ = cols.pop("time")
-    _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None)
+    from .studies.crane import hoist_convention
+    convention = hoist_convention(scene, cols)
+    _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None, convention)
     _simulate_extras(args, scene, time_, cols, out)
     how = ("(the run of the fidelity full-run check)" if reused else
            f"in {wall:.2f} s (incl. statics and JIT load; {real_time(time_[-1] - time_[0], wall)})")
@@ -91,8 +95,10 @@ def _simulate_extras(args, scene, time_, cols, out):
     summary.update({"verdict": worst(vs), "verdicts": vs, "findings": explain(vs)})
     report.write_summary(out, summary)
     report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
-                                                           "t_end_s": float(time_[-1])},
-                        [], vs, ["results.png"], command="reeve-fmu simulate")
+                                                           "t_end_s": float(time_[-1]),
+                                                           "motor sign": summary.get("motor_sign_convention", "")},
+                        [], vs, ["results.png"], command="reeve-fmu simulate",
+                        parameters={"Scene (after --set)": report.scene_parameters(scene)})
     print_verdicts(vs)
 
 
@@ -112,10 +118,11 @@ def plausibility_warnings(scene) -> list[str]:
     return warnings
 
 
-def _write_run(out, scene, time_, cols, warnings, stop, wall):
+def _write_run(out, scene, time_, cols, warnings, stop, wall, convention=""):
     """results.csv, results.png (the event marked) and summary.json of a simulate run."""
     import json
     from .core.results import plot_overview, write_csv
+    from .studies.report import _json_default, scene_parameters
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", time_, cols)
     event = None
@@ -128,8 +135,10 @@ def _write_run(out, scene, time_, cols, warnings, stop, wall):
     summary = {"scene": scene.name, "source": scene.source, "model": scene.model,
                "samples": int(len(time_)), "t_last": float(time_[-1]),
                "wall_seconds": wall, "warnings": list(warnings), "event": event,
-               "exit_code": EXIT_EVENT if event else 0}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+               "exit_code": EXIT_EVENT if event else 0, "motor_sign_convention": convention,
+               "parameters": {"scene": scene_parameters(scene)}}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
+                                      encoding="utf-8")
 
 
 def _fidelity(args, scene, t_end, dt, out):

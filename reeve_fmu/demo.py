@@ -49,6 +49,17 @@ def print_table(summary: dict) -> None:
     print()
 
 
+#: drive outputs recorded in results.csv only when the drive runs its Level 2 (PMSM dq) model
+LEVEL2_OUTPUTS = ("motor.current_d", "motor.current_q")
+
+
+def parameter_groups(parameters: dict) -> dict:
+    """report.md's parameter tables."""
+    return {"Drive FMU parameters (sized from the scene, then --set)": parameters["drive"],
+            "Plant FMU parameters": parameters["plant"],
+            "Scene (after --set; the car mass includes the trip's load)": parameters["scene"]}
+
+
 def _sequence(text):
     if text is None:
         return None
@@ -113,7 +124,7 @@ def _write_stopped(out: Path, case, exc, output_dt) -> None:
 def cli_demo(args) -> int:
     from .fmu import cosim
     from .studies import report
-    from .studies.trip import run_case, summarize_case, traction_limits
+    from .studies.trip import run_case, run_parameters, summarize_case, traction_limits
     from .studies.verdicts import explain, levelling_verdicts, print_verdicts, worst
 
     out = Path(getattr(args, "out", None) or "results")
@@ -185,7 +196,9 @@ def cli_demo(args) -> int:
         order.append(n)
         if n == "motor.speed":
             order.append("motor.torque")
-    order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order]
+    level = int(drive_values.get("drive.level", 1))
+    order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order and n in c
+              and (level == 2 or n not in LEVEL2_OUTPUTS)]
     files = report.write_tables(out, t, {n: c[n] for n in order}, output_dt=output_dt,
                                 parquet=bool(getattr(args, "parquet", False)))
     limits = traction_limits(case.scene)
@@ -194,13 +207,15 @@ def cli_demo(args) -> int:
                             f"drive FMUs, {step * 1e3:g} ms)", stops=stops, sis=sis)
     scenario = {"scene": case.scene.name, "scene_file": str(scene_file), "car_load_kg": case.load,
                 "landings_m": list(case.sequence), "dwell_s": case.dwell,
-                "pretorque_Nm": pre, "drive_level": 1, "communication_step_s": step,
+                "pretorque_Nm": pre, "drive_level": level, "communication_step_s": step,
                 "drive_sizing": case.sizing, "overrides": {**case.scene_sets, **case.drive_sets},
                 "drive_values": dict(drive_values), "plant_values": dict(case.plant_values),
                 "scheme": res.info["scheme"], "t_end_s": res.info["t_end_s"],
                 "plant_fmu": str(plant_fmu), "drive_fmu": str(drive_fmu)}
+    parameters = run_parameters(case, drive_values)      # (the drive FMU gets no sis.* values)
     summary = {
         "scenario": scenario,
+        "parameters": parameters,
         **summary,
         "verdict": worst(verdicts),
         "verdicts": verdicts,
@@ -217,7 +232,7 @@ def cli_demo(args) -> int:
     report.write_report(out, f"Trip study: {case.describe()}", {k: v for k, v in scenario.items()
                                                                 if k not in ("drive_sizing",)},
                         metrics, verdicts, pngs, lev_rows, command="reeve-fmu demo",
-                        findings=summary["findings"])
+                        findings=summary["findings"], parameters=parameter_groups(parameters))
     print_table(summary)
     print_verdicts(verdicts, summary=summary)
     first = res.info["first_step_wall_s"]

@@ -618,3 +618,23 @@ def cli_crane(args) -> int:
     return 0
 
 
+
+
+#: motor outputs whose sign follows the hoist convention
+MOTOR_OUTPUTS = ("motor.torque", "motor.speed", "motor.angle")
+
+
+def hoist_convention(scene: Scene, cols: dict) -> str:
+    """Give a crane scene's motor outputs the crane FMUs' sign (positive torque, speed and angle hoist):
+    the engine's sign follows the reeving, so the columns are negated when the torque that holds the
+    load at t = 0 is negative. Elevator scenes keep the engine's (their routes make positive raise the
+    car). Returns the convention applied, for the run's summary."""
+    from ..fmu.crane import is_crane_scene
+
+    if not (is_crane_scene(scene) or "crane" in scene.extra) or "motor.torque" not in cols:
+        return "engine: motor.* positive counter-clockwise about the driven sheave's axis"
+    if float(np.asarray(cols["motor.torque"])[0]) < 0.0:
+        for n in MOTOR_OUTPUTS:
+            if n in cols:
+                cols[n] = -np.asarray(cols[n])
+    return "hoist: motor.torque, motor.speed, motor.angle positive when hoisting (as the crane FMUs)"
