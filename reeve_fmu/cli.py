@@ -238,7 +238,8 @@ def _cfg_sweep(p):
 def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml); a crane scene "
                    "(a body on a revolute joint and a hoist drive) builds CranePlant.fmu and CraneDrive.fmu")
-    p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
+    p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant for the reference "
+                   "scene scenes/elevator_2to1.toml as it is, Plant_<scene name> for any other scene or --set)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
     _add_set(p)
 

@@ -80,6 +80,19 @@ def demo_case(args):
                      sets=parse_sets(getattr(args, "set", None)))
 
 
+def plant_fmu_name(scene_file, scene, name: str | None = None) -> str:
+    """The plant FMU's model name, one convention for build, demo and the SSP: `name` when given
+    (explicit), ReevingPlant for the shipped reference scene file as it is (the SSP
+    cosim/ReevingSystem runs it), Plant_<scene name> for any other scene or a scene changed by --set."""
+    from .fmu import cosim
+
+    if name:
+        return name
+    if Path(scene_file).resolve() == cosim.default_scene_path().resolve():
+        return cosim.PLANT_NAME
+    return "Plant_" + cosim._slug(scene.name)
+
+
 def _plant_source(case, out: Path):
     """(scene file, plant FMU model name) the plant FMU is built from: the shipped default scene as
     ReevingPlant; another scene, or one changed by --set (written to DIR/scene.toml), under its own name."""
@@ -93,9 +106,7 @@ def _plant_source(case, out: Path):
         path = out / "scene.toml"
         path.write_text(f"# {case.scene_path} with --set " + ", ".join(
             f"{k}={v!r}" for k, v in case.scene_sets.items()) + "\n" + dump_toml(data), encoding="utf-8")
-    if path.resolve() == cosim.default_scene_path().resolve():
-        return path, cosim.PLANT_NAME
-    return path, "Plant_" + cosim._slug(case.scene.name)
+    return path, plant_fmu_name(path, case.scene)
 
 
 def _write_stopped(out: Path, case, exc, output_dt) -> None:
@@ -266,17 +277,22 @@ def cli_build(args) -> int:
     """Build the plant FMU of a scene (with --set applied) and the drive FMU (a crane scene: the crane
     plant and crane drive FMUs, `_build_crane`); for an elevator scene also
     write DEST/<name>.drive.json, the drive parameters sized from the scene (start values to give the
-    drive FMU, whose built-in defaults are those of the R1 2:1 elevator)."""
+    drive FMU, whose built-in defaults are those of the R1 2:1 elevator). The plant FMU is named by
+    `plant_fmu_name`: only the reference scene, or an explicit --name, writes ReevingPlant.fmu."""
     import json
 
     from .fmu import cosim
     from .studies.overrides import apply_to_data, dump_toml, load_scene_data, parse_sets, scene_with, split
 
     dest = Path(getattr(args, "dest", None) or "fmus")
-    name = getattr(args, "name", None) or cosim.PLANT_NAME
     scene = Path(getattr(args, "scene", None) or cosim.default_scene_path())
     scene_sets, drive_sets, load = split(parse_sets(getattr(args, "set", None)))
     sc, _ = scene_with(scene, scene_sets)
+    # a changed reference scene is another plant: it never takes the reference name implicitly
+    name = plant_fmu_name(scene if not scene_sets else dest / "changed.toml", sc, getattr(args, "name", None))
+    if name == cosim.PLANT_NAME and (scene_sets or scene.resolve() != cosim.default_scene_path().resolve()):
+        print(f"note: --name {name} replaces the reference plant FMU (scene {cosim.DEFAULT_SCENE}, run by the "
+              f"SSP cosim/ReevingSystem) with {sc.name}")
     if scene_sets:
         dest.mkdir(parents=True, exist_ok=True)
         path = dest / f"{name}.scene.toml"
