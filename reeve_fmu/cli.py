@@ -258,6 +258,11 @@ def _cfg_crane(p):
 
 def _cfg_hil(p):
     p.add_argument("--bus", choices=("virtual", "udp_multicast"), default="virtual")
+    p.add_argument("--multicast", choices=("host", "route", "lan"), default="host",
+                   help="udp_multicast: host (default: the sockets keep the frames on this host; nothing on the "
+                        "host is changed), route (also route the bench's group /32 to lo while it runs: root, "
+                        "said on the console, undone at exit), lan (TTL 1 on the default interface: a controller "
+                        "on another host)")
     p.add_argument("--controller", choices=("builtin", "external"), default="builtin")
     p.add_argument("--realtime", action="store_true", help="pace SYNC to the wall clock")
     p.add_argument("--inject", action="append", default=[], metavar="FAULT",

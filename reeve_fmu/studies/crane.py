@@ -471,7 +471,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
     q, J = S.solve(st.q, "height", h0)
     if q is None or np.linalg.cond(J) > 1e14:    # singular: some coordinate (the yaw) is undetermined
         raise CraneError(f"{crane.scene.source}: no unique equilibrium found in the scene's configuration "
-                         f"(height {h0:.3f} m){_no_yaw_stiffness(crane)}")
+                         f"(height {h0:.3f} m){_no_yaw_stiffness(crane) or _yaw_keys(crane)}")
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
@@ -508,6 +508,16 @@ def _no_yaw_stiffness(crane: Crane) -> str:
             + ("the yaw is undetermined" if tor.k0 == 0 else "the rope torque turns it freely")
             + "). Give the rope torsional stiffness (torsion GJ0 > 0, or law = 'costello' or 'feyrer') "
               "or reeve two or more falls")
+
+
+def _yaw_keys(crane: Crane) -> str:
+    """The keys a singular block equilibrium depends on, when `_no_yaw_stiffness` has no better reason."""
+    i = next(k for k, rp in enumerate(crane.scene.ropes) if rp.name == crane.spec.rope)
+    tor = crane.scene.ropes[i].torsion
+    b = next(k for k, bd in enumerate(crane.scene.bodies) if bd.name == crane.spec.block)
+    return (f": the hook block's yaw is not determined by the rope torque (ropes[{i}].torsion: law = "
+            f"{tor.law!r}, diameter = {tor.diameter:g} m, k0 = {tor.k0:g}, GJ0 = {tor.GJ0:g} N·m²) and the "
+            f"falls at this position (bodies[{b}].position); check these values (the diameter in m)")
 
 
 # ---------------------------------------------------------------------------------------- front end
