@@ -181,8 +181,10 @@ def test_level2_demo_reports_level2_and_records_its_currents(demo_level2):
         rows = list(csv.DictReader(fh))
     tau = [float(r["motor.torque"]) for r in rows]
     iq = [float(r["motor.current_q"]) for r in rows]
-    assert max(abs(float(r["motor.current_d"])) for r in rows) < 1e-3 * max(abs(x) for x in iq)   # i_d = 0 control
-    assert max(abs(t - 1.5 * 12 * 0.9 * i) for t, i in zip(tau, iq)) <= 1e-6 * max(abs(t) for t in tau)
+    # i_d = 0 control: measured |i_d| <= 3.2e-5 of the peak i_q (51.7 A)
+    assert max(abs(float(r["motor.current_d"])) for r in rows) < 1e-4 * max(abs(x) for x in iq)
+    # the torque is the currents' to the CSV's 10 significant digits: measured 1.3e-7 N·m of 838 N·m
+    assert max(abs(t - 1.5 * 12 * 0.9 * i) for t, i in zip(tau, iq)) <= 1e-9 * max(abs(t) for t in tau)
 
 
 def test_cosim_error_at_1ms_is_below_a_quarter_millimetre(demo):
