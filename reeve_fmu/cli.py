@@ -49,8 +49,9 @@ def cmd_simulate(args) -> int:
     wall = time.perf_counter() - t0
     cols = res.as_dict()
     time_ = cols.pop("time")
-    from .studies.crane import hoist_convention
+    from .studies.crane import crane_angles, hoist_convention
     convention = hoist_convention(scene, cols)
+    crane_angles(scene, cols)                       # the crane FMU's swing and yaw angles, same names
     _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None, convention)
     _simulate_extras(args, scene, time_, cols, out)
     how = ("(the run of the fidelity full-run check)" if reused else
@@ -97,7 +98,8 @@ def _simulate_extras(args, scene, time_, cols, out):
     report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
                                                            "t_end_s": float(time_[-1]),
                                                            "motor sign": summary.get("motor_sign_convention", "")},
-                        [], vs, ["results.png"], command="reeve-fmu simulate",
+                        [], vs, ["results.png"] + (["crane.png"] if (out / "crane.png").is_file() else []),
+                        command="reeve-fmu simulate",
                         parameters={"Scene (after --set)": report.scene_parameters(scene)})
     print_verdicts(vs)
 
@@ -132,6 +134,8 @@ def _write_run(out, scene, time_, cols, warnings, stop, wall, convention=""):
                  "message": msg}
     plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})",
                   event=None if event is None else (event["time"], event["cause"]))
+    from .studies.crane import plot_crane_angles
+    plot_crane_angles(out / "crane.png", scene, time_, cols)
     summary = {"scene": scene.name, "source": scene.source, "model": scene.model,
                "samples": int(len(time_)), "t_last": float(time_[-1]),
                "wall_seconds": wall, "warnings": list(warnings), "event": event,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from reeve_fmu.cli import main
@@ -64,3 +65,20 @@ def test_crane_simulate_has_the_crane_fmu_sign():
     assert e.summary["motor_sign_convention"].startswith("engine")
     assert e["motor.torque"][0] == pytest.approx(holding_torque(load_scene(R1), 1000.0, 0.0), rel=1e-9)
     assert e["motor.torque"][0] > 0
+
+
+def test_crane_simulate_plots_and_writes_the_jib_swing_and_yaw_angles(tmp_path, capsys):
+    """results.csv carries the crane plant FMU's derived angles and crane.png shows them with the jib
+    angle. At rest the payload hangs under the tip (no swing); while the jib accelerates (a positive slew
+    from 2 s, docs/crane.md) the payload lags: the tangential swing goes negative first."""
+    from reeve_fmu.core.results import read_csv
+
+    rc = main(["simulate", str(ROOT / "scenes" / "slewing_crane.toml"), "--t-end", "6", "--out", str(tmp_path)])
+    assert rc == 0, capsys.readouterr().err
+    c = read_csv(tmp_path / "results.csv")
+    assert abs(c["payload.swing_radial"][0]) < 1e-9 and abs(c["payload.swing_tangential"][0]) < 1e-9
+    swing = c["payload.swing_tangential"]
+    k = int(np.argmax(np.abs(swing) > 1e-3))                 # first visible swing (> 0.06 deg)
+    assert k > 0 and swing[k] < 0 and c["jib.angular_velocity"][k] > 0
+    assert (tmp_path / "crane.png").stat().st_size > 10_000
+    assert "![crane.png](crane.png)" in (tmp_path / "report.md").read_text(encoding="utf-8")

@@ -648,3 +648,57 @@ def hoist_convention(scene: Scene, cols: dict) -> str:
             if n in cols:
                 cols[n] = -np.asarray(cols[n])
     return "hoist: motor.torque, motor.speed, motor.angle positive when hoisting (as the crane FMUs)"
+
+
+def crane_angles(scene: Scene, cols: dict) -> list:
+    """Add to a `simulate` record of a slewing crane (a body on a revolute joint with a hoist) the crane
+    plant FMU's derived angles, `payload.swing_radial`, `payload.swing_tangential`, `payload.yaw` [rad]
+    (core.craneplant: the same expressions, from the same outputs); returns the names added."""
+    from ..core.craneplant import DERIVED, CranePlant
+    from ..fmu.crane import is_crane_scene
+
+    if not is_crane_scene(scene):
+        return []
+    cp = CranePlant(scene, "speed")
+    names = cp.plant.output_names
+    if any(n not in cols for n in names):
+        return []
+    rows = np.column_stack([np.asarray(cols[n], float) for n in names])
+    out = np.array([cp._outputs(y)[-len(DERIVED):] for y in rows])
+    for k, n in enumerate(DERIVED):
+        cols[n] = out[:, k]
+    return list(DERIVED)
+
+
+def plot_crane_angles(path, scene: Scene, time_, cols: dict):
+    """crane.png of a `simulate` run: the joint angles of the scene's revolute bodies (the jib), the
+    payload's swing angles and the yaw of the payload or the hook block [deg]; None when the record has
+    none of them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    joints = [f"{b.name}.angle" for b in scene.bodies if b.joint == "revolute" and f"{b.name}.angle" in cols]
+    swing = [n for n in ("payload.swing_radial", "payload.swing_tangential") if n in cols]
+    # yaw: the slewing payload's heading, else the z component of each rotating body's rotation vector
+    # (the yaw while the tilt is small, as `reeve-fmu crane` reports block.yaw)
+    yaw = ["payload.yaw"] if "payload.yaw" in cols else [
+        f"{b.name}.rotation.z" for b in scene.bodies if "rotation" in b.free and f"{b.name}.rotation.z" in cols]
+    panels = [(lab, ns) for lab, ns in (("joint angle [deg]", joints), ("payload swing [deg]", swing),
+                                        ("yaw [deg]", yaw)) if ns]
+    if not panels:
+        return None
+    fig, ax = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels)), sharex=True, squeeze=False)
+    for a, (lab, ns) in zip(ax[:, 0], panels):
+        for n in ns:
+            a.plot(time_, np.degrees(np.asarray(cols[n], float)), lw=0.9, label=n)
+        a.set_ylabel(lab)
+        a.grid(alpha=0.3)
+        a.legend(loc="best", fontsize=8)
+    ax[-1, 0].set_xlabel("time [s]")
+    ax[0, 0].set_title(f"{scene.name}: crane angles")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
