@@ -771,3 +771,24 @@ def default_scene(name: str) -> Path:
         if p.exists():
             return p
     return Path("scenes") / name
+
+
+def scene_parameters(scene) -> dict:
+    """Every parameter of a parsed scene (defaults filled in, overrides applied) as JSON-able data, with
+    bodies, sheaves, ropes and buffers keyed by name as --set spells them (bodies.car.mass)."""
+    from dataclasses import asdict
+
+    def plain(v):
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [plain(x) for x in v]
+        if isinstance(v, (np.floating, np.integer)):
+            return v.item()
+        return v
+
+    d = plain(asdict(scene))
+    for table in ("bodies", "sheaves", "ropes", "buffers"):
+        if isinstance(d.get(table), list):
+            d[table] = {x.pop("name"): x for x in d[table]}
+    return d

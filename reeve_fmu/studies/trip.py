@@ -192,7 +192,7 @@ def run_parameters(case: TripCase, drive_values: dict | None = None) -> dict:
     """Every parameter a trip ran with: the scene after --set with the trip's load in the car mass, the
     plant's values and the drive's (sized from the scene, then --set; default the case's)."""
     from ..core.elevator import with_load
-    from .report import scene_parameters
+    from ..core.scene import scene_parameters
 
     return {"scene": scene_parameters(with_load(case.scene, case.load)), "plant": dict(case.plant_values),
             "drive": dict(case.drive_values if drive_values is None else drive_values)}
