@@ -5,8 +5,17 @@ whole) scaled by 1e-6, 1e-3, 1e3, 1e6 and sign-flipped, every wrap sense flipped
 +-1 m along x, y and z. Each case is parsed, checked (core/plausibility.py), built, brought to its
 initial statics and stepped a few solver steps (crane scenes: the quasi-static sweep at 3 heights).
 A case passes when it runs, or stops with a clear error (SceneError / SolverError / CraneError / a
-ValueError naming a key); it fails on any other exception (a traceback), a non-finite output or a
-case that runs out of time.
+ValueError) that names a key of the scene or one of its bodies, sheaves or ropes; it fails on any
+other exception (a traceback), an error that names nothing, a non-finite output or a case that runs
+out of time.
+
+Every elevator scene also gets geometry and capacity mutations that no real elevator has (a
+counterweight or car above the sheaves that carry it, a sheave radius in mm, ropes too short for
+their route, a brake or drive that cannot hold the car, counterweight and rated load far off balance,
+a load above max_load). Each is taken through the study path — plausibility, the initial statics,
+the trip case (holding torques, drive sizing) and the static EN 81-20/-50 verdicts — and passes only
+when it stops with an error naming one of the case's keys, or (where the case allows it) ends in a
+FAIL verdict: never a PASS, never a traceback.
 
     python benchmarks/fuzz_physical.py [--jobs 2] [--timeout 120] [--json docs/img/fuzz_physical.json]
 
@@ -21,6 +30,7 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import signal
 import sys
 import time
@@ -103,7 +113,99 @@ def cases():
                 for d in (-1.0, 1.0):
                     out.append(dict(scene=rel, kind="move", path=["bodies", i], arg=[ax, d],
                                     label=f"bodies[{i}].position {'xyz'[ax]} {d:+g} m"))
+        if "elevator" in doc:
+            out.extend(study_cases(rel, doc))
     return out
+
+
+# study mutations: (name, keys an error may name, whether a FAIL verdict is an acceptable end)
+STUDY_MUTATIONS = (
+    ("counterweight above its top sheave", ("bodies[{cw}].position",), False),
+    ("car above its top sheave", ("bodies[{car}].position",), False),
+    ("traction sheave radius in mm", ("sheaves[{traction}].radius",), False),
+    ("ropes 5 m long for rope-length statics", ("ropes[0].length",), False),
+    ("brake.torque x 0.1", ("brake.torque",), False),
+    ("brake.torque between the rated-load and 125 % holding torques", (), True),
+    ("drive torque.max x 0.3", ("torque.max",), False),
+    ("counterweight mass x 0.1", ("brake.torque",), True),
+    ("counterweight mass x 10", ("brake.torque",), True),
+    ("rated_load x 3", ("brake.torque",), True),
+    ("load above max_load", ("elevator.max_load",), False),
+)
+
+
+def study_cases(rel, doc):
+    el = doc["elevator"]
+    names = [b["name"] for b in doc["bodies"]]
+    sheaves = [s["name"] for s in doc.get("sheaves", [])]
+    idx = {"cw": names.index(el.get("counterweight", "counterweight")), "car": names.index(el.get("car", "car")),
+           "traction": sheaves.index(doc["drive"]["sheave"])}
+    return [dict(scene=rel, kind="study", path=[], arg=name, label=f"study: {name}",
+                 keys=[k.format(**idx) for k in keys], fail_ok=fail_ok, index=idx)
+            for name, keys, fail_ok in STUDY_MUTATIONS]
+
+
+def _top(doc):
+    """Height of the highest fixed stop (ground sheaves and anchors) of the scene."""
+    zs = [s["center"][2] for s in doc.get("sheaves", []) if not s.get("body")]
+    zs += [st["at"][2] for r in doc["ropes"] for st in r["route"] if st.get("anchor") == "ground"]
+    return max(zs)
+
+
+def _study_mutated(case):
+    """(scene document, load kg or None, drive --set values) of a study mutation."""
+    doc = tomllib.loads((ROOT / case["scene"]).read_text(encoding="utf-8"))
+    name, i = case["arg"], case["index"]
+    load, sets = None, {}
+    if name.endswith("above its top sheave"):
+        body = doc["bodies"][i["cw" if name.startswith("counterweight") else "car"]]
+        body["position"] = [body["position"][0], body["position"][1], _top(doc) + 3.0]
+    elif name == "traction sheave radius in mm":
+        doc["sheaves"][i["traction"]]["radius"] *= 1e3
+    elif name.startswith("ropes 5 m"):
+        doc.setdefault("initial", {})["statics"] = "rope-length"
+        for r in doc["ropes"]:
+            r["length"] = 5.0
+    elif name == "brake.torque x 0.1":
+        doc["brake"]["torque"] *= 0.1
+    elif name.startswith("brake.torque between"):
+        from reeve_fmu.core.scene import parse_scene
+        from reeve_fmu.studies.verdicts import brake_cases
+        bc = brake_cases(parse_scene(copy.deepcopy(doc), case["scene"]))
+        rated, full = (max(abs(t) for t in bc["hold"][m]) for m in sorted(bc["hold"])[1:])
+        doc["brake"]["torque"] = 0.5 * (rated + full)
+    elif name == "drive torque.max x 0.3":
+        from reeve_fmu.core.scene import parse_scene
+        from reeve_fmu.studies.trip import sized_drive
+        sets = {"torque.max": 0.3 * sized_drive(parse_scene(copy.deepcopy(doc), case["scene"]))["torque.max"]}
+    elif name.startswith("counterweight mass"):
+        doc["bodies"][i["cw"]]["mass"] *= 0.1 if name.endswith("0.1") else 10.0
+    elif name == "rated_load x 3":
+        doc["elevator"]["rated_load"] *= 3.0
+        doc["elevator"].pop("max_load", None)
+    elif name == "load above max_load":
+        el = doc["elevator"]
+        load = 1.01 * el.get("max_load", 1.25 * el["rated_load"])
+    return doc, load, sets
+
+
+def _run_study(case):
+    """The study path of a mutation: plausibility, initial statics, trip case, static verdicts."""
+    from reeve_fmu.core.model import build_model
+    from reeve_fmu.core.plausibility import check_or_raise, initial_statics
+    from reeve_fmu.core.scene import parse_scene
+    from reeve_fmu.core.solver import Simulator
+    from reeve_fmu.studies.analysis import traction_limits
+    from reeve_fmu.studies.trip import trip_case
+    from reeve_fmu.studies.verdicts import brake_verdicts, en81_verdicts, worst
+    doc, load, sets = _study_mutated(case)
+    scene = parse_scene(doc, source(case))
+    warnings = check_or_raise(scene)
+    initial_statics(Simulator(build_model(scene)))
+    tc = trip_case(scene, load=load, sets=sets)
+    vs = en81_verdicts(tc.scene, traction_limits(tc.scene)) + brake_verdicts(tc.scene)
+    return dict(outcome="run", verdict=worst(vs), warnings=warnings,
+                message="; ".join(v.line() for v in vs if v.status != "PASS"))
 
 
 def mutated(case):
@@ -149,12 +251,39 @@ def run_case(case, timeout: float = 120.0) -> dict:
         res.update(outcome="fail-timeout", message=f"no answer within {timeout:g} s")
     except Exception as exc:  # noqa: BLE001 - classified here
         res.update(_classify(exc))
+        if res["outcome"] == "error" and not names_a_key(res["full_message"], case) \
+                and not (isinstance(getattr(exc, "time", None), float)):     # (a run-time event names its time)
+            res.update(outcome="fail-nokey")
     finally:
         if timeout:
             signal.setitimer(signal.ITIMER_REAL, 0)
             signal.signal(signal.SIGALRM, old)
     res["seconds"] = time.perf_counter() - t0
+    if case["kind"] == "study":
+        res["study_failure"] = study_failure(case, res)
     return res
+
+
+#: a scene key in an error message: bodies[0].mass, ropes[1].route[2], solver.min_span, brake.torque, a
+#: drive parameter (torque.max)
+KEY_RE = re.compile(r"\b(?:bodies|sheaves|ropes|buffers)\[\d+\]|\b(?:scene|solver|drive|brake|initial|elevator|"
+                    r"crane|accuracy|torque|control|trip|sis|car)\.[A-Za-z_]")
+
+
+def source(case):
+    """The scene source a case's scene is parsed under (error messages start with it)."""
+    return f"{case['scene']} ({case['label']})"
+
+
+def names_a_key(text, case):
+    """Whether an error message names a scene key, or a body, sheave or rope of the scene by name (the
+    case's label, part of the scene source the message starts with, does not count)."""
+    text = text.replace(source(case), "")
+    if KEY_RE.search(text):
+        return True
+    doc = tomllib.loads((ROOT / case["scene"]).read_text(encoding="utf-8"))
+    names = [x.get("name") for t in ("bodies", "sheaves", "ropes", "buffers") for x in doc.get(t, [])]
+    return any(n and f"'{n}'" in text for n in names)
 
 
 def _classify(exc):
@@ -162,20 +291,23 @@ def _classify(exc):
     from reeve_fmu.core.solver import SolverError
     from reeve_fmu.studies.crane import CraneError
     text = str(exc).strip()
-    clear = isinstance(exc, (SceneError, SolverError, CraneError)) or (
-        type(exc) is ValueError and "[" in text)
+    # a ValueError of the package (not a subclass such as numpy's LinAlgError) is bad input
+    clear = isinstance(exc, (SceneError, SolverError, CraneError)) or type(exc).__name__ in ("ValueError",
+                                                                                               "OverrideError")
     if clear and text:
-        return dict(outcome="error", message=text.splitlines()[0], error=type(exc).__name__)
+        return dict(outcome="error", message=text.splitlines()[0], full_message=text, error=type(exc).__name__)
     return dict(outcome="fail-traceback", message=f"{type(exc).__name__}: {text}",
                 traceback=traceback.format_exc())
 
 
 def _run(case):
     import numpy as np
+    if case["kind"] == "study":
+        return _run_study(case)
     from reeve_fmu.core.plausibility import check_or_raise
     from reeve_fmu.core.scene import parse_scene
     doc = mutated(case)
-    scene = parse_scene(doc, f"{case['scene']} ({case['label']})")
+    scene = parse_scene(doc, source(case))
     warnings = check_or_raise(scene)
     if "crane" in scene.extra:
         from reeve_fmu.studies.crane import build_crane, sweep
@@ -207,6 +339,23 @@ def _run(case):
     return dict(outcome="run", warnings=warnings + sim.warnings)
 
 
+def study_failure(case, res):
+    """Why a study mutation's outcome is wrong (None when right): a PASS verdict, a FAIL where the case
+    must stop with an error, an error that names none of the case's keys, or any failure outcome."""
+    if res["outcome"].startswith("fail"):
+        return f"{res['outcome']}: {res['message']}"
+    if res["outcome"] == "run":
+        if res["verdict"] == "PASS":
+            return "PASS on an impossible configuration"
+        if not case["fail_ok"]:
+            return f"{res['verdict']} verdict where an error naming {case['keys']} was expected: {res['message']}"
+        return None
+    text = res.get("full_message", res["message"]).replace(source(case), "")
+    if case["keys"] and not any(k in text for k in case["keys"]):
+        return f"the error names none of {case['keys']}: {text}"
+    return None
+
+
 def warm_up():
     """Load (or compile) the numba kernels outside any case's time limit: one unchanged run of every
     scene the cases use (dense and banded Newton paths, cranes). A timeout inside a compile leaves
@@ -227,7 +376,7 @@ def _worker(args):
 
 def summarize(results) -> dict:
     out = {"cases": len(results)}
-    for key in ("run", "error", "fail-traceback", "fail-nan", "fail-timeout"):
+    for key in ("run", "error", "fail-traceback", "fail-nokey", "fail-nan", "fail-timeout"):
         out[key] = sum(r["outcome"] == key for r in results)
     errors = [r for r in results if r["outcome"] == "error"]
     out["errors_by_kind"] = {
@@ -237,12 +386,18 @@ def summarize(results) -> dict:
         "no static equilibrium / statics mode": sum(r["error"] == "SolverError" or "initial.statics" in r["message"]
                                                     for r in errors),
         "crane": sum(r["error"] == "CraneError" for r in errors),
-        "other (ValueError naming a key)": sum(r["error"] == "ValueError" for r in errors)}
+        "other (ValueError naming a key)": sum(r["error"] in ("ValueError", "OverrideError") for r in errors)}
     out["runs_stopped_by_an_event_in_the_steps"] = sum(
         r["outcome"] == "run" and any(w.startswith("event:") for w in r["warnings"]) for r in results)
     out["runs_with_warnings"] = sum(r["outcome"] == "run" and bool(r["warnings"]) for r in results)
     out["runs_without_warnings"] = out["run"] - out["runs_with_warnings"]
-    out["failures"] = out["fail-traceback"] + out["fail-nan"] + out["fail-timeout"]
+    out["failures"] = out["fail-traceback"] + out["fail-nokey"] + out["fail-nan"] + out["fail-timeout"]
+    study = [r for r in results if r.get("study_failure", "") != ""]
+    out["study_mutations"] = len(study)
+    out["study_errors_naming_the_key"] = sum(r["outcome"] == "error" and r["study_failure"] is None for r in study)
+    out["study_fail_verdicts"] = sum(r["outcome"] == "run" and r["study_failure"] is None for r in study)
+    out["study_wrong"] = sum(r["study_failure"] is not None for r in study)
+    out["failures"] += out["study_wrong"]
     return out
 
 
@@ -261,8 +416,8 @@ def main(argv=None) -> int:
             results = []
             for k, r in enumerate(pool.imap(_worker, [(c, args.timeout) for c in todo], chunksize=4)):
                 results.append(r)
-                if r["outcome"].startswith("fail"):
-                    print(f"FAIL {r['scene']}: {r['case']}: {r['message']}", flush=True)
+                if r["outcome"].startswith("fail") or r.get("study_failure"):
+                    print(f"FAIL {r['scene']}: {r['case']}: {r.get('study_failure') or r['message']}", flush=True)
                 if (k + 1) % 200 == 0:
                     print(f"... {k + 1}/{len(todo)} cases, {time.perf_counter() - t0:.0f} s", flush=True)
     else:
@@ -274,7 +429,7 @@ def main(argv=None) -> int:
                 slowest_case_seconds=round(max(r["seconds"] for r in results), 2))
     print(json.dumps(summ, indent=2))
     if args.json:
-        fails = [r for r in results if r["outcome"].startswith("fail")]
+        fails = [r for r in results if r["outcome"].startswith("fail") or r.get("study_failure")]
         Path(args.json).write_text(json.dumps({"summary": summ, "failures": fails}, indent=2) + "\n", encoding="utf-8")
     return 1 if summ["failures"] else 0
 

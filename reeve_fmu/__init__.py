@@ -2,16 +2,28 @@
 
 Layers (nothing below imports from above): core (scene, model, elements, solver, plant, drive) -> fmu
 (FMU machinery, co-simulation masters) -> studies (trips, verdicts, sweeps, bench, fidelity, crane) ->
-hil -> front ends (cli, demo, api). `reeve_fmu.simulate` and `reeve_fmu.cosimulate` are the scripting
-API (reeve_fmu.api), imported on first use.
+hil -> front ends (cli, demo, api). The scripting API (docs/api.md) — `simulate`, `cosimulate`,
+`Result` and the exceptions a caller catches — is imported on first use.
 """
 __version__ = "0.1.0"
 
-__all__ = ["simulate", "cosimulate", "Result"]
+#: public name -> module that defines it (imported on first access: `import reeve_fmu` stays cheap)
+_EXPORTS = {
+    "simulate": "api", "cosimulate": "api", "Result": "api",
+    "SceneError": "core.scene", "PlausibilityError": "core.plausibility", "SolverError": "core.solver",
+    "OverrideError": "studies.overrides", "CosimError": "fmu.cosim", "CosimInstability": "fmu.cosim",
+}
+
+__all__ = list(_EXPORTS)
 
 
 def __getattr__(name):
-    if name in __all__:
-        from . import api
-        return getattr(api, name)
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
     raise AttributeError(f"module 'reeve_fmu' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

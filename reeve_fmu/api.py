@@ -65,6 +65,7 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
                "load" [kg] sets the payload of an elevator scene
     """
     from .core.model import build_model
+    from .core.plausibility import initial_statics
     from .core.solver import Simulator
     from .studies.overrides import OverrideError, scene_with, split
 
@@ -78,14 +79,21 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
         sc = with_load(sc, load)
     t_end = sc.t_end if t_end is None else t_end
     dt = sc.output_step if dt is None else dt
-    res = Simulator(build_model(sc), method=method, step=step).run(t_end, dt)
+    sim = Simulator(build_model(sc), method=method, step=step)
+    st = initial_statics(sim)
+    res = sim.run(t_end, dt, state=st)
     cols = res.as_dict()
     time_ = np.asarray(cols.pop("time"))
+    from .studies.crane import hoist_convention
+    from .studies.report import scene_parameters
     from .studies.verdicts import explain, scene_verdicts, worst
 
+    convention = hoist_convention(sc, cols)
     vs = [v.as_dict() for v in scene_verdicts(sc, time_, cols)]
     return Result(time_, {k: np.asarray(v) for k, v in cols.items()},
-                  {"verdict": worst(vs), "verdicts": vs, "findings": explain(vs)}, {"scene": sc.name})
+                  {"verdict": worst(vs), "verdicts": vs, "findings": explain(vs),
+                   "motor_sign_convention": convention, "parameters": {"scene": scene_parameters(sc)}},
+                  {"scene": sc.name})
 
 
 def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: float = 3.0,
@@ -103,7 +111,7 @@ def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: f
     overrides  {--set key: value}; also keyword arguments with "__" for "."
 
     Returns a Result whose summary holds the trip metrics and the verdicts (studies.verdicts)."""
-    from .studies.trip import run_case, summarize_case, trip_case
+    from .studies.trip import run_case, run_parameters, summarize_case, trip_case
 
     case = trip_case(scene, load=load, sequence=landings, dwell=dwell, sets=_overrides(overrides, kw), sis=sis)
     res = run_case(case, step=step)
@@ -113,5 +121,7 @@ def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: f
     s["verdict"] = worst(s["verdicts"])
     s["findings"] = explain(s["verdicts"], s)
     s["scenario"] = {"scene": case.scene.name, "car_load_kg": case.load, "landings_m": list(case.sequence),
-                     "dwell_s": case.dwell, "drive": {k: v for k, v in case.drive_values.items()}}
+                     "dwell_s": case.dwell, "drive_level": int(case.drive_values.get("drive.level", 1)),
+                     "drive": {k: v for k, v in case.drive_values.items()}}
+    s["parameters"] = run_parameters(case)
     return Result(np.asarray(res.time), {k: np.asarray(v) for k, v in res.columns.items()}, s, dict(res.info))

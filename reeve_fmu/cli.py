@@ -19,7 +19,7 @@ from .core.scene import default_scene  # noqa: E402,F401  (re-exported)
 
 def cmd_simulate(args) -> int:
     from .core.model import build_model
-    from .core.scene import load_scene
+    from .core.plausibility import initial_statics
     from .core.solver import Simulator, SolverError
 
     scene = _scene_with_sets(args.scene, getattr(args, "set", None))
@@ -37,8 +37,10 @@ def cmd_simulate(args) -> int:
     if res is None:    # (the fidelity selection's full-run check already ran the chosen configuration)
         step = chosen_step if chosen_step is not None else args.step
         sim = Simulator(build_model(scene), method=args.method, step=step)
+        # an equilibrium with a compressed rope is no state to simulate from (exit 2, the rope named)
+        st = initial_statics(sim)
         try:
-            res = sim.run(t_end, dt)
+            res = sim.run(t_end, dt, state=st)
         except SolverError as exc:
             if exc.result is None:      # nothing computed (e.g. the initial statics failed)
                 raise
@@ -47,7 +49,10 @@ def cmd_simulate(args) -> int:
     wall = time.perf_counter() - t0
     cols = res.as_dict()
     time_ = cols.pop("time")
-    _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None)
+    from .studies.crane import crane_angles, hoist_convention
+    convention = hoist_convention(scene, cols)
+    crane_angles(scene, cols)                       # the crane FMU's swing and yaw angles, same names
+    _write_run(out, scene, time_, cols, warnings, stop, wall if not reused else None, convention)
     _simulate_extras(args, scene, time_, cols, out)
     how = ("(the run of the fidelity full-run check)" if reused else
            f"in {wall:.2f} s (incl. statics and JIT load; {real_time(time_[-1] - time_[0], wall)})")
@@ -91,8 +96,11 @@ def _simulate_extras(args, scene, time_, cols, out):
     summary.update({"verdict": worst(vs), "verdicts": vs, "findings": explain(vs)})
     report.write_summary(out, summary)
     report.write_report(out, f"Simulation: {scene.name}", {"scene file": scene.source, "model": scene.model,
-                                                           "t_end_s": float(time_[-1])},
-                        [], vs, ["results.png"], command="reeve-fmu simulate")
+                                                           "t_end_s": float(time_[-1]),
+                                                           "motor sign": summary.get("motor_sign_convention", "")},
+                        [], vs, ["results.png"] + (["crane.png"] if (out / "crane.png").is_file() else []),
+                        command="reeve-fmu simulate",
+                        parameters={"Scene (after --set)": report.scene_parameters(scene)})
     print_verdicts(vs)
 
 
@@ -112,10 +120,11 @@ def plausibility_warnings(scene) -> list[str]:
     return warnings
 
 
-def _write_run(out, scene, time_, cols, warnings, stop, wall):
+def _write_run(out, scene, time_, cols, warnings, stop, wall, convention=""):
     """results.csv, results.png (the event marked) and summary.json of a simulate run."""
     import json
     from .core.results import plot_overview, write_csv
+    from .studies.report import _json_default, scene_parameters
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", time_, cols)
     event = None
@@ -125,11 +134,15 @@ def _write_run(out, scene, time_, cols, warnings, stop, wall):
                  "message": msg}
     plot_overview(out / "results.png", time_, cols, title=f"{scene.name} ({scene.model})",
                   event=None if event is None else (event["time"], event["cause"]))
+    from .studies.crane import plot_crane_angles
+    plot_crane_angles(out / "crane.png", scene, time_, cols)
     summary = {"scene": scene.name, "source": scene.source, "model": scene.model,
                "samples": int(len(time_)), "t_last": float(time_[-1]),
                "wall_seconds": wall, "warnings": list(warnings), "event": event,
-               "exit_code": EXIT_EVENT if event else 0}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+               "exit_code": EXIT_EVENT if event else 0, "motor_sign_convention": convention,
+               "parameters": {"scene": scene_parameters(scene)}}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default) + "\n",
+                                      encoding="utf-8")
 
 
 def _fidelity(args, scene, t_end, dt, out):
@@ -229,7 +242,8 @@ def _cfg_sweep(p):
 def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml); a crane scene "
                    "(a body on a revolute joint and a hoist drive) builds CranePlant.fmu and CraneDrive.fmu")
-    p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant)")
+    p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant for the reference "
+                   "scene scenes/elevator_2to1.toml as it is, Plant_<scene name> for any other scene or --set)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
     p.add_argument("--standalone", action="store_true", help="FMUs that carry their Python runtime (libpython, "
                    "stdlib, numpy, numba): a native host runs them on a machine without Python (docs/fmu-hosts.md)")
@@ -250,6 +264,11 @@ def _cfg_crane(p):
 
 def _cfg_hil(p):
     p.add_argument("--bus", choices=("virtual", "udp_multicast"), default="virtual")
+    p.add_argument("--multicast", choices=("host", "route", "lan"), default="host",
+                   help="udp_multicast: host (default: the sockets keep the frames on this host; nothing on the "
+                        "host is changed), route (also route the bench's group /32 to lo while it runs: root, "
+                        "said on the console, undone at exit), lan (TTL 1 on the default interface: a controller "
+                        "on another host)")
     p.add_argument("--controller", choices=("builtin", "external"), default="builtin")
     p.add_argument("--realtime", action="store_true", help="pace SYNC to the wall clock")
     p.add_argument("--inject", action="append", default=[], metavar="FAULT",

@@ -49,6 +49,17 @@ def print_table(summary: dict) -> None:
     print()
 
 
+#: drive outputs recorded in results.csv only when the drive runs its Level 2 (PMSM dq) model
+LEVEL2_OUTPUTS = ("motor.current_d", "motor.current_q")
+
+
+def parameter_groups(parameters: dict) -> dict:
+    """report.md's parameter tables."""
+    return {"Drive FMU parameters (sized from the scene, then --set)": parameters["drive"],
+            "Plant FMU parameters": parameters["plant"],
+            "Scene (after --set; the car mass includes the trip's load)": parameters["scene"]}
+
+
 def _sequence(text):
     if text is None:
         return None
@@ -69,6 +80,19 @@ def demo_case(args):
                      sets=parse_sets(getattr(args, "set", None)))
 
 
+def plant_fmu_name(scene_file, scene, name: str | None = None) -> str:
+    """The plant FMU's model name, one convention for build, demo and the SSP: `name` when given
+    (explicit), ReevingPlant for the shipped reference scene file as it is (the SSP
+    cosim/ReevingSystem runs it), Plant_<scene name> for any other scene or a scene changed by --set."""
+    from .fmu import cosim
+
+    if name:
+        return name
+    if Path(scene_file).resolve() == cosim.default_scene_path().resolve():
+        return cosim.PLANT_NAME
+    return "Plant_" + cosim._slug(scene.name)
+
+
 def _plant_source(case, out: Path):
     """(scene file, plant FMU model name) the plant FMU is built from: the shipped default scene as
     ReevingPlant; another scene, or one changed by --set (written to DIR/scene.toml), under its own name."""
@@ -82,9 +106,7 @@ def _plant_source(case, out: Path):
         path = out / "scene.toml"
         path.write_text(f"# {case.scene_path} with --set " + ", ".join(
             f"{k}={v!r}" for k, v in case.scene_sets.items()) + "\n" + dump_toml(data), encoding="utf-8")
-    if path.resolve() == cosim.default_scene_path().resolve():
-        return path, cosim.PLANT_NAME
-    return path, "Plant_" + cosim._slug(case.scene.name)
+    return path, plant_fmu_name(path, case.scene)
 
 
 def _write_stopped(out: Path, case, exc, output_dt) -> None:
@@ -113,7 +135,7 @@ def _write_stopped(out: Path, case, exc, output_dt) -> None:
 def cli_demo(args) -> int:
     from .fmu import cosim
     from .studies import report
-    from .studies.trip import run_case, summarize_case, traction_limits
+    from .studies.trip import run_case, run_parameters, summarize_case, traction_limits
     from .studies.verdicts import explain, levelling_verdicts, print_verdicts, worst
 
     out = Path(getattr(args, "out", None) or "results")
@@ -185,7 +207,9 @@ def cli_demo(args) -> int:
         order.append(n)
         if n == "motor.speed":
             order.append("motor.torque")
-    order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order]
+    level = int(drive_values.get("drive.level", 1))
+    order += [n for n in ("brake.command",) + cosim.DRIVE_RECORD if n not in order and n in c
+              and (level == 2 or n not in LEVEL2_OUTPUTS)]
     files = report.write_tables(out, t, {n: c[n] for n in order}, output_dt=output_dt,
                                 parquet=bool(getattr(args, "parquet", False)))
     limits = traction_limits(case.scene)
@@ -194,13 +218,15 @@ def cli_demo(args) -> int:
                             f"drive FMUs, {step * 1e3:g} ms)", stops=stops, sis=sis)
     scenario = {"scene": case.scene.name, "scene_file": str(scene_file), "car_load_kg": case.load,
                 "landings_m": list(case.sequence), "dwell_s": case.dwell,
-                "pretorque_Nm": pre, "drive_level": 1, "communication_step_s": step,
+                "pretorque_Nm": pre, "drive_level": level, "communication_step_s": step,
                 "drive_sizing": case.sizing, "overrides": {**case.scene_sets, **case.drive_sets},
                 "drive_values": dict(drive_values), "plant_values": dict(case.plant_values),
                 "scheme": res.info["scheme"], "t_end_s": res.info["t_end_s"],
                 "plant_fmu": str(plant_fmu), "drive_fmu": str(drive_fmu)}
+    parameters = run_parameters(case, drive_values)      # (the drive FMU gets no sis.* values)
     summary = {
         "scenario": scenario,
+        "parameters": parameters,
         **summary,
         "verdict": worst(verdicts),
         "verdicts": verdicts,
@@ -217,7 +243,7 @@ def cli_demo(args) -> int:
     report.write_report(out, f"Trip study: {case.describe()}", {k: v for k, v in scenario.items()
                                                                 if k not in ("drive_sizing",)},
                         metrics, verdicts, pngs, lev_rows, command="reeve-fmu demo",
-                        findings=summary["findings"])
+                        findings=summary["findings"], parameters=parameter_groups(parameters))
     print_table(summary)
     print_verdicts(verdicts, summary=summary)
     first = res.info["first_step_wall_s"]
@@ -251,18 +277,23 @@ def cli_build(args) -> int:
     """Build the plant FMU of a scene (with --set applied) and the drive FMU (a crane scene: the crane
     plant and crane drive FMUs, `_build_crane`); for an elevator scene also
     write DEST/<name>.drive.json, the drive parameters sized from the scene (start values to give the
-    drive FMU, whose built-in defaults are those of the R1 2:1 elevator)."""
+    drive FMU, whose built-in defaults are those of the R1 2:1 elevator). The plant FMU is named by
+    `plant_fmu_name`: only the reference scene, or an explicit --name, writes ReevingPlant.fmu."""
     import json
 
     from .fmu import cosim
     from .studies.overrides import apply_to_data, dump_toml, load_scene_data, parse_sets, scene_with, split
 
     dest = Path(getattr(args, "dest", None) or "fmus")
-    name = getattr(args, "name", None) or cosim.PLANT_NAME
     standalone = bool(getattr(args, "standalone", False))
     scene = Path(getattr(args, "scene", None) or cosim.default_scene_path())
     scene_sets, drive_sets, load = split(parse_sets(getattr(args, "set", None)))
     sc, _ = scene_with(scene, scene_sets)
+    # a changed reference scene is another plant: it never takes the reference name implicitly
+    name = plant_fmu_name(scene if not scene_sets else dest / "changed.toml", sc, getattr(args, "name", None))
+    if name == cosim.PLANT_NAME and (scene_sets or scene.resolve() != cosim.default_scene_path().resolve()):
+        print(f"note: --name {name} replaces the reference plant FMU (scene {cosim.DEFAULT_SCENE}, run by the "
+              f"SSP cosim/ReevingSystem) with {sc.name}")
     if scene_sets:
         dest.mkdir(parents=True, exist_ok=True)
         path = dest / f"{name}.scene.toml"

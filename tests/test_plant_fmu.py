@@ -133,18 +133,36 @@ def test_drive_model_description(fmus):
         assert u.get("dependencies") == ""                      # the drive samples at the step start
 
 
-def test_build_with_scene_and_name(tmp_path):
-    """--scene/--name: another scene and model name; the entry module gets a unique name."""
+def test_plant_fmu_names_follow_one_convention(tmp_path):
+    """build, demo and the SSP: ReevingPlant only for the reference scene file as it is (or by explicit
+    name), Plant_<scene name> for any other scene and for a scene changed by --set."""
+    from reeve_fmu.core.scene import load_scene
+    from reeve_fmu.demo import plant_fmu_name
+
+    r1, r2 = ROOT / "scenes" / "elevator_2to1.toml", ROOT / "scenes" / "elevator_1to1_highrise.toml"
+    assert plant_fmu_name(r1, load_scene(r1)) == "ReevingPlant"
+    assert plant_fmu_name(r2, load_scene(r2)) == "Plant_elevator_1to1_highrise"
+    changed = tmp_path / "scene.toml"                  # the demo writes a --set scene there
+    changed.write_text(r1.read_text(encoding="utf-8"), encoding="utf-8")
+    assert plant_fmu_name(changed, load_scene(changed)) == "Plant_elevator_2to1"
+    assert plant_fmu_name(r2, load_scene(r2), "ReevingPlant") == "ReevingPlant"     # explicit
+
+
+def test_build_with_scene_is_named_after_the_scene(tmp_path):
+    """--scene: another scene under its own name (the reference FMU is not touched); the entry module
+    gets a unique name."""
     p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--dest", str(tmp_path),
-                        "--scene", str(ROOT / "scenes" / "elevator_1to1_highrise.toml"), "--name", "HighRise"],
+                        "--scene", str(ROOT / "scenes" / "elevator_1to1_highrise.toml")],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
-    fmu = tmp_path / "HighRise.fmu"
+    fmu = tmp_path / "Plant_elevator_1to1_highrise.fmu"
+    assert not (tmp_path / "ReevingPlant.fmu").exists()
+    assert (tmp_path / "Plant_elevator_1to1_highrise.drive.json").is_file()
     root, names = _md(fmu)
-    assert root.get("modelName") == "HighRise"
-    assert "resources/reeve_plant_highrise_slave.py" in names
+    assert root.get("modelName") == "Plant_elevator_1to1_highrise"
+    assert "resources/reeve_plant_plant_elevator_1to1_highrise_slave.py" in names
     with zipfile.ZipFile(fmu) as zf:
-        assert zf.read("resources/slavemodule.txt").decode() == "reeve_plant_highrise_slave"
+        assert zf.read("resources/slavemodule.txt").decode() == "reeve_plant_plant_elevator_1to1_highrise_slave"
     v = _vars(root)
     assert float(v["car.load"]["t_start"]) == 1600.0            # R2 rated load
     q = subprocess.run([sys.executable, "-m", "fmpy", "validate", str(fmu)], capture_output=True, text=True,

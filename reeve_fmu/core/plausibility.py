@@ -59,6 +59,75 @@ def check_or_raise(scene: Scene) -> list[str]:
     return [str(f) for f in found]
 
 
+def statics_or_raise(scene: Scene, outputs: dict, where: str = "") -> None:
+    """Raise PlausibilityError when the static equilibrium `outputs` ({name: value} at rest, e.g. the
+    first sample of a run) is unphysical: a rope force below zero (a compressed rope: ropes are
+    modelled bilateral, so statics can find such a state) or a non-finite output. `where` says which
+    case (load, landing) the statics belongs to."""
+    found = check_statics(scene, outputs, where)
+    if found:
+        raise PlausibilityError("\n".join(str(f) for f in found), found)
+
+
+def with_statics_context(exc, scene: Scene):
+    """A failed initial statics (a SolverError without a time) with `statics_context` appended: the
+    solver's message names the equation or the span; this names the keys it depends on."""
+    context = statics_context(scene)
+    if getattr(exc, "time", None) is None and "initial statics" in str(exc) and context not in str(exc):
+        new = type(exc)(f"{exc}. {context}")
+        new.result, new.time = getattr(exc, "result", None), None
+        return new
+    return exc
+
+
+def initial_statics(sim, where: str = "at t = 0"):
+    """`sim.initial_state()` with a failed statics naming the keys it depends on (`with_statics_context`)
+    and an equilibrium that needs a compressed rope rejected (`statics_or_raise`)."""
+    from .solver import SolverError
+
+    scene = sim.model.scene
+    try:
+        st = sim.initial_state()
+    except SolverError as exc:
+        raise with_statics_context(exc, scene) from None
+    statics_or_raise(scene, dict(zip(sim.model.output_names, sim.outputs(st))), where)
+    return st
+
+
+def _rope_of_output(scene, name):
+    """(index, rope) whose force the output `name` is: <rope>.tension_start/end, <sheave>.tension_in/out."""
+    obj = name.rpartition(".")[0]
+    for i, rope in enumerate(scene.ropes):
+        if obj == rope.name or any(st.sheave == obj for st in rope.route):
+            return i, rope
+    return None, None
+
+
+def check_statics(scene: Scene, outputs: dict, where: str = "") -> list[Finding]:
+    """Findings (errors) of a static equilibrium: compressed ropes, non-finite outputs."""
+    out = []
+    at = f" {where}" if where else ""
+    forces = {n: float(v) for n, v in outputs.items()
+              if n.endswith((".tension_in", ".tension_out", ".tension_start", ".tension_end"))}
+    scale = max((abs(v) for v in forces.values() if math.isfinite(v)), default=0.0)
+    seen = set()
+    for name, v in sorted(forces.items(), key=lambda kv: kv[1]):
+        i, rope = _rope_of_output(scene, name)
+        key = f"ropes[{i}]" if rope is not None else name
+        if key in seen or not (v < -1e-9 * scale or not math.isfinite(v)):
+            continue
+        seen.add(key)
+        what = rope.name if rope is not None else name
+        out.append(Finding("error", key,
+                           f"rope {what!r}: the static equilibrium{at} needs a rope force of {v:.4g} N at {name} "
+                           f"(compression): a rope cannot push. Check the positions of the bodies it carries "
+                           f"against its sheaves and hitches, and the masses (z up, m, kg)", scene.source))
+    for name, v in outputs.items():
+        if name not in forces and not name.endswith(".traction_ratio") and not math.isfinite(float(v)):
+            out.append(Finding("error", name, f"the static equilibrium{at} gives {name} = {v}", scene.source))
+    return out
+
+
 def check_scene(scene: Scene) -> list[Finding]:
     """Every plausibility finding of a parsed scene (errors first)."""
     out: list[Finding] = []
@@ -68,11 +137,13 @@ def check_scene(scene: Scene) -> list[Finding]:
 
     _check_gravity(scene, add)
     geo = _route_geometry(scene)
+    _check_tangents(scene, geo, add)
     _check_masses(scene, geo, add)
     _check_ropes(scene, geo, add)
     _check_sheave_diameters(scene, add)
     _check_grooves(scene, add)
     _check_spans(scene, geo, add)
+    _check_suspension(scene, geo, add)
     _check_wraps(scene, geo, add)
     _check_run_length(scene, add)
     _check_motion(scene, add)
@@ -162,6 +233,60 @@ def _rope_lengths(scene, geo):
         else:
             out.append(sum(float(np.linalg.norm(b - a)) for a, b in spans))
     return out
+
+
+def _check_tangents(scene, geo, add):
+    """A route whose consecutive stops have no common tangent (pitch circles that overlap: a radius in mm,
+    two stops at one place): the error names the rope, the span and the likelier key."""
+    index = {s.name: i for i, s in enumerate(scene.sheaves)}
+    for i, (rope, (spans, circles)) in enumerate(zip(scene.ropes, geo)):
+        if spans is not None:
+            continue
+        for k in range(len(circles) - 1):
+            try:
+                tangent(*circles[k], *circles[k + 1])
+                continue
+            except (GeometryError, np.linalg.LinAlgError, FloatingPointError):
+                pass
+            (ca, ra, _, _), (cb, rb, _, _) = circles[k], circles[k + 1]
+            d = float(np.linalg.norm(np.asarray(cb) - np.asarray(ca)))
+            big = max((rope.route[k], rope.route[k + 1]), key=lambda st: (
+                scene.sheaves[index[st.sheave]].radius if st.sheave is not None else -1.0))
+            if big.sheave is not None and max(ra, rb) > 0.0:
+                key = f"sheaves[{index[big.sheave]}].radius"
+                hint = (f"sheave {big.sheave!r} has radius = {max(ra, rb):g} m (the pitch radius in m: given "
+                        f"in mm?), or the stops are placed on top of each other")
+            else:
+                key = f"ropes[{i}].route[{k + 1}]"
+                hint = "the two stops are at the same place"
+            add("error", key, f"rope {rope.name!r} {_span_name(rope, k)}: no common tangent: the pitch circles "
+                              f"overlap (centres {d:.4g} m apart, radii {ra:g} m and {rb:g} m); {hint}")
+            break
+
+
+def route_length(scene, rope, spans, circles) -> float:
+    """Geometric length of a rope's route at the scene's positions: spans plus wrap arcs (m)."""
+    L = sum(float(np.linalg.norm(b - a)) for a, b in spans)
+    for k in range(1, len(spans)):
+        c, r, a, sense = circles[k]
+        if r > 0.0:
+            L += r * wrap_angle(c, a, sense, spans[k - 1][1], spans[k][0])
+    return L
+
+
+def statics_context(scene: Scene) -> str:
+    """What a failed initial statics depends on, by key: with statics = 'rope-length' each rope's
+    length against its route at the given positions; else the body positions."""
+    if scene.statics == "rope-length":
+        parts = []
+        for i, (rope, (spans, circles)) in enumerate(zip(scene.ropes, _route_geometry(scene))):
+            if rope.length is None or spans is None:
+                continue
+            parts.append(f"ropes[{i}].length = {rope.length:g} m (rope {rope.name!r}; its route at the given "
+                         f"positions is {route_length(scene, rope, spans, circles):.4g} m)")
+        return ("initial.statics = 'rope-length' moves the bodies until each rope's length fits its route: "
+                + "; ".join(parts) + ". A rope far shorter than its route pulls its bodies onto the sheaves")
+    return "initial.statics = 'positions' keeps the bodies at bodies[*].position and solves the rope lengths"
 
 
 def _check_masses(scene, geo, add):
@@ -312,6 +437,63 @@ def _check_spans(scene, geo, add):
                     f"rope {rope.name!r} {_span_name(rope, k)} is {L:.4g} m long{per}: shorter than "
                     f"solver.min_span = {scene.solver.min_span:g} m, where a run stops (move the stops "
                     f"apart, or lower solver.min_span)")
+
+
+def _stop_body(scene, stop):
+    if stop.sheave is not None:
+        return next(s.body for s in scene.sheaves if s.name == stop.sheave)
+    return None if stop.anchor in (None, "ground") else stop.anchor
+
+
+def _free_along(body, g):
+    """Whether the body translates freely along gravity (each axis gravity has is a free one)."""
+    return body.joint is None and all(ax in body.free for ax, gi in zip("xyz", g) if abs(gi) > 1e-12)
+
+
+def _check_suspension(scene, geo, add):
+    """A body hanging on ropes must be pulled up by them: rope forces can only pull along a span away
+    from the body, so when no span leaves it upwards (a counterweight above its suspension sheave, a
+    car above its hitches) its weight needs a compressed rope. (One upward span suffices here: the
+    rope forces differ, e.g. a light compensation rope pulls down; the statics check catches the rest.)"""
+    g = np.asarray(scene.gravity, float)
+    if not np.any(g):
+        return
+    up = -g / np.linalg.norm(g)
+    for i, body in enumerate(scene.bodies):
+        if body.mass <= 0.0 or not _free_along(body, g):
+            continue
+        lift, spans_down, ropes = -1.0, [], []
+        for rope, (spans, circles) in zip(scene.ropes, geo):
+            if spans is None:
+                continue
+            for k, st in enumerate(rope.route):
+                if _stop_body(scene, st) != body.name:
+                    continue
+                legs = []
+                if k > 0:
+                    a, b = spans[k - 1]
+                    legs.append((k - 1, a - b))         # from the body back along the previous span
+                if k < len(spans):
+                    a, b = spans[k]
+                    legs.append((k, b - a))
+                for j, d in legs:
+                    n = float(np.linalg.norm(d))
+                    if n == 0.0:
+                        continue
+                    u = float(d @ up) / n
+                    lift = max(lift, u)
+                    if u < 0.0:
+                        spans_down.append(f"rope {rope.name!r} {_span_name(rope, j)}")
+                if rope.name not in ropes:
+                    ropes.append(rope.name)
+        if not ropes or lift > 1e-3:
+            continue
+        z = float(np.asarray(body.position, float) @ up)
+        add("error", f"bodies[{i}].position",
+            f"body {body.name!r} (height {z:g} m) hangs on rope(s) {', '.join(map(repr, ropes))} whose spans "
+            f"do not lift it ({'; '.join(spans_down) or 'horizontal spans'} leave it downwards): holding its "
+            f"weight needs a compressed rope. A suspended body hangs below the sheaves and hitches that carry "
+            f"it (positions in m, z up)")
 
 
 def _segment_distance(p1, q1, p2, q2):

@@ -560,8 +560,14 @@ def _check_overlaps(r: _Reader, sheaves):
             axial = float(np.dot(d, a.axis))
             radial = float(np.linalg.norm(d - axial * np.asarray(a.axis)))
             if abs(axial) < 1e-6 and radial < a.radius + b.radius:
-                r.fail(f"sheaves[{i}].center", f"sheave {a.name!r} overlaps sheave {b.name!r} in the same plane "
-                                               f"(centre distance {radial:g} m < radii {a.radius:g} + {b.radius:g} m)")
+                text = (f"sheave {a.name!r} overlaps sheave {b.name!r} in the same plane (centre distance "
+                        f"{radial:g} m < radii {a.radius:g} + {b.radius:g} m)")
+                j, big = max(((i, a), (k, b)), key=lambda x: x[1].radius)
+                if big.radius > max(radial, 10.0):   # no sheave is 20 m across: the radius is the slip
+                    r.fail(f"sheaves[{j}].radius", f"{text}: radius = {big.radius:g} m of {big.name!r} is the "
+                                                   f"pitch radius in m (given in mm?)")
+                else:
+                    r.fail(f"sheaves[{i}].center", text)
 
 
 def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_names, used_sheaves) -> list:
@@ -765,3 +771,24 @@ def default_scene(name: str) -> Path:
         if p.exists():
             return p
     return Path("scenes") / name
+
+
+def scene_parameters(scene) -> dict:
+    """Every parameter of a parsed scene (defaults filled in, overrides applied) as JSON-able data, with
+    bodies, sheaves, ropes and buffers keyed by name as --set spells them (bodies.car.mass)."""
+    from dataclasses import asdict
+
+    def plain(v):
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [plain(x) for x in v]
+        if isinstance(v, (np.floating, np.integer)):
+            return v.item()
+        return v
+
+    d = plain(asdict(scene))
+    for table in ("bodies", "sheaves", "ropes", "buffers"):
+        if isinstance(d.get(table), list):
+            d[table] = {x.pop("name"): x for x in d[table]}
+    return d

@@ -515,7 +515,7 @@ def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool =
 # ------------------------------------------------------------------------------------------------
 #: drive outputs recorded by the masters (after motor.torque and brake.command)
 DRIVE_RECORD = ("car.position_ref", "car.velocity_ref", "car.acceleration_ref",
-                "motor.speed_ref", "drive.torque_ref")
+                "motor.speed_ref", "drive.torque_ref", "motor.current_d", "motor.current_q")
 PLANT_EXCHANGE = ("motor.speed", "motor.angle")        # plant -> drive
 DRIVE_EXCHANGE = ("motor.torque", "brake.command")     # drive -> plant
 
@@ -1119,7 +1119,7 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
 
     def drive_row(tau, br):
         return (tau, br, drive.position_ref, drive.velocity_ref, drive.acceleration_ref,
-                drive.speed_ref, drive.torque_ref)
+                drive.speed_ref, drive.torque_ref) + drive.currents
 
     y = plant._y
     Y[0] = y[idx]

@@ -260,6 +260,10 @@ class ReeveSlave(Fmi2Slave):
         self.tolerance: Optional[float] = None
         self.time: Optional[float] = None
         self._fault: Optional[str] = None      # sticky: define()/initialize() failed
+        #: True once fmi2ExitInitializationMode failed (logged with its reason): pythonfmu 0.7.0 returns
+        #: fmi2OK from it whatever Python does (an exception becomes fmi2Fatal and tears the instance
+        #: down), so the FMU's native loader reads this after forwarding the call and returns fmi2Error
+        self.initialization_failed = False
         self._dirty: Optional[str] = None      # step raised; needs setFMUstate or reset
         self._bad_inputs: dict[str, str] = {}  # name -> reason (value was rejected)
         self._pending: list[str] = []          # one-shot call errors, reported by the next doStep
@@ -574,6 +578,7 @@ class ReeveSlave(Fmi2Slave):
                 self._pending.append(f"exitInitializationMode called in state {self._mode!r} "
                                      f"(expected after enterInitializationMode)")
                 self._error(self._pending[-1])
+                self.initialization_failed = True
                 return
             if self.start_time is None:
                 de = self.default_experiment
@@ -582,6 +587,7 @@ class ReeveSlave(Fmi2Slave):
             self._set_mode("step")
             if self._fault is not None:
                 self._error("cannot initialize, the instance is faulty:\n" + self._fault)
+                self.initialization_failed = True
                 return
             try:
                 self.initialize()
@@ -589,9 +595,11 @@ class ReeveSlave(Fmi2Slave):
             except BaseException:
                 self._fault = "initialize() failed:\n" + traceback.format_exc()
                 self._error(self._fault)
+                self.initialization_failed = True
             self._sync_link()
         except Exception:  # pragma: no cover
             self._error("exit_initialization_mode failed:\n" + traceback.format_exc())
+            self.initialization_failed = True
 
     def terminate(self):
         try:

@@ -10,9 +10,11 @@ instances (e.g. a canopen Network) on the same channel exchange frames with it.
 from __future__ import annotations
 
 import queue
+import socket
 import time
 
 import can
+from can.interfaces.udp_multicast import bus as _udp
 from can.interfaces.virtual import VirtualBus
 
 
@@ -95,14 +97,66 @@ def send_batch(bus, msgs, reuse: bool = False) -> None:
 
 MULTICAST_GROUP = "239.74.163.2"          # python-can UdpMulticastBus.DEFAULT_GROUP_IPv4
 DEFAULT_UDP_PORT = 43113
+LOOPBACK = "127.0.0.1"
+#: --multicast: host (the socket keeps the frames on this host), route (host, plus a /32 route of the
+#: group to lo while the bench runs: root only, undone at exit), lan (python-can's sockets, TTL 1, the
+#: default interface: a controller on another host of the LAN)
+MULTICAST_MODES = ("host", "route", "lan")
 
 
-def make_bus(kind: str, channel=None, port: int | None = None, **kw):
-    """A python-can bus: virtual (FastVirtualBus on `channel`), udp_multicast (IPv4 group, port), or any
-    other python-can interface name (socketcan, pcan, ...) with `channel` and keyword arguments."""
+class _HostOnlySocket(_udp.GeneralPurposeUdpMulticastBus):
+    """python-can's multicast socket handler with a socket that keeps the traffic on this host."""
+
+    def _create_socket(self, address_family):
+        """Join the group on the loopback interface and send through it (IP_MULTICAST_IF), TTL 0, loop on:
+        no IGMP report and no frame on any NIC, whatever the routing table says."""
+        if address_family != socket.AF_INET:
+            raise OSError("host-only multicast is IPv4 (a 224.0.0.0/4 group)")
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            lo = socket.inet_aton(LOOPBACK)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, lo)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            if hasattr(socket, "SO_REUSEPORT"):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, _udp.SO_TIMESTAMPNS, 1)
+                self.timestamp_nanosecond = True
+            except OSError:
+                self.timestamp_nanosecond = False
+            sock.bind((self.group, self.port))          # the group's datagrams only
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, socket.inet_aton(self.group) + lo)
+            return sock
+        except OSError as error:
+            sock.close()
+            raise can.CanInitializationError(f"host-only multicast socket on {self.group}: {error}") from error
+
+
+class HostOnlyUdpMulticastBus(_udp.UdpMulticastBus):
+    """python-can's udp_multicast bus (same wire format: it exchanges frames with any UdpMulticastBus of this
+    host on the group) whose socket keeps the traffic on this host: joined and sent on the loopback
+    interface, TTL 0. No route, link or system setting is needed or changed."""
+
+    def __init__(self, channel: str = MULTICAST_GROUP, port: int = DEFAULT_UDP_PORT, fd: bool = True, **kwargs):
+        _udp.is_msgpack_installed()
+        can.BusABC.__init__(self, channel, **kwargs)
+        self._multicast = _HostOnlySocket(channel, int(port), 0)
+        self._can_protocol = can.CanProtocol.CAN_FD if fd else can.CanProtocol.CAN_20
+
+
+def make_bus(kind: str, channel=None, port: int | None = None, multicast: str = "host", **kw):
+    """A python-can bus: virtual (FastVirtualBus on `channel`), udp_multicast (IPv4 group, port; kept on this
+    host unless multicast = "lan"), or any other python-can interface name (socketcan, pcan, ...) with
+    `channel` and keyword arguments."""
     if kind == "virtual":
         return FastVirtualBus(channel=channel or "reeve_hil", receive_own_messages=False, **kw)
     if kind == "udp_multicast":
-        return can.Bus(interface="udp_multicast", channel=channel or MULTICAST_GROUP,
-                       port=int(port or DEFAULT_UDP_PORT), hop_limit=1, **kw)
+        if multicast not in MULTICAST_MODES:
+            raise ValueError(f"--multicast {multicast!r}: one of {', '.join(MULTICAST_MODES)}")
+        if multicast == "lan":
+            return can.Bus(interface="udp_multicast", channel=channel or MULTICAST_GROUP,
+                           port=int(port or DEFAULT_UDP_PORT), hop_limit=1, **kw)
+        return HostOnlyUdpMulticastBus(channel=channel or MULTICAST_GROUP, port=int(port or DEFAULT_UDP_PORT), **kw)
     return can.Bus(interface=kind, channel=channel, **kw)

@@ -21,6 +21,7 @@ controller, docs/hil.md).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -37,28 +38,28 @@ from pathlib import Path
 
 import numpy as np
 
-from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, make_bus  # noqa: E402  (re-exported)
+from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, MULTICAST_MODES, make_bus  # noqa: E402  (re-exported)
 
 
 # ---------------------------------------------------------------------------------------------------
 # buses
 # ---------------------------------------------------------------------------------------------------
-def multicast_probe(port: int | None = None, timeout: float = 1.0) -> tuple[bool, str]:
+def multicast_probe(port: int | None = None, timeout: float = 1.0, multicast: str = "host") -> tuple[bool, str]:
     """Can two udp_multicast buses on this host exchange a frame? (ok, reason)."""
     import can
 
     port = port or random.randint(44000, 44999)
     a = b = None
     try:
-        a = make_bus("udp_multicast", port=port)
-        b = make_bus("udp_multicast", port=port)
+        a = make_bus("udp_multicast", port=port, multicast=multicast)
+        b = make_bus("udp_multicast", port=port, multicast=multicast)
         a.send(can.Message(arbitration_id=0x7FF, data=b"probe", is_extended_id=False))
         deadline = time.perf_counter() + timeout
         while time.perf_counter() < deadline:
             m = b.recv(max(0.0, deadline - time.perf_counter()))
             if m is not None and m.arbitration_id == 0x7FF:
                 return True, "ok"
-        return False, "udp_multicast: a frame sent to 239.74.163.2 was not received within 1 s"
+        return False, f"udp_multicast: a frame sent to {MULTICAST_GROUP} was not received within {timeout:g} s"
     except Exception as exc:  # CanInitializationError, OSError
         return False, f"udp_multicast: {type(exc).__name__}: {exc}"
     finally:
@@ -70,39 +71,74 @@ def multicast_probe(port: int | None = None, timeout: float = 1.0) -> tuple[bool
                     pass
 
 
-def _multicast_dev() -> str | None:
-    ip = shutil.which("ip")
-    if ip is None:
-        return None
-    try:
-        out = subprocess.run([ip, "route", "get", MULTICAST_GROUP], capture_output=True, text=True, encoding="utf-8", errors="replace", timeout=10).stdout
-    except (OSError, subprocess.SubprocessError):
-        return None
-    parts = out.split()
-    return parts[parts.index("dev") + 1] if "dev" in parts else None
+def ensure_multicast(multicast: str = "host") -> tuple[bool, str]:
+    """Is udp_multicast usable on this host? Probes with two buses; changes nothing (the host-only buses
+    keep the frames on the loopback interface by their socket options). Returns (ok, reason)."""
+    return multicast_probe(multicast=multicast)
 
 
-def ensure_multicast(setup_route: bool = True) -> tuple[bool, str]:
-    """Is udp_multicast usable on this host? As root (and with `ip`), first keep the bench's multicast on
-    the loopback device: `ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo` (docs/hil.md, "Connecting a real controller")
-    unless 239.74.163.2 already routes to lo: through a NIC (default route) the frames leave the host, and
-    on the test VM the real-time bench then had a p99 SYNC lateness of 2.9 ms instead of 52 us (docs/hil.md).
-    Then probe with two buses. Returns (ok, what was done or why not)."""
-    note = ""
-    ip = shutil.which("ip")
-    if setup_route and ip is not None and hasattr(os, "geteuid") and os.geteuid() == 0 \
-            and _multicast_dev() != "lo":
-        subprocess.run([ip, "link", "set", "lo", "multicast", "on"], capture_output=True, timeout=10)
-        r = subprocess.run([ip, "route", "add", "239.0.0.0/8", "dev", "lo"], capture_output=True, text=True, encoding="utf-8", errors="replace",
-                           timeout=10)
-        note = " (added: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)" if r.returncode == 0 \
-            else f" (ip route add 239.0.0.0/8 dev lo failed: {r.stderr.strip()})"
-    ok, why = multicast_probe()
-    if ok:
-        return True, "ok" + note
-    if ip is None or not hasattr(os, "geteuid") or os.geteuid() != 0:
-        why += " (as root: ip link set lo multicast on; ip route add 239.0.0.0/8 dev lo)"
-    return False, why + note
+def _ip(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([shutil.which("ip") or "ip", *args], capture_output=True, text=True, encoding="utf-8",
+                          errors="replace", timeout=10)
+
+
+class _Signals:
+    """SIGTERM and SIGHUP raise SystemExit while the bench runs, so that `finally` blocks undo what was set up
+    (Ctrl-C already raises KeyboardInterrupt); the previous handlers come back at exit."""
+
+    SIGNALS = ("SIGTERM", "SIGHUP")
+
+    def __enter__(self):
+        import signal
+
+        self.old = {}
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                sig = getattr(signal, name, None)
+                if sig is not None:
+                    self.old[sig] = signal.signal(sig, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise SystemExit(128 + signum)
+
+    def __exit__(self, *exc):
+        import signal
+
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+        return False
+
+
+@contextlib.contextmanager
+def bench_route(group: str = MULTICAST_GROUP, log=print):
+    """--multicast route: while the bench runs, route the bench's own group (a /32, never a range) to lo,
+    with lo's multicast flag on if it was off; said on the console and undone at exit, also after a fault,
+    Ctrl-C, SIGTERM or SIGHUP. Root only; only what was not already so is changed and undone."""
+    if not (hasattr(os, "geteuid") and os.geteuid() == 0) or shutil.which("ip") is None:
+        raise ValueError("--multicast route changes the routing table: it needs root and the `ip` command "
+                         "(the default --multicast host needs neither)")
+    undo = []
+    with _Signals():
+        try:
+            if "MULTICAST" not in _ip("link", "show", "lo").stdout.split(">")[0]:
+                r = _ip("link", "set", "lo", "multicast", "on")
+                if r.returncode != 0:
+                    raise OSError(f"ip link set lo multicast on: {r.stderr.strip()}")
+                undo.append(("link", "set", "lo", "multicast", "off"))
+                log("network: ip link set lo multicast on (undone at exit)")
+            if "dev lo" not in _ip("route", "show", "exact", f"{group}/32").stdout:
+                r = _ip("route", "add", f"{group}/32", "dev", "lo")
+                if r.returncode != 0:
+                    raise OSError(f"ip route add {group}/32 dev lo: {r.stderr.strip()}")
+                undo.append(("route", "del", f"{group}/32", "dev", "lo"))
+                log(f"network: ip route add {group}/32 dev lo (undone at exit)")
+            yield
+        finally:
+            for args in reversed(undo):
+                r = _ip(*args)
+                log(f"network: ip {' '.join(args)}" + ("" if r.returncode == 0 else f" FAILED: {r.stderr.strip()}"))
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -125,6 +161,7 @@ class HilConfig:
     start_timeout: float = 300.0              # a cold numba compile of plant + drive can take minutes
     channel: str | None = None
     port: int | None = None
+    multicast: str = "host"                    # udp_multicast: host | route | lan (buses.MULTICAST_MODES)
     compare: bool = True                       # builtin, no faults: compare with the in-process references
     stop_when_safe: bool = False
     record: bool = True
@@ -252,11 +289,11 @@ class _ThreadController:
 
 
 class _ProcessController:
-    def __init__(self, channel, port, ccfg, workdir: Path):
+    def __init__(self, channel, port, ccfg, workdir: Path, multicast: str = "host"):
         self.stats_path = workdir / "controller_stats.json"
         self.log_path = workdir / "controller.log"
         args = [sys.executable, "-m", "reeve_fmu.hil", "controller", "--bus", "udp_multicast",
-                "--channel", channel, "--port", str(port), "--n-steps", str(ccfg.n_steps), "--dt", repr(ccfg.dt),
+                "--multicast", multicast, "--channel", channel, "--port", str(port), "--n-steps", str(ccfg.n_steps), "--dt", repr(ccfg.dt),
                 "--sync-timeout", repr(ccfg.sync_timeout), "--start-timeout", repr(ccfg.start_timeout),
                 "--stats", str(self.stats_path)]
         if ccfg.dies_at is not None:
@@ -312,7 +349,9 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     _check_config(cfg)
     faults = FaultSpec.parse(cfg.inject)
     cfg, n = _with_defaults(cfg)
-    res, plant, ctl_stats = _run_bench(cfg, faults, n, log)
+    route = cfg.bus == "udp_multicast" and cfg.multicast == "route"
+    with bench_route(cfg.channel or MULTICAST_GROUP, log) if route else contextlib.nullcontext():
+        res, plant, ctl_stats = _run_bench(cfg, faults, n, log)
     st = res.stats
     cols = res.columns() if res.outputs is not None else {}
     summary = _summary(cfg, faults, res, plant, cols, ctl_stats)
@@ -332,6 +371,8 @@ def _check_config(cfg: HilConfig):
     """Bus, controller and step of the configuration; raises ValueError naming the option."""
     if cfg.bus not in ("virtual", "udp_multicast"):
         raise ValueError(f"--bus must be virtual or udp_multicast, got {cfg.bus!r}")
+    if cfg.multicast not in MULTICAST_MODES:
+        raise ValueError(f"--multicast must be one of {', '.join(MULTICAST_MODES)}, got {cfg.multicast!r}")
     if cfg.controller not in ("builtin", "external"):
         raise ValueError(f"--controller must be builtin or external, got {cfg.controller!r}")
     if not (cfg.dt > 0 and math.isfinite(cfg.dt)):
@@ -362,14 +403,14 @@ def _run_bench(cfg: HilConfig, faults, n: int, log):
     from .protocol import EDS_PATH, DBC_PATH
 
     if cfg.bus == "udp_multicast":
-        ok, why = ensure_multicast()
+        ok, why = ensure_multicast(cfg.multicast)
         if not ok:
             raise HilError(f"--bus udp_multicast is not usable here: {why}")
     channel = cfg.channel or (f"reeve_hil_{uuid.uuid4().hex[:8]}" if cfg.bus == "virtual" else MULTICAST_GROUP)
     port = cfg.port or (None if cfg.bus == "virtual" else
                         (DEFAULT_UDP_PORT if cfg.controller == "external" else random.randint(43200, 43999)))
     plant = _make_plant(cfg, log)
-    bus = make_bus(cfg.bus, channel, port)
+    bus = make_bus(cfg.bus, channel, port, multicast=cfg.multicast)
     workdir = Path(tempfile.mkdtemp(prefix="reeve_hil_"))
     ctl = None
     try:
@@ -387,7 +428,7 @@ def _run_bench(cfg: HilConfig, faults, n: int, log):
             if cfg.bus == "virtual":
                 ctl = _ThreadController(lambda: make_bus("virtual", channel), ccfg)
             else:
-                ctl = _ProcessController(channel, port, ccfg, workdir)
+                ctl = _ProcessController(channel, port, ccfg, workdir, cfg.multicast)
             ctl.start()
         else:
             log(f"waiting up to {cfg.start_timeout:g} s for a CANopen master on {cfg.bus} "
@@ -568,7 +609,7 @@ def cli_hil(args) -> int:
     from .bridge import HilError
 
     cfg = HilConfig(bus=args.bus, controller=args.controller, realtime=args.realtime, inject=list(args.inject or []),
-                    t_end=args.t_end, out=args.out)
+                    t_end=args.t_end, out=args.out, multicast=getattr(args, "multicast", "host"))
     if getattr(args, "set", None):
         cfg = replace(cfg, **_hil_sets(args.set))
     print(f"HIL: {'real time' if cfg.realtime else 'lock-step'} over {cfg.bus}, {cfg.controller} controller"
@@ -608,6 +649,7 @@ def _controller_main(argv) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m reeve_fmu.hil controller")
     ap.add_argument("--bus", default="udp_multicast")
+    ap.add_argument("--multicast", choices=MULTICAST_MODES, default="host")
     ap.add_argument("--channel", default=None)
     ap.add_argument("--port", type=int, default=None)
     ap.add_argument("--n-steps", type=int, required=True)
@@ -622,7 +664,7 @@ def _controller_main(argv) -> int:
     ccfg = ControllerConfig(dt=a.dt, n_steps=a.n_steps, dies_at=a.dies_at, sync_timeout=a.sync_timeout,
                             start_timeout=a.start_timeout, rt_priority=a.rt_priority,
                             drive_values=json.loads(a.drive_values) if a.drive_values else None)
-    bus = make_bus(a.bus, a.channel, a.port)
+    bus = make_bus(a.bus, a.channel, a.port, multicast=a.multicast)
     try:
         st = BuiltinController(bus, ccfg).run()
     finally:

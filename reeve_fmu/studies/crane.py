@@ -471,7 +471,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
     q, J = S.solve(st.q, "height", h0)
     if q is None or np.linalg.cond(J) > 1e14:    # singular: some coordinate (the yaw) is undetermined
         raise CraneError(f"{crane.scene.source}: no unique equilibrium found in the scene's configuration "
-                         f"(height {h0:.3f} m){_no_yaw_stiffness(crane)}")
+                         f"(height {h0:.3f} m){_no_yaw_stiffness(crane) or _yaw_keys(crane)}")
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
@@ -508,6 +508,16 @@ def _no_yaw_stiffness(crane: Crane) -> str:
             + ("the yaw is undetermined" if tor.k0 == 0 else "the rope torque turns it freely")
             + "). Give the rope torsional stiffness (torsion GJ0 > 0, or law = 'costello' or 'feyrer') "
               "or reeve two or more falls")
+
+
+def _yaw_keys(crane: Crane) -> str:
+    """The keys a singular block equilibrium depends on, when `_no_yaw_stiffness` has no better reason."""
+    i = next(k for k, rp in enumerate(crane.scene.ropes) if rp.name == crane.spec.rope)
+    tor = crane.scene.ropes[i].torsion
+    b = next(k for k, bd in enumerate(crane.scene.bodies) if bd.name == crane.spec.block)
+    return (f": the hook block's yaw is not determined by the rope torque (ropes[{i}].torsion: law = "
+            f"{tor.law!r}, diameter = {tor.diameter:g} m, k0 = {tor.k0:g}, GJ0 = {tor.GJ0:g} N·m²) and the "
+            f"falls at this position (bodies[{b}].position); check these values (the diameter in m)")
 
 
 # ---------------------------------------------------------------------------------------- front end
@@ -618,3 +628,77 @@ def cli_crane(args) -> int:
     return 0
 
 
+
+
+#: motor outputs whose sign follows the hoist convention
+MOTOR_OUTPUTS = ("motor.torque", "motor.speed", "motor.angle")
+
+
+def hoist_convention(scene: Scene, cols: dict) -> str:
+    """Give a crane scene's motor outputs the crane FMUs' sign (positive torque, speed and angle hoist):
+    the engine's sign follows the reeving, so the columns are negated when the torque that holds the
+    load at t = 0 is negative. Elevator scenes keep the engine's (their routes make positive raise the
+    car). Returns the convention applied, for the run's summary."""
+    from ..fmu.crane import is_crane_scene
+
+    if not (is_crane_scene(scene) or "crane" in scene.extra) or "motor.torque" not in cols:
+        return "engine: motor.* positive counter-clockwise about the driven sheave's axis"
+    if float(np.asarray(cols["motor.torque"])[0]) < 0.0:
+        for n in MOTOR_OUTPUTS:
+            if n in cols:
+                cols[n] = -np.asarray(cols[n])
+    return "hoist: motor.torque, motor.speed, motor.angle positive when hoisting (as the crane FMUs)"
+
+
+def crane_angles(scene: Scene, cols: dict) -> list:
+    """Add to a `simulate` record of a slewing crane (a body on a revolute joint with a hoist) the crane
+    plant FMU's derived angles, `payload.swing_radial`, `payload.swing_tangential`, `payload.yaw` [rad]
+    (core.craneplant: the same expressions, from the same outputs); returns the names added."""
+    from ..core.craneplant import DERIVED, CranePlant
+    from ..fmu.crane import is_crane_scene
+
+    if not is_crane_scene(scene):
+        return []
+    cp = CranePlant(scene, "speed")
+    names = cp.plant.output_names
+    if any(n not in cols for n in names):
+        return []
+    rows = np.column_stack([np.asarray(cols[n], float) for n in names])
+    out = np.array([cp._outputs(y)[-len(DERIVED):] for y in rows])
+    for k, n in enumerate(DERIVED):
+        cols[n] = out[:, k]
+    return list(DERIVED)
+
+
+def plot_crane_angles(path, scene: Scene, time_, cols: dict):
+    """crane.png of a `simulate` run: the joint angles of the scene's revolute bodies (the jib), the
+    payload's swing angles and the yaw of the payload or the hook block [deg]; None when the record has
+    none of them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    joints = [f"{b.name}.angle" for b in scene.bodies if b.joint == "revolute" and f"{b.name}.angle" in cols]
+    swing = [n for n in ("payload.swing_radial", "payload.swing_tangential") if n in cols]
+    # yaw: the slewing payload's heading, else the z component of each rotating body's rotation vector
+    # (the yaw while the tilt is small, as `reeve-fmu crane` reports block.yaw)
+    yaw = ["payload.yaw"] if "payload.yaw" in cols else [
+        f"{b.name}.rotation.z" for b in scene.bodies if "rotation" in b.free and f"{b.name}.rotation.z" in cols]
+    panels = [(lab, ns) for lab, ns in (("joint angle [deg]", joints), ("payload swing [deg]", swing),
+                                        ("yaw [deg]", yaw)) if ns]
+    if not panels:
+        return None
+    fig, ax = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels)), sharex=True, squeeze=False)
+    for a, (lab, ns) in zip(ax[:, 0], panels):
+        for n in ns:
+            a.plot(time_, np.degrees(np.asarray(cols[n], float)), lw=0.9, label=n)
+        a.set_ylabel(lab)
+        a.grid(alpha=0.3)
+        a.legend(loc="best", fontsize=8)
+    ax[-1, 0].set_xlabel("time [s]")
+    ax[0, 0].set_title(f"{scene.name}: crane angles")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

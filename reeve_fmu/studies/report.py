@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.scene import scene_parameters  # noqa: F401  (re-exported: the parameters of a run)
 from .verdicts import Verdict, explain, worst
 
 
@@ -199,10 +200,38 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
+def flat_parameters(d: dict, prefix: str = "") -> list:
+    """[(key, value)] of nested parameter data: bodies.car.mass, ropes.hoist.route[0].hitch_stiffness."""
+    out = []
+    for k, v in d.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if isinstance(v, dict):
+            out += flat_parameters(v, key)
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            for i, x in enumerate(v):
+                out += flat_parameters(x, f"{key}[{i}]")
+        else:
+            out.append((key, v))
+    return out
+
+
+def _parameter_lines(parameters: dict) -> list:
+    """## Parameters: one table per group ({group title: {key: value} or nested scene data})."""
+    lines = ["", "## Parameters", ""]
+    for title, values in parameters.items():
+        rows = flat_parameters(values)
+        lines += [f"<details><summary>{title} ({len(rows)} values)</summary>", "", "| key | value |", "|---|---|"]
+        lines += [f"| `{k}` | {_cell(v)} |" for k, v in rows]
+        lines += ["", "</details>", ""]
+    return lines
+
+
 def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts: list, pngs: list,
-                 levelling: list | None = None, command: str = "", findings: list | None = None) -> Path:
+                 levelling: list | None = None, command: str = "", findings: list | None = None,
+                 parameters: dict | None = None) -> Path:
     """DIR/report.md: scenario, verdicts with limits and sources, findings (what each WARN/FAIL means;
-    default `verdicts.explain`), key figures, levelling, plots."""
+    default `verdicts.explain`), key figures, levelling, plots, and (`parameters`: {group title:
+    values}) every parameter the run used."""
     vs = [v if isinstance(v, Verdict) else Verdict(**v) for v in verdicts]
     bad = [f"{v.status} {v.check}" for v in vs if v.status in ("FAIL", "WARN")]
     lines = [f"# {title}", "",
@@ -227,6 +256,8 @@ def write_report(out: Path, title: str, scenario: dict, metrics: list, verdicts:
         lines += [f"| {a} | {_num(b)} | {_num(c)} |" for a, b, c in levelling]
     lines += ["", "## Plots", ""]
     lines += [f"![{p}]({p})" for p in pngs]
+    if parameters:
+        lines += _parameter_lines(parameters)
     p = Path(out) / "report.md"
     p.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return p
@@ -241,6 +272,8 @@ def _num(v):
 
 
 def _cell(v):
+    if v is None:
+        return "—"
     if isinstance(v, dict):           # parameter sets: "key = value" at 4 significant digits
         return ", ".join(f"{k} = {_cell(x)}" for k, x in v.items()) or "none"
     if isinstance(v, (list, tuple)):

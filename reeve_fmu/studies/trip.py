@@ -70,13 +70,13 @@ _SIZING_CACHE: dict = {}
 def sized_drive(scene) -> dict:
     """Drive FMU parameter values sized from the scene (core.elevator.size_drive), cached per scene."""
     from ..core.elevator import elevator_spec, size_drive
-    from ..fmu.cosim import holding_torques
+    from .verdicts import holding_torque
 
     key = repr(scene)
     if key not in _SIZING_CACHE:
         spec = elevator_spec(scene)
         ends = (min(spec.landings), max(spec.landings))
-        hold = tuple(holding_torques(scene, ends, spec.rated_load))
+        hold = tuple(holding_torque(scene, spec.rated_load, z) for z in ends)
         fields = size_drive(scene, hold)
         _SIZING_CACHE[key] = {SIZED[k]: float(v) for k, v in fields.items() if k in SIZED}
     return dict(_SIZING_CACHE[key])
@@ -90,7 +90,7 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
     overrides {key: value} (studies.overrides); `sis`: shaft information system for the approach."""
     from ..core.elevator import check_load, elevator_spec
     from ..core.scene import Scene
-    from ..fmu.cosim import MAX_LANDINGS, MAX_MOVES, default_scene_path, holding_torques
+    from ..fmu.cosim import MAX_LANDINGS, MAX_MOVES, default_scene_path
     from .overrides import scene_with, split
 
     scene_sets, drive_sets, set_load = split(dict(sets or {}))
@@ -136,7 +136,7 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
         raise ValueError(f"landings: at most {MAX_LANDINGS} distinct landings and {MAX_MOVES} moves")
     if not (isinstance(dwell, (int, float)) and math.isfinite(dwell) and dwell >= 0):
         raise ValueError(f"dwell = {dwell!r}: must be a time >= 0 s")
-    hold = holding_torques(scene, lands, load)
+    hold = _holding(scene, spec, lands, load)
     sizing = sized_drive(scene)
     dv = dict(sizing)
     dv.update({"drive.level": int(level), "trip.landings": len(lands), "trip.dwell_time": float(dwell),
@@ -149,9 +149,53 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
     if sis is not None:
         dv["sis.enabled"] = 1.0 if sis else 0.0
     dv.update(drive_sets)
+    _check_drive(scene, spec, lands, load, hold, dv, drive_sets)
     return TripCase(scene=scene, scene_path=path, load=load, sequence=sequence, dwell=float(dwell),
                     plant_values={"car.load": load}, drive_values=dv, sizing=sizing,
                     holding_torques=dict(zip(lands, hold)), scene_sets=scene_sets, drive_sets=drive_sets)
+
+
+def _holding(scene, spec, lands, load) -> list:
+    """Holding torques [N m] at the landings `lands` with `load` kg (the drive's pre-torque); SceneError
+    naming brake.torque when the scene's brake cannot hold the car there (PlausibilityError naming the
+    rope when the statics needs a compressed rope)."""
+    from ..core.scene import SceneError
+    from .verdicts import holding_torque
+
+    hold = [holding_torque(scene, load, x) for x in lands]
+    k = max(range(len(lands)), key=lambda i: abs(hold[i]))
+    if scene.brake.torque < abs(hold[k]):
+        raise SceneError(f"{scene.source}: [brake.torque] = {scene.brake.torque:g} N·m cannot hold the car with "
+                         f"{load:g} kg at {lands[k]:g} m: that needs {abs(hold[k]):.1f} N·m at the motor (EN 81-20: "
+                         f"the brake holds and stops the car with 125 % of the rated load, "
+                         f"{1.25 * spec.rated_load:g} kg)")
+    return hold
+
+
+def _check_drive(scene, spec, lands, load, hold, dv, drive_sets) -> None:
+    """ValueError naming torque.max when the drive cannot hold the car at rest with the trip's load or
+    the rated load (the drive is sized above both unless torque.max is set)."""
+    from .verdicts import holding_torque
+
+    ends = (min(spec.landings), max(spec.landings))
+    need = [(abs(h), load, x) for h, x in zip(hold, lands)]
+    need += [(abs(holding_torque(scene, spec.rated_load, z)), spec.rated_load, z) for z in ends]
+    T, m, x = max(need)
+    tmax = float(dv["torque.max"])
+    if not tmax >= T:
+        how = "--set torque.max" if "torque.max" in drive_sets else "the drive sized from the scene"
+        raise ValueError(f"[torque.max] = {tmax:g} N·m ({how}) cannot hold the car with {m:g} kg at {x:g} m, "
+                         f"which needs {T:.1f} N·m at the motor")
+
+
+def run_parameters(case: TripCase, drive_values: dict | None = None) -> dict:
+    """Every parameter a trip ran with: the scene after --set with the trip's load in the car mass, the
+    plant's values and the drive's (sized from the scene, then --set; default the case's)."""
+    from ..core.elevator import with_load
+    from ..core.scene import scene_parameters
+
+    return {"scene": scene_parameters(with_load(case.scene, case.load)), "plant": dict(case.plant_values),
+            "drive": dict(case.drive_values if drive_values is None else drive_values)}
 
 
 def run_case(case: TripCase, *, step: float = 1e-3, sis: bool | None = None, progress=None):

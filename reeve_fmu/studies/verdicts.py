@@ -2,7 +2,8 @@
 source of the limit (docs/studies.md, "Verdicts").
 
 Sources: EN 81-20 (stopping accuracy ±10 mm, levelling ±20 mm, overspeed governor at 115 % of the rated
-speed, no buffer contact in normal operation), EN 81-50 (traction: car loading 125 %, emergency braking,
+speed, no buffer contact in normal operation, machine brake with 125 % load and per circuit, unintended
+car movement), EN 81-50 (traction: car loading 125 %, emergency braking,
 car stalled), the drive's torque and power limits, the rope model (slack rope), the co-simulation
 coupling monitor; ride quality against typical contract targets (industry practice, not a standard),
 computed in the manner of ISO 18738-1 (which sets no limits).
@@ -24,6 +25,14 @@ OVERSPEED_TRIP = 1.15
 OVERSPEED_WARN = 1.05
 #: EN 81-50 emergency-braking deceleration (m/s², 0.8 with reduced-stroke buffers)
 BRAKING_DECELERATION = 0.5
+#: EN 81-20 brake: the machine brake holds and stops the car with 125 % of the rated load; each of its
+#: two circuits alone slows the car with the rated load
+BRAKE_LOAD_FACTOR = 1.25
+BRAKE_CIRCUITS = 2
+#: EN 81-20 unintended car movement: detected at the edge of the unlocking zone (0.2 m from the
+#: landing), the car stops within 1.2 m of the landing
+UCM_DETECTION = 0.2
+UCM_STOP = 1.2
 #: time at the torque/power limit: WARN above 0, FAIL above this (s)
 SATURATION_FAIL = 0.5
 #: the coupling monitor's torque-chatter threshold (fmu.cosim.CouplingMonitor, fraction of torque.max)
@@ -162,7 +171,43 @@ def _trip_traction(s, limits) -> Verdict:
                    "exceeds the emergency-braking limit" if r > lb else "")
 
 
+_STATICS_CACHE: dict = {}
 _EN81_CACHE: dict = {}
+
+
+def static_outputs(scene, load: float, z: float) -> dict:
+    """The plant's outputs at rest with `load` kg in the car at car position `z` (m), the counterweight
+    moved the other way (cached). The brake's capacity is raised for this statics so that
+    `brake.torque` is the torque that holds the car whatever the scene's brake can do (a slipping
+    brake would give its capacity instead). Raises PlausibilityError (naming the rope) when the
+    equilibrium needs a compressed rope."""
+    from dataclasses import replace
+
+    from ..core.elevator import car_at, elevator_spec
+    from ..core.plausibility import statics_or_raise, with_statics_context
+    from ..core.solver import SolverError
+    from ..fmu.cosim import make_plant
+
+    key = (repr(scene), float(load), float(z))
+    if key not in _STATICS_CACHE:
+        spec = elevator_spec(scene)
+        el = dict(scene.extra["elevator"])
+        el["max_load"] = max(spec.max_load, float(load))      # the 125 % cases may exceed max_load
+        sc = car_at(replace(scene, extra={**scene.extra, "elevator": el}), z)
+        big = 10.0 * G * (sum(b.mass for b in sc.bodies) + float(load)) * spec.sheave_radius
+        try:
+            y = make_plant(sc, None, {"car.load": float(load),
+                                      "brake.static_torque": max(scene.brake.torque, big)}).outputs()
+        except SolverError as exc:
+            raise with_statics_context(exc, scene) from None
+        statics_or_raise(scene, y, f"with {load:g} kg in the car at {z:g} m")
+        _STATICS_CACHE[key] = y
+    return dict(_STATICS_CACHE[key])
+
+
+def holding_torque(scene, load: float, z: float) -> float:
+    """Static motor torque [N m] that holds the car with `load` kg at car position `z` (m)."""
+    return static_outputs(scene, load, z)["brake.torque"]
 
 
 def en81_traction_cases(scene) -> dict:
@@ -170,12 +215,12 @@ def en81_traction_cases(scene) -> dict:
     statics at the landing (rope weights included), with the car and counterweight inertia terms
     m a / roping for emergency braking (rope and pulley inertia neglected). Stalled: empty car at the top,
     counterweight on its buffer, T2 = weight of the hoist rope between the sheave and the counterweight
-    (an estimate from the scene's geometry)."""
+    (an estimate from the scene's geometry). A ratio is NaN when a rope force of its case is not
+    positive (no rope can carry that case)."""
     key = repr(scene)
     if key in _EN81_CACHE:
         return _EN81_CACHE[key]
     from ..core.elevator import car_at, elevator_spec, with_load
-    from ..fmu.cosim import make_plant
 
     spec = elevator_spec(scene)
     lo, hi = min(spec.landings), max(spec.landings)
@@ -185,8 +230,8 @@ def en81_traction_cases(scene) -> dict:
     r = spec.roping
 
     def tensions(load, z):
-        p = make_plant(car_at(scene, z), None, {"car.load": load})
-        return p.output(f"{sh}.tension_in"), p.output(f"{sh}.tension_out")
+        y = static_outputs(scene, load, z)
+        return y[f"{sh}.tension_in"], y[f"{sh}.tension_out"]
 
     # which side carries the car: the one the load changes
     a_in, a_out = tensions(0.0, lo)
@@ -196,30 +241,40 @@ def en81_traction_cases(scene) -> dict:
     def sides(t_in, t_out):
         return (t_in, t_out) if car_in else (t_out, t_in)
 
+    def ratio(t1, t2):
+        return max(t1, t2) / min(t1, t2) if min(t1, t2) > 0 else math.nan
+
     a = BRAKING_DECELERATION
     out = {}
-    tc, tw = sides(*tensions(1.25 * spec.rated_load, lo))
-    out["loading"] = max(tc, tw) / min(tc, tw)
+    tc, tw = sides(*tensions(BRAKE_LOAD_FACTOR * spec.rated_load, lo))
+    out["loading"] = ratio(tc, tw)
     # empty car at the top going up, braking: car side loses m a / r, counterweight side gains it
     tc, tw = sides(*tensions(0.0, hi))
-    tc_d, tw_d = tc - m_car0 * a / r, tw + m_cw * a / r
-    em1 = max(tc_d, tw_d) / min(tc_d, tw_d)
+    em1 = ratio(tc - m_car0 * a / r, tw + m_cw * a / r)
     # rated load at the bottom going down, braking: car side gains, counterweight side loses
     tc2, tw2 = sides(b_in, b_out)
     m_car = m_car0 + spec.rated_load
-    tc2, tw2 = tc2 + m_car * a / r, tw2 - m_cw * a / r
-    em2 = max(tc2, tw2) / min(tc2, tw2)
-    out["emergency_braking"] = max(em1, em2)
-    out["emergency_braking_case"] = "empty car at the top going up" if em1 >= em2 else \
-        "rated load at the bottom going down"
+    em2 = ratio(tc2 + m_car * a / r, tw2 - m_cw * a / r)
+    out["emergency_braking"] = max(em1, em2) if not (math.isnan(em1) or math.isnan(em2)) else math.nan
+    out["emergency_braking_case"] = ("a rope force of a braking case is not positive" if math.isnan(
+        out["emergency_braking"]) else "empty car at the top going up" if em1 >= em2 else
+        "rated load at the bottom going down")
     # stalled: empty car at the top, counterweight resting; T2 = hoist rope between sheave and counterweight
     hoist = next(rp for rp in scene.ropes if any(st.sheave == sh for st in rp.route))
     z_sheave = next(s.center[2] for s in scene.sheaves if s.name == sh)
     cw = next(b for b in car_at(scene, hi).bodies if b.name == spec.counterweight)
-    t2 = hoist.count * hoist.rhoA * G * max(z_sheave - cw.position[2], 0.0)
-    out["stalled"] = tc / t2 if t2 > 0 else math.inf
+    t2 = hoist.count * hoist.rhoA * G * (z_sheave - cw.position[2])
+    out["stalled"] = tc / t2 if t2 > 0 and tc > 0 else math.nan
     _EN81_CACHE[key] = out
     return out
+
+
+def _ratio_verdict(check, value, limit, ok, source, note=""):
+    """A traction verdict; a ratio that is not a finite number >= 1 is FAIL whatever the limit."""
+    if not (math.isfinite(value) and value >= 1.0):
+        return Verdict(check, FAIL, value, limit, "", source,
+                       "no valid ratio: a rope force of this case is not positive (the scene cannot hold it)")
+    return Verdict(check, PASS if ok(value) else FAIL, value, limit, "", source, note)
 
 
 def en81_verdicts(scene, limits) -> list:
@@ -227,16 +282,84 @@ def en81_verdicts(scene, limits) -> list:
     ll, lb, ls = limits["loading"], limits["emergency_braking"], limits["stalled"]
     src = "EN 81-50 traction, static-equivalent (rope weights from the plant statics; pulley inertia neglected)"
     return [
-        Verdict("EN 81-50 car loading (125 % at the lowest landing)", PASS if cases["loading"] <= ll else FAIL,
-                cases["loading"], ll, "", src + "; T1/T2 <= e^(fα), μ = 0.1"),
-        Verdict(f"EN 81-50 emergency braking ({BRAKING_DECELERATION} m/s²)",
-                PASS if cases["emergency_braking"] <= lb else FAIL, cases["emergency_braking"], lb, "",
-                src + f"; T1/T2 <= e^(fα), μ = {limits['mu_emergency_braking']:.4f}",
-                cases["emergency_braking_case"]),
-        Verdict("EN 81-50 car stalled (counterweight on its buffer)", PASS if cases["stalled"] >= ls else FAIL,
-                cases["stalled"], ls, "", "EN 81-50: the ropes must slip, T1/T2 >= e^(fα), μ = 0.2 (T2 "
-                "estimated as the hoist-rope weight on the counterweight side)"),
+        _ratio_verdict("EN 81-50 car loading (125 % at the lowest landing)", cases["loading"], ll,
+                       lambda v: v <= ll, src + "; T1/T2 <= e^(fα), μ = 0.1"),
+        _ratio_verdict(f"EN 81-50 emergency braking ({BRAKING_DECELERATION} m/s²)", cases["emergency_braking"],
+                       lb, lambda v: v <= lb, src + f"; T1/T2 <= e^(fα), μ = {limits['mu_emergency_braking']:.4f}",
+                       cases["emergency_braking_case"]),
+        _ratio_verdict("EN 81-50 car stalled (counterweight on its buffer)", cases["stalled"], ls,
+                       lambda v: v >= ls, "EN 81-50: the ropes must slip, T1/T2 >= e^(fα), μ = 0.2 (T2 "
+                       "estimated as the hoist-rope weight on the counterweight side)"),
     ]
+
+
+def brake_cases(scene) -> dict:
+    """Holding torques [N m] of the scene's brake cases: {load kg: [torque at each end landing]} for the
+    empty car, the rated load and 125 % of it, and the inertia [kg m²] at the motor for each load."""
+    from ..core.elevator import elevator_spec, inertia_at_motor
+
+    spec = elevator_spec(scene)
+    ends = (min(spec.landings), max(spec.landings))
+    loads = (0.0, spec.rated_load, BRAKE_LOAD_FACTOR * spec.rated_load)
+    hold = {m: [holding_torque(scene, m, z) for z in ends] for m in loads}
+    el = {**scene.extra["elevator"], "max_load": max(spec.max_load, loads[-1])}
+    from dataclasses import replace
+    sc = replace(scene, extra={**scene.extra, "elevator": el})
+    return {"hold": hold, "inertia": {m: inertia_at_motor(sc, m) for m in loads}, "ends": ends,
+            "rated_load": spec.rated_load, "radius": spec.sheave_radius, "roping": spec.roping}
+
+
+def _car_deceleration(torque, hold, inertia, radius, roping):
+    """Car deceleration [m/s²] of a moving car braked by `torque` against the holding torque `hold`."""
+    return (torque - abs(hold)) / inertia * radius / roping
+
+
+def brake_verdicts(scene) -> list:
+    """EN 81-20 machine brake: it stops and holds the car with 125 % of the rated load (value: the car's
+    deceleration with the full brake torque against the larger holding torque of the two end landings,
+    FAIL when it does not stop the car), one of its circuits alone slows the car with the rated load,
+    and the unintended-movement case (empty to rated load, rigid estimate)."""
+    bc = brake_cases(scene)
+    T = float(scene.brake.torque)
+    R, r, rated = bc["radius"], bc["roping"], bc["rated_load"]
+    m125 = BRAKE_LOAD_FACTOR * rated
+    src = "EN 81-20 machine brake; rigid car, counterweight and ropes (their elasticity neglected)"
+    out = []
+    for check, torque, m in (
+            (f"EN 81-20 brake stops and holds the car ({BRAKE_LOAD_FACTOR * 100:.0f} % rated load)", T, m125),
+            (f"EN 81-20 brake, one circuit of {BRAKE_CIRCUITS} (rated load)", T / BRAKE_CIRCUITS, rated)):
+        k = max(range(2), key=lambda i: abs(bc["hold"][m][i]))     # the landing with the larger torque
+        hold = bc["hold"][m][k]
+        dec = _car_deceleration(torque, hold, bc["inertia"][m], R, r)
+        out.append(Verdict(check, PASS if dec > 0 else FAIL, dec, 0.0, "m/s²", src,
+                           f"brake torque {torque:.0f} N·m against a holding torque of {abs(hold):.1f} N·m "
+                           f"({m:g} kg at {bc['ends'][k]:g} m)" + ("" if dec > 0 else ": the brake cannot hold the car")))
+    out.append(_ucm_verdict(scene, bc, T))
+    return out
+
+
+def _ucm_verdict(scene, bc, T) -> Verdict:
+    """EN 81-20 unintended car movement with the machine brake as the stopping element: the car, at a
+    landing with any load from empty to rated, starts to move when the drive loses it; it is detected
+    UCM_DETECTION from the landing, the brake acts after its engage time; distance from the landing
+    to the stop (rigid estimate)."""
+    R, r, rated = bc["radius"], bc["roping"], bc["rated_load"]
+    te = float(scene.brake.engage_time)
+    worst_d, where = 0.0, ""
+    for m in (0.0, rated):
+        for k, z in enumerate(bc["ends"]):
+            hold, J = bc["hold"][m][k], bc["inertia"][m]
+            a0 = abs(hold) / J * R / r                      # free acceleration of the car, m/s²
+            v1 = math.sqrt(2.0 * a0 * UCM_DETECTION) + a0 * te
+            d = UCM_DETECTION + math.sqrt(2.0 * a0 * UCM_DETECTION) * te + 0.5 * a0 * te * te
+            dec = _car_deceleration(T, hold, J, R, r)
+            d = d + v1 * v1 / (2.0 * dec) if dec > 0 else math.inf
+            if d > worst_d:
+                worst_d, where = d, f"{m:g} kg at {z:g} m"
+    return Verdict("EN 81-20 unintended car movement (stopping distance)", PASS if worst_d <= UCM_STOP else FAIL,
+                   worst_d, UCM_STOP, "m",
+                   f"EN 81-20 UCMP with the machine brake as stopping element: detected {UCM_DETECTION:g} m from "
+                   f"the landing, brake engage time {te:g} s, rigid estimate", f"worst case: {where}")
 
 
 def ride_verdicts(s) -> list:
@@ -249,22 +372,42 @@ def ride_verdicts(s) -> list:
     return out
 
 
+def _compression(t, c):
+    """(force, column, time) of the most compressed rope of a record, None when no rope force is below
+    zero. The ropes are bilateral unless tension_only: a negative force is a state no rope reaches."""
+    low = None
+    for n in _tension_columns(c):
+        x = np.asarray(c[n], float)
+        k = int(np.argmin(x))
+        if x[k] < 0.0 and (low is None or x[k] < low[0]):
+            low = (float(x[k]), n, float(np.asarray(t)[k]))
+    return low
+
+
+def _not_assessed(vs: list, t, c) -> list:
+    """The PASS verdicts of a record with a compressed rope become INFO 'not assessed': they were
+    computed on a state outside the model's physical range (the slack-rope verdict FAILs it)."""
+    low = _compression(t, c)
+    if low is None:
+        return vs
+    why = f"not assessed: rope force {low[0]:.4g} N at {low[1]}, t = {low[2]:.3f} s (a compressed rope)"
+    return [Verdict(v.check, INFO, v.value, v.limit, v.unit, v.source, why)
+            if v.status == PASS and not v.check.startswith("slack rope") else v for v in vs]
+
+
 def trip_verdicts(case, t, c, s, limits, info: dict) -> list:
     """All verdicts of an elevator trip (studies.trip.TripCase and its record)."""
     out = _levelling(s["stopping_error_mm"], "")
     out.append(_trip_traction(s, limits))
-    out += en81_verdicts(case.scene, limits)
-    out.append(_saturation(case, t, c))
-    out.append(_overspeed(case, c))
-    out += generic_verdicts(t, c, info)
-    out += ride_verdicts(s)
-    return out
+    static = en81_verdicts(case.scene, limits) + brake_verdicts(case.scene)
+    run = [_saturation(case, t, c), _overspeed(case, c)] + generic_verdicts(t, c, info) + ride_verdicts(s)
+    return _not_assessed(out, t, c) + static + _not_assessed(run, t, c)
 
 
 def record_verdicts(case, t, c, info: dict | None = None) -> list:
     """The checks of a record that need no complete trip (a run stopped early): drive at its torque/power
     limit, overspeed, slack rope, buffer contact, co-simulation coupling."""
-    return [_saturation(case, t, c), _overspeed(case, c)] + generic_verdicts(t, c, info)
+    return _not_assessed([_saturation(case, t, c), _overspeed(case, c)] + generic_verdicts(t, c, info), t, c)
 
 
 def levelling_verdicts(errors_mm: dict, label: str) -> list:
@@ -357,6 +500,14 @@ def _explain_one(v: Verdict, vs: list, summary: dict) -> str:
                 "that episode are not reliable. The drive's speed loop gets one measurement per communication "
                 "step: use a smaller step (the R1 drive is stable at 1 ms Jacobi and 2 ms Gauss-Seidel; "
                 "docs/hard-cases.md, 'Large communication steps').")
+    if c.startswith("EN 81-20 brake"):
+        return (f"Brake: {c[len('EN 81-20 brake '):]}: car deceleration {v.value:.3g} m/s² ({v.note}). EN 81-20 asks "
+                "that the machine brake stop and hold the car going down with 125 % of the rated load, and that "
+                "each circuit alone slow it with the rated load: a larger brake.torque is needed.")
+    if c.startswith("EN 81-20 unintended car movement"):
+        return (f"Unintended car movement: the car would stop {v.value:.3g} m from the landing ({v.note}; "
+                f"{v.source}); EN 81-20 asks for at most {v.limit:g} m. A larger brake.torque or a shorter "
+                "brake.engage_time shortens it.")
     if c.startswith("ride quality"):
         return (f"Ride quality: {c[len('ride quality: '):]} {v.value:.3g} {v.unit} above the typical target "
                 f"{v.limit:g} {v.unit} (a contract value, not a standard).")
@@ -376,7 +527,7 @@ def scene_verdicts(scene, t, c) -> list:
     adds the static EN 81-50 traction cases and the car speed against the [drive] rated speed."""
     from types import SimpleNamespace
 
-    out = generic_verdicts(t, c)
+    out, static = generic_verdicts(t, c), []
     for sh in scene.sheaves:
         name = f"{sh.name}.traction_ratio"
         if sh.kind != "traction" or name not in c or scene.drive.sheave != sh.name:
@@ -387,7 +538,7 @@ def scene_verdicts(scene, t, c) -> list:
         r = float(np.nanmax(c[name]))
         out.append(_trip_traction({"traction_ratio_max": r}, lim))
         if "elevator" in scene.extra:
-            out += en81_verdicts(scene, lim)
+            static = en81_verdicts(scene, lim) + brake_verdicts(scene)
             if "car.velocity" in c:
                 out.append(_overspeed(SimpleNamespace(drive_values={}, scene=scene), c))
-    return out
+    return _not_assessed(out, t, c) + static
