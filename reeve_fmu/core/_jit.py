@@ -74,12 +74,13 @@ def cache_root() -> str:
                         "reeve_fmu")
 
 
-def _generic_target(numba) -> str:
+def _generic_target() -> str:
     """Compile for a generic x86-64 CPU unless told otherwise: machine code cached that way loads on
     any x86-64 machine, so an FMU can carry its kernels (the per-step cost is that of host-tuned code
-    for these small dense kernels; docs/performance.md). REEVE_FMU_CPU=host, or NUMBA_CPU_NAME set by
+    for these small dense kernels; docs/fmu-hosts.md). REEVE_FMU_CPU=host, or NUMBA_CPU_NAME set by
     the user, keeps numba's host tuning. Only possible before numba's CPU target is created in this
-    process (the first compile or dispatcher); returns the CPU name in use."""
+    process (the first compile or dispatcher), and it holds for the whole process; returns the CPU
+    name in use."""
     from numba.core import config, registry
     started = "_toplevel_target_context" in vars(registry.cpu_target)
     if (os.environ.get("REEVE_FMU_CPU", "generic") == "generic" and not os.environ.get("NUMBA_CPU_NAME")
@@ -186,7 +187,7 @@ _LOCK_DIR = None   # where compile locks live (None: no cross-process locking)
 CPU_TARGET = None  # the CPU numba compiles for: "generic" (portable caches), or another name / "host"
 
 if _numba is not None:
-    CPU_TARGET = _generic_target(_numba)
+    CPU_TARGET = _generic_target()
     if os.environ.get("REEVE_FMU_RECORD_KERNELS"):
         _record_index_reads(os.environ["REEVE_FMU_RECORD_KERNELS"])
 
