@@ -209,12 +209,21 @@ def test_lockstep_is_deterministic_and_realtime_reports_timing(tmp_path):
     r = _run(tmp_path, t_end=1.5, realtime=True)
     assert r["mode"] == "real-time" and r["steps"] == 1500
     assert r["wall_s"] >= 1.5 - 1e-3                               # paced by the wall clock
-    for k in ("deadline_misses", "step_time_p50_us", "step_time_p99_us", "sync_jitter_p50_us", "sync_jitter_p99_us"):
-        assert r[k] is not None and r[k] >= 0
-    # step-time and SYNC-jitter figures are reported here and measured in benchmarks/hil_lockstep.py
+    assert 0 <= r["deadline_misses"] <= 1500
     assert r["controller_stats"]["operation_enabled_at"] is not None
+    # the reported percentiles are those of the per-cycle log (timing.csv, written with 10 digits); the
+    # figures themselves are machine-dependent and measured in benchmarks/hil_lockstep.py
     cols = np.genfromtxt(tmp_path / "hil" / "timing.csv", delimiter=",", names=True)
-    assert len(cols) == 1500 and "sync_late_us" in cols.dtype.names
+    assert len(cols) == 1500
+    for col, key in (("step_time_us", "step_time"), ("sync_late_us", "sync_jitter")):
+        x = cols[col]
+        p50, p99 = np.percentile(x, 50), np.percentile(x, 99)
+        assert r[f"{key}_p50_us"] == pytest.approx(p50, rel=1e-8)
+        assert r[f"{key}_p99_us"] == pytest.approx(p99, rel=1e-8)
+        assert r[f"{key}_max_us"] == pytest.approx(np.max(x), rel=1e-8)
+        assert r[f"{key}_p50_us"] <= r[f"{key}_p99_us"] <= r[f"{key}_max_us"]
+    assert np.all(cols["step_time_us"] > 0.0)        # each cycle's work takes time
+    assert np.all(cols["sync_late_us"] >= 0.0)       # a SYNC is never sent before its time
 
 
 # ------------------------------------------------------------------------------------------------
@@ -305,12 +314,15 @@ def test_realtime_late_commands_are_stale_and_trip_the_watchdog():
     assert r["mode"] == "real-time"
     assert r["watchdog_trips"] == 1 and r["fault"]["code"] == "0x8250"
     assert r["fault"]["reason"].startswith("command watchdog")
+    assert r["final_state"] == "FAULT"
     if r["brake_engaged_at"] < 1.0:
-        # a machine that misses 1 ms deadlines of wall time before the injection (heavy load) must still
-        # end in the same safe state, by the same watchdog, from the missed cycles themselves; the exact
-        # timing is tested on a simulated clock (test_realtime_watchdog_on_a_simulated_clock)
-        assert r["deadline_misses"] > 0 and r["final_state"] == "FAULT"
-        return
+        # a machine that misses 1 ms deadlines of wall time before the injection (heavy load) still ends
+        # in the same safe state by the same watchdog, from the missed cycles themselves (checked above);
+        # what follows needs wall-clock deadlines met, and is tested on a simulated clock as well
+        # (test_realtime_watchdog_on_a_simulated_clock)
+        assert r["deadline_misses"] > 0
+        pytest.skip(f"real time: this machine missed {r['deadline_misses']} deadlines of 1 ms and the watchdog "
+                    f"tripped at {r['brake_engaged_at']:.3f} s, before the injected delay at 1.0 s")
     assert r["frames_injected"]["delayed"] > 900
     assert r["frames_rejected_detail"]["stale"] > 900                   # measured 994
     assert 1.0 < r["brake_engaged_at"] < 1.01                           # measured 1.003 s
