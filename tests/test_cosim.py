@@ -22,6 +22,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import cosim_jobs  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
+from checks import check_png  # noqa: E402
 
 JOBS = str(ROOT / "tests" / "cosim_jobs.py")
 R1_DRIVE = {"pretorque[1]": 522.5, "pretorque[2]": 331.5}
@@ -70,8 +71,10 @@ def demo(fmus, tmp_path_factory):
 
 def test_demo_writes_results_plots_and_summary(demo):
     out = demo["out"]
-    for f in ("results.csv", "results.png", "traction.png", "motor.png", "summary.json"):
+    for f in ("results.csv", "summary.json"):
         assert (out / f).is_file() and (out / f).stat().st_size > 1000, f
+    for f in ("results.png", "traction.png", "motor.png"):
+        check_png(out / f)
     with open(out / "results.csv", encoding="utf-8") as fh:
         header = next(csv.reader(fh))
         n_rows = sum(1 for _ in fh)
@@ -141,7 +144,8 @@ def test_demo_summary_report_and_console_carry_the_verdicts(demo):
     assert "not a simulation error" in " ".join(demo["stdout"].split())     # the console wraps the findings
     assert md.count("| **") == len(s["verdicts"])
     for png in ("results.png", "traction.png", "motor.png", "levelling.png"):
-        assert f"]({png})" in md and (out / png).is_file()
+        assert f"]({png})" in md
+        check_png(out / png)
 
 
 def test_cosim_error_at_1ms_is_below_a_quarter_millimetre(demo):

@@ -22,32 +22,50 @@ def _fall_length(z_cm):
     return -(z_cm + 0.5)
 
 
+def _yaw_reference(t, h, psi0):
+    """The block's yaw as one degree of freedom: I psi'' + c psi' = 2 k d S - S a b sin(psi) / (2 h) with
+    S = M g / 2 per fall (the torque factor's moment against the falls' lean), h(t) the fall length
+    of the run, block inertia 300 kg m^2 and yaw damping 100 N m s/rad of the scene; at rest it is the
+    closed form sin(psi) = 4 k d h / (a b). Integrated by scipy to 1e-10."""
+    from scipy.integrate import solve_ivp
+
+    W = 15500.0 * 9.81
+
+    def rhs(s, u):
+        H = np.interp(s, t, h)
+        return [u[1], (0.08 * 0.022 * W - W * 0.25 * math.sin(u[0]) / (4.0 * H) - 100.0 * u[1]) / 300.0]
+    return solve_ivp(rhs, (0.0, t[-1]), [psi0, 0.0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.01).y[0]
+
+
 def test_lowering_follows_the_quasi_static_yaw():
-    """Lowering the block 10 m (h = 5.1 -> 15.1 m) in dynamics: the yaw stays within 1 % of its range
-    of the same model's static equilibrium at the same drum position, and that equilibrium is the
-    closed form sin(psi) = 4 k d h / (a b)."""
+    """Lowering the block 10 m (h = 5.1 -> 15.1 m) in dynamics: the yaw follows the one-degree-of-freedom
+    yaw equation of the two-fall block (lag while moving included) from the closed-form equilibrium, and
+    the model's static equilibrium along the way is the closed form sin(psi) = 4 k d h / (a b)."""
     m = build_model(load_scene(SCENE))
     sim = Simulator(m)
     res = sim.run()
+    h = _fall_length(res["block.position.z"])
+    psi = res["block.rotation.z"]
+    ref = _yaw_reference(res.time, h, math.asin(K_D_AB * h[0]))
+    span = np.ptp(ref)
+    assert span > 0.29                                             # lowered 10 m: 0.144 -> 0.438 rad
+    # measured 0.13 % of the range (-0.09 % of the yaw): the model's equilibrium is 0.08 % below the
+    # closed form (the W1 wraps' bookkeeping, below); its inertia and damping are the reference's
+    assert np.max(np.abs(psi - ref)) < 5e-3 * span
     st0 = sim.initial_state()
     jd = m.sheave_dof["drum"]
-    psi_dyn, psi_qs, psi_cf = [], [], []
-    for t in (0.0, 10.0, 20.0, 30.0, 40.0, 50.0):
+    psi_qs, psi_cf = [], []
+    for t in (0.0, 20.0, 50.0):
         i = int(np.argmin(np.abs(res.time - t)))
         q = st0.q.copy()
         q[jd] += res["motor.angle"][i] / m.K.mot_gain      # the drum where the run has it
         st = sim._statics(new_state(m, q=q), "rope-length")
-        psi_dyn.append(res["block.rotation.z"][i])
         psi_qs.append(st.q[m.body_dofs["block"]["rz"]])
         psi_cf.append(math.asin(K_D_AB * _fall_length(st.q[m.body_dofs["block"]["z"]])))
-    psi_dyn, psi_qs, psi_cf = map(np.array, (psi_dyn, psi_qs, psi_cf))
-    span = np.ptp(psi_qs)
-    assert span > 0.29                                             # lowered 10 m: 0.144 -> 0.438 rad
-    assert np.max(np.abs(psi_dyn - psi_qs)) < 0.01 * span          # measured 0.71 % (lag while moving)
-    # the equilibrium against the closed form: measured -0.24 % (h = 5.1 m) to -0.58 % (15.1 m) of
+    # the equilibrium against the closed form: measured -0.080 % (h = 5.1 m) to -0.084 % (15.1 m) of
     # the yaw; the torsion moment is 2 k d S to 4e-5, the rest is the W1 wraps' bookkeeping (their
     # rope counted unstretched and its weight lumped at t = 0: docs/crane.md)
-    assert np.max(np.abs(psi_qs / psi_cf - 1.0)) < 1e-2
+    assert np.max(np.abs(np.array(psi_qs) / np.array(psi_cf) - 1.0)) < 2e-3
     tilt = np.max(np.abs(res["block.rotation.x"])) + np.max(np.abs(res["block.rotation.y"]))
     assert tilt < 1e-5                                             # measured 1.2e-6
 

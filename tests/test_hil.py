@@ -36,6 +36,7 @@ from reeve_fmu.hil.buses import make_bus  # noqa: E402
 from reeve_fmu.hil.drive402 import Drive402  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
 from reeve_fmu.hil.run import HilConfig, ensure_multicast, run_hil  # noqa: E402
+from checks import check_png  # noqa: E402
 
 JOBS = str(ROOT / "tests" / "hil_jobs.py")
 
@@ -727,7 +728,8 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     md = (out / "report.md").read_text(encoding="utf-8")
     assert md.count("| **") == len(vs) and f"Overall verdict: **{r['verdict']}**" in md
     for png in ("results.png", "traction.png", "motor.png", "levelling.png"):
-        assert f"]({png})" in md and (out / png).is_file()
+        assert f"]({png})" in md
+        check_png(out / png)
     assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["verdicts"] == r["verdicts"]
     _print_summary(r, HilConfig(out=str(out)))
     printed = capsys.readouterr().out

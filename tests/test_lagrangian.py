@@ -11,6 +11,7 @@ from scipy.optimize import brentq
 from reeve_fmu.studies import bench
 from reeve_fmu.studies import lagrangian as lag
 from reeve_fmu.core.scene import load_scene
+from checks import check_png  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 HANGING = ROOT / "scenes" / "hanging_rope.toml"
@@ -102,7 +103,9 @@ def test_bench_records_schema(tmp_path):
     h = bench.headline(recs, "hanging_release")
     assert h["case"] == "hanging_release"
     figs = bench.plot(recs, tmp_path)
-    assert all((tmp_path / f).stat().st_size > 0 for f in figs)
+    assert figs
+    for f in figs:
+        check_png(tmp_path / f)
 
 
 def test_bad_scene_for_the_baseline_names_the_problem():
