@@ -49,6 +49,12 @@ def trip(d):
                    f"{r['us_per_step']:.2f} µs", f"{r['newton_iter_per_step']:.2f}"] for r in d])
 
 
+def newton_tol(d):
+    return table(["setting", "car position", "traction-sheave tension", "car acceleration"],
+                 [[("**" + r["setting"] + "**") if r["tol"] == 1e-4 else r["setting"], f"{g(r['car.position'])} m",
+                   f"{g(r['traction.tension_in'])} N", f"{g(r['car.acceleration'])} m/s²"] for r in d])
+
+
 def crane_speed(d):
     names = {"linear": "slewing crane, linear elements", "cubic": "slewing crane, cubic, 2 per span",
              "8fall": "8-fall dynamic hoist"}
@@ -254,6 +260,7 @@ def crane_sweep(d):
 #: NAME -> (JSON file in docs/img, the command that writes it, function of the loaded JSON)
 TABLES = {
     "trip": ("trip_2to1.json", "python benchmarks/trip_2to1.py --json docs/img/trip_2to1.json", trip),
+    "newton_tol": ("newton_tol.json", "python benchmarks/newton_tol.py --json docs/img/newton_tol.json", newton_tol),
     "crane_speed": ("crane_speed.json", "python benchmarks/crane_speed.py --json docs/img/crane_speed.json",
                     crane_speed),
     "scaling": ("scaling.json", "python benchmarks/scaling.py --out docs/img", scaling),
