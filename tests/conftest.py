@@ -15,6 +15,7 @@ import ast
 import functools
 import importlib.util
 import inspect
+import json
 import os
 import re
 import shutil
@@ -22,6 +23,10 @@ import sys
 import textwrap
 
 import pytest
+
+import checks
+
+TOLERANCES = os.path.join(os.path.dirname(__file__), "tolerances.json")
 
 
 def _linux_x86_64() -> bool:
@@ -86,22 +91,72 @@ _BAD_SKIPS: list = []      # (test id, reason) of skips outside SKIP_POLICY
 
 def pytest_runtest_logreport(report):
     # on the xdist controller this sees every worker's reports; on a worker, only its own
+    if report.when == "call" or report.skipped:
+        _RAN.add(report.nodeid)
     if report.skipped and not hasattr(report, "wasxfail"):
         reason = _skip_reason(report)
         if not skip_allowed(reason):
             _BAD_SKIPS.append((report.nodeid, reason))
 
 
+_RAN: set = set()         # ids of the tests that ran (their records replace the file's)
+
+
+class _XdistRecords:
+    """Collects the workers' tolerance records on the controller (registered only with pytest-xdist)."""
+
+    def pytest_testnodedown(self, node, error):
+        checks.RECORDS.extend(getattr(node, "workeroutput", {}).get("reeve_tolerances", []))
+
+
+def pytest_configure(config):
+    if config.pluginmanager.hasplugin("xdist") and _is_controller(config):
+        config.pluginmanager.register(_XdistRecords(), "reeve-tolerances")
+
+
+def _write_tolerances() -> list:
+    old = []
+    if os.path.exists(TOLERANCES):
+        try:
+            with open(TOLERANCES, encoding="utf-8") as fh:
+                old = json.load(fh)
+        except ValueError:
+            old = []
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    keep = [r for r in old if r["test"] not in _RAN and os.path.exists(os.path.join(root, r["test"].split("::")[0]))]
+    recs = keep + checks.RECORDS
+    recs.sort(key=lambda r: (r["test"], r["quantity"]))
+    with open(TOLERANCES, "w", encoding="utf-8") as fh:
+        json.dump(recs, fh, indent=1)
+        fh.write("\n")
+    return recs
+
+
 def pytest_sessionfinish(session, exitstatus):
-    if _is_controller(session.config) and _BAD_SKIPS and exitstatus == 0:
+    if not _is_controller(session.config):
+        session.config.workeroutput["reeve_tolerances"] = checks.RECORDS
+        return
+    if checks.RECORDS or _RAN:
+        _write_tolerances()
+    wide = [r for r in checks.RECORDS if checks.too_wide(r)]
+    if (_BAD_SKIPS or wide) and exitstatus == 0:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
-    if _BAD_SKIPS and _is_controller(config):
+    if not _is_controller(config):
+        return
+    if _BAD_SKIPS:
         terminalreporter.section("skips outside the allow-list (tests/conftest.py SKIP_POLICY): failing")
         for nodeid, reason in _BAD_SKIPS:
             terminalreporter.line(f"{nodeid}: {reason}")
+    wide = [r for r in checks.RECORDS if checks.too_wide(r)]
+    if wide:
+        terminalreporter.section(f"bounds more than {checks.RATIO:g}x the observed error without a reason: failing")
+        for r in wide:
+            terminalreporter.line(f"{r['test']}: {r['quantity']}: observed {r['observed']:.3g}, bound {r['bound']:.3g}")
+    if checks.RECORDS:
+        terminalreporter.line(f"{len(checks.RECORDS)} checked bounds recorded in tests/tolerances.json")
 
 
 @functools.lru_cache(maxsize=None)
