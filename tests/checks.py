@@ -14,6 +14,7 @@ all-NaN plot fails, which a file-size check lets through).
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +33,9 @@ def _test_id() -> str:
 def check(quantity: str, observed, bound: float, reason: str | None = None) -> float:
     """Assert |observed| <= bound and record it; returns the observed magnitude."""
     obs = float(np.max(np.abs(np.asarray(observed, dtype=float)))) if np.size(observed) else 0.0
+    caller = sys._getframe(1)
     RECORDS.append({"test": _test_id(), "quantity": quantity, "observed": obs, "bound": float(bound),
-                    "reason": reason})
+                    "reason": reason, "line": f"{os.path.basename(caller.f_code.co_filename)}:{caller.f_lineno}"})
     assert obs <= bound, f"{quantity}: {obs:.3g} > bound {bound:.3g}"      # NaN fails too
     return obs
 

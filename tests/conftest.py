@@ -154,7 +154,8 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if wide:
         terminalreporter.section(f"bounds more than {checks.RATIO:g}x the observed error without a reason: failing")
         for r in wide:
-            terminalreporter.line(f"{r['test']}: {r['quantity']}: observed {r['observed']:.3g}, bound {r['bound']:.3g}")
+            terminalreporter.line(f"{r['line']} {r['test'].split('::', 1)[-1]}: {r['quantity']}: observed "
+                                  f"{r['observed']:.3g}, bound {r['bound']:.3g}")
     if checks.RECORDS:
         terminalreporter.line(f"{len(checks.RECORDS)} checked bounds recorded in tests/tolerances.json")
 
