@@ -94,8 +94,9 @@ def test_3d_tangent_is_perpendicular_to_both_radii_and_follows_wrap_sense():
     aB = np.array([1.0, 0.2, 0.1]) / np.linalg.norm([1.0, 0.2, 0.1])
     TA, TB = tangent(cA, RA, aA, 1.0, cB, RB, aB, -1.0)
     D = TB - TA
-    assert abs(np.linalg.norm(TA - cA) - RA) < 1e-14 and abs(np.linalg.norm(TB - cB) - RB) < 1e-14   # measured 0
-    assert abs(D @ (TA - cA)) < 2e-14 and abs(D @ (TB - cB)) < 2e-14     # round-off: measured 1.8e-16, 2.6e-15
+    check('tangent points on the circles', [np.linalg.norm(TA - cA) - RA, np.linalg.norm(TB - cB) - RB], 1e-14,
+          reason="round-off of the radii (exact here)")
+    check('span perpendicular to the radii', [D @ (TA - cA), D @ (TB - cB)], 2e-14, reason="round-off")
     assert D @ np.cross(aA, TA - cA) > 0 and D @ (-np.cross(aB, TB - cB)) > 0
 
 
@@ -104,7 +105,7 @@ def test_coplanar_closed_form_matches_3d_newton():
     cA, cB = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0, 4.0])
     TA, TB = tangent(cA, 0.2, a, 1.0, cB, 0.5, a, -1.0)
     # shift B's plane out of coplanarity by 1e-9: the Newton path must land on the same points (B's
-    # moved with it): measured 0 and 0 (1e-9 apart before the shift is taken out)
+    # moved with it; 1e-9 apart before the shift is taken out)
     shift = np.array([0, 1e-9, 0])
     TA3, TB3 = tangent(cA, 0.2, a, 1.0, cB + shift, 0.5, a, -1.0)
     assert np.max(np.abs(TA3 - TA)) < 1e-14 and np.max(np.abs(TB3 - shift - TB)) < 1e-14
@@ -155,7 +156,8 @@ def test_3d_tangent_far_from_the_origin():
     cA, cB = off.copy(), np.array([2.0, 0.5, 5.0]) + off
     TA, TB = tangent(cA, 0.3, np.array([0.0, 1.0, 0.0]), 1.0, cB, 0.4, aB, -1.0)
     D = TB - TA
-    assert abs(D @ (TA - cA)) < 1e-12 and abs(D @ (TB - cB)) < 1e-12    # measured 3.2e-14, 9.4e-14 (130 m)
+    check('span perpendicular to the radii, 130 m out', [D @ (TA - cA), D @ (TB - cB)], 1e-12,
+          reason="round-off of coordinates of 130 m")
 
 
 def test_planar_linear_multi_element_spans_match_1d():
