@@ -43,7 +43,7 @@ def test_slack_rope_snaps_taut_without_solver_failure():
     T = res["car_sheave.tension_in"]
     t = res.time
     slack = (T <= 6 * 2.9e6 * 1e-6 / 2 * 1.001) & (t > 8.1)
-    assert slack.sum() * 1e-3 > 0.5                          # measured 0.81 s of slack after the stop
+    assert slack.sum() * 1e-3 > 0.5                          # 0.81 s of slack after the stop
     # the first snap: the car falls back onto its ropes at v_r (read at the first taut sample before the
     # peak). A spring-mass catch from zero tension, 1/2 k d^2 = M_e g d + 1/2 M_e v_r^2, with the car-side
     # rope (two falls and the wrap, 6 ropes) in series with the 6 hitch springs, T = k d / 2 (2:1), brackets
@@ -254,6 +254,6 @@ def test_extreme_parameters_run(case):
         R = next(sh.radius for sh in sc.sheaves if sh.name == "car_sheave")
         expect = (mass["car"] * g + rhoA * math.pi * R * g) / 2
         # the static Newton's floor grows as the car's weight shrinks against EA x strain differences
-        bound = {"EA x100": 7e-11, "very light car": 1e-8, "rope heavier than car": 5e-9}[case]
+        bound = {"EA x100": 1.4e-11, "very light car": 1e-8, "rope heavier than car": 5e-9}[case]
         for side in ("tension_in", "tension_out"):
             check(f"{case}: car_sheave.{side} / hand statics - 1", res[f"car_sheave.{side}"][0] / expect - 1, bound)
