@@ -1,12 +1,13 @@
-"""docs/performance.md's tables from the benchmarks' JSON output in docs/img.
+"""docs/performance.md's tables from the benchmarks' JSON output in docs/img, and docs/testing.md's
+table of checked bounds from a test run's record.
 
-Each table of docs/performance.md sits between `<!-- report:NAME -->` and `<!-- /report:NAME -->`; this
-script rewrites what is between them from the JSON file named in TABLES (written by the command next
-to it) and leaves the text around them alone. A missing JSON file leaves a line saying which command
-writes it.
+Each generated table sits between `<!-- report:NAME -->` and `<!-- /report:NAME -->`; this script
+rewrites what is between them from the JSON file named in TABLES (written by the command next to it)
+and leaves the text around them alone. A missing JSON file leaves a line saying which command writes it.
 
-    python benchmarks/report.py            # rewrite docs/performance.md
-    python benchmarks/report.py --check    # exit 1 if docs/performance.md differs from the JSON
+    python benchmarks/report.py            # rewrite docs/performance.md and docs/testing.md
+    python benchmarks/report.py --check    # exit 1 if a doc differs from its JSON
+    python benchmarks/report.py --tolerances tests/tolerances.json   # first take this run's record
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 IMG = ROOT / "docs" / "img"
-DOC = ROOT / "docs" / "performance.md"
+DOCS = (ROOT / "docs" / "performance.md", ROOT / "docs" / "testing.md")
 
 
 def table(head, rows) -> str:
@@ -36,10 +37,11 @@ def g(x, digits=3) -> str:
         return "0"
     if abs(x) >= 1000:
         return f"{x:.0f}"
-    if abs(x) >= 1e-3:
-        return f"{x:.{digits}g}"
-    m, e = f"{x:.{digits - 1}e}".split("e")
-    return f"{m}e{int(e)}"
+    s = f"{x:.{digits}g}"
+    if "e" in s:
+        m, e = s.split("e")
+        s = f"{m}e{int(e)}"
+    return s
 
 
 # ------------------------------------------------------------------------------------------ tables
@@ -257,6 +259,28 @@ def crane_sweep(d):
                    "—" if r.get("critical_height") is None else f"{r['critical_height']:.2f} m"] for r in d])
 
 
+def tolerances(d):
+    """One row per test function and quantity (parametrizations and loops together): the check whose
+    observed error comes closest to its bound, and the reason a bound may be wider than 10x."""
+    rows = {}
+    for r in d:
+        f, _, test = r["test"].partition("::")
+        key = (f.removeprefix("tests/"), test.split("[")[0], r["quantity"])
+        worst = rows.get(key)
+        if worst is None or r["observed"] * worst["bound"] > worst["observed"] * r["bound"]:
+            rows[key] = dict(r, n=(worst or {}).get("n", 0) + 1)
+        else:
+            worst["n"] += 1
+    out = []
+    for (f, test, q), r in sorted(rows.items()):
+        ratio = "—" if r["observed"] == 0 else f"{r['bound'] / r['observed']:.1f}"
+        out.append([f"`{f}`", test, q.replace("|", "\\|"), g(r["observed"]), g(r["bound"]), ratio, r["n"],
+                    (r.get("reason") or "").replace("|", "\\|")])
+    return (f"{len(d)} checks in {len(rows)} rows:\n\n"
+            + table(["file", "test", "quantity", "observed", "bound", "bound / observed", "checks",
+                     "why wider than 10×"], out))
+
+
 #: NAME -> (JSON file in docs/img, the command that writes it, function of the loaded JSON)
 TABLES = {
     "trip": ("trip_2to1.json", "python benchmarks/trip_2to1.py --json docs/img/trip_2to1.json", trip),
@@ -280,16 +304,18 @@ TABLES = {
     "fmi_floor": ("fmi_floor.json", "python benchmarks/fmi_floor.py --json docs/img/fmi_floor.json", fmi_floor),
     "sweep": ("sweep_throughput_quiet3.json", "python benchmarks/sweep_throughput.py --runs 200 --json FILE", sweep),
     "fmu_hosts": ("fmu_hosts_quiet.json", "python benchmarks/fmu_hosts.py --json FILE", fmu_hosts),
+    "tolerances": ("tolerances.json", "python -m pytest ...; python benchmarks/report.py --tolerances tests/tolerances.json",
+                   tolerances),
 }
 
 _BLOCK = re.compile(r"(<!-- report:(\w+) -->\n)(.*?)(<!-- /report:\2 -->)", re.S)
 
 
-def render(text: str) -> str:
+def render(text: str, doc: Path) -> str:
     def fill(m):
         name = m.group(2)
         if name not in TABLES:
-            raise SystemExit(f"{DOC}: unknown report block {name!r} (known: {', '.join(TABLES)})")
+            raise SystemExit(f"{doc}: unknown report block {name!r} (known: {', '.join(TABLES)})")
         fname, cmd, fn = TABLES[name]
         path = IMG / fname
         if not path.is_file():
@@ -302,19 +328,25 @@ def render(text: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="only compare; exit 1 if the doc is out of date")
+    ap.add_argument("--check", action="store_true", help="only compare; exit 1 if a doc is out of date")
+    ap.add_argument("--tolerances", type=Path, help="a test run's record (tests/tolerances.json) to copy first")
     a = ap.parse_args(argv)
-    old = DOC.read_text(encoding="utf-8")
-    new = render(old)
-    if a.check:
+    if a.tolerances is not None and not a.check:
+        (IMG / "tolerances.json").write_text(a.tolerances.read_text(encoding="utf-8"), encoding="utf-8")
+    stale = []
+    for doc in DOCS:
+        old = doc.read_text(encoding="utf-8")
+        new = render(old, doc)
+        if a.check:
+            if new != old:
+                stale.append(doc)
+            continue
         if new != old:
-            print(f"{DOC} differs from its JSON: run python benchmarks/report.py", file=sys.stderr)
-            return 1
-        return 0
-    if new != old:
-        DOC.write_text(new, encoding="utf-8")
-    print(f"{DOC.relative_to(ROOT)}: {len(_BLOCK.findall(new))} tables from docs/img")
-    return 0
+            doc.write_text(new, encoding="utf-8")
+        print(f"{doc.relative_to(ROOT)}: {len(_BLOCK.findall(new))} tables from docs/img")
+    for doc in stale:
+        print(f"{doc} differs from its JSON: run python benchmarks/report.py", file=sys.stderr)
+    return 1 if stale else 0
 
 
 if __name__ == "__main__":
