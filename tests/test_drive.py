@@ -155,7 +155,8 @@ def test_brake_sequencing_follows_parameters():
         assert te <= t[i] <= te + dt + p.Ts + 1e-9
     # no torque before the pre-torque starts and after the torque ramp of the last move
     assert np.all(tau[t <= p.start_delay] == 0.0)
-    assert np.all(np.abs(tau[t >= sched[1]["t_torque_off"] + 0.02]) < 5e-17)  # lag tail e^(-t/tau_T): measured 5.0e-18 N m
+    check("torque after the lag tail e^(-t/tau_T) [N m]", tau[t >= sched[1]["t_torque_off"] + 0.02], 5e-17,
+          reason="the tail decays to round-off")
     # pre-torque is reached before the brake is released (no torque step at brake lift)
     i_rel = edges[0]
     check('tau[i_rel] - T_EMPTY', tau[i_rel] - T_EMPTY, 2e-3 * np.max(np.abs(T_EMPTY)))
@@ -303,7 +304,7 @@ def test_level2_torque_from_the_power_balance():
         if t > 12.0:                       # cruise at 1.6 m/s (20 rad/s at the motor)
             rows.append((tau, w, *d.currents, *d.voltages))
     tau, w, i_d, i_q, vd, vq = np.array(rows).T
-    assert np.all(np.abs(w - 20.0) < 5e-9)                          # measured 7.7e-10 rad/s
+    check("speed - 20 rad/s", w - 20.0, 5e-9)
     T_power = 1.5 * (vd * i_d + vq * i_q - p.Rs * (i_d ** 2 + i_q ** 2)) / w
     check('T_power / tau - 1', T_power / tau - 1, 5e-11)
     check('1.5 * p.pole_pairs * p.psi * i_q / tau - 1', 1.5 * p.pole_pairs * p.psi * i_q / tau - 1, 1e-15)
