@@ -11,7 +11,8 @@ under load), best of `--repeat` runs after a warm-up, statics excluded, outputs 
 `--other CHECKOUT` measures the cases in that checkout too, alternately in fresh interpreters (warm
 numba caches), and prints this / other ratios of CPU time per simulated second.
 
-    python benchmarks/crane_speed.py [--t-end 20] [--repeat 3] [--other /work/main] [--cubic-elements 2]
+    python benchmarks/crane_speed.py [--t-end 20] [--repeat 3] [--other CHECKOUT] [--cubic-elements 2]
+                                     [--json docs/img/crane_speed.json]
 """
 from pathlib import Path
 import argparse
@@ -84,10 +85,13 @@ if __name__ == "__main__":
     ap.add_argument("--cases", default="linear,cubic,8fall")
     ap.add_argument("--other", type=Path, default=None)
     ap.add_argument("--cubic-elements", type=int, default=2, help="cubic elements per span (cubic case)")
+    ap.add_argument("--json", default=None, help="write the records here (read by benchmarks/report.py)")
     a = ap.parse_args()
     loads = [os.getloadavg()[0]]
+    records = {}
     for case in a.cases.split(","):
         r = run_case(ROOT, case, a.t_end, a.repeat, a.cubic_elements)
+        records[case] = dict(r, t_end_s=a.t_end, target_rtf=CASES[case][2])
         print(_line(case, r, CASES[case][2]), flush=True)
         if a.other is not None and "error" not in r:
             o = run_case(a.other, case, a.t_end, a.repeat, a.cubic_elements)
@@ -102,3 +106,6 @@ if __name__ == "__main__":
     print(f"2:1 elevator trip (same run): {e['rtf']:.0f}x real time ({e['us_per_step']:.2f} us/step, wall)")
     loads.append(os.getloadavg()[0])
     print(f"load average {min(loads):.2f}-{max(loads):.2f} during the run (2 cores shared)")
+    if a.json:
+        records["elevator_2to1"] = e
+        Path(a.json).write_text(json.dumps(records, indent=1) + "\n", encoding="utf-8")

@@ -6,12 +6,13 @@ warm-up, then the best of 3 runs of `--t-end` s from the statics at rest (CPU ti
 the scene sets them, outputs every 1 ms). Forced paths (`Simulator(sparse=False / True)`), so the
 rows show both sides of solver.SPARSE_MIN_FREE.
 
-    python benchmarks/dense_cutoff.py [--t-end 0.5]
+    python benchmarks/dense_cutoff.py [--t-end 0.5] [--json docs/img/dense_cutoff.json]
 """
 from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+import json
 import os
 from pathlib import Path
 import sys
@@ -44,7 +45,9 @@ def cpu_of_run(model, sparse: bool, t_end: float) -> float:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--t-end", type=float, default=0.5)
+    ap.add_argument("--json", default=None, help="write the rows here (read by benchmarks/report.py)")
     a = ap.parse_args(argv)
+    rows = []
     load0 = os.getloadavg()[0]
     print(f"| scene | model | el/span | free coordinates | dense ms | banded ms | dense / banded |")
     print("|---|---|---|---|---|---|---|")
@@ -53,10 +56,15 @@ def main(argv=None):
         for n in counts:
             m = build_model(replace(scene, ropes=tuple(replace(r, elements_per_span=n) for r in scene.ropes)))
             d, b = cpu_of_run(m, False, a.t_end), cpu_of_run(m, True, a.t_end)
+            rows.append(dict(scene=name, model=model, elements_per_span=n, free=len(m.K.free), dense_s=d,
+                             banded_s=b, t_end_s=a.t_end))
             print(f"| {name} | {model} | {n} | {len(m.K.free)} | {d * 1e3:.1f} | {b * 1e3:.1f} | {d / b:.2f} |",
                   flush=True)
     print(f"\n{a.t_end} s per run, CPU time; load average {load0:.2f} -> {os.getloadavg()[0]:.2f}; "
           f"the default chooses banded from {SPARSE_MIN_FREE} free coordinates on")
+    if a.json:
+        Path(a.json).write_text(json.dumps({"sparse_min_free": SPARSE_MIN_FREE, "rows": rows}, indent=1) + "\n",
+                                encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ import pytest
 
 from reeve_fmu.studies import analysis as A
 from reeve_fmu.core.profiles import scurve, trip_sequence
+from checks import check  # noqa: E402
 
 # ---------------------------------------------------------------------------------------------------
 # EN 81-50 traction
@@ -21,7 +22,8 @@ def test_en81_check_vector(case, expected):
 def test_en81_mu_values():
     assert A.en81_mu("loading") == 0.1
     assert A.en81_mu("stalled") == 0.2
-    assert A.en81_mu("emergency", 3.2) == pytest.approx(0.1 / 1.32, rel=1e-15)
+    check('A.en81_mu("emergency", 3.2) / (0.1 / 1.32) - 1', A.en81_mu("emergency", 3.2) / (0.1 / 1.32) - 1, 1e-15,
+          reason="one rounding of the same formula")
     with pytest.raises(ValueError, match="rope_speed"):
         A.en81_mu("emergency")
     with pytest.raises(ValueError, match="case"):
@@ -34,9 +36,11 @@ def test_other_grooves():
         math.exp(math.pi * 0.1 / math.sin(math.radians(20.0))), rel=1e-12)
     # semicircular without undercut, gamma = 30°: f = 4 mu cos15° / (pi - pi/6 + 1/2)
     f = 4 * 0.1 * math.cos(math.radians(15)) / (math.pi - math.pi / 6 + 0.5)
-    assert A.traction_limit(0.1, 0.0, 30.0, 180.0, "semicircular") == pytest.approx(math.exp(f * math.pi), rel=1e-12)
+    check('A.traction_limit(0.1, 0.0, 30.0, 180.0, "semicircular") / math.exp(...', A.traction_limit(0.1, 0.0, 30.0, 180.0, "semicircular") / math.exp(f * math.pi) - 1, 1e-12,
+          reason="round-off of the same closed form")
     # unhardened V groove with beta = 0 degenerates to f = 4 mu / pi
-    assert A.equivalent_friction(0.1, 0.0, 35.0, "v") == pytest.approx(0.4 / math.pi, rel=1e-12)
+    check('A.equivalent_friction(0.1, 0.0, 35.0, "v") / (0.4 / math.pi) - 1', A.equivalent_friction(0.1, 0.0, 35.0, "v") / (0.4 / math.pi) - 1, 1e-12,
+          reason="round-off of the same closed form")
     with pytest.raises(ValueError, match="groove"):
         A.traction_limit(0.1, 95, 30, 180, groove="flat")
     with pytest.raises(ValueError, match="alpha_deg"):
@@ -55,8 +59,8 @@ def test_weighting_transfer_functions_match_iso_tables():
     for table, wname in ((WK_TABLE, "Wk"), (WD_TABLE, "Wd")):
         f = np.array(list(table))
         g = np.abs(A.weighting_response(f, wname))
-        # the table is rounded to 3 decimals (+-5e-4): measured max |error| 7.0e-4 (Wk), 2.4e-4 (Wd)
-        assert np.allclose(g, list(table.values()), rtol=0.0, atol=1.5e-3), (wname, g)
+        # the table is rounded to 3 decimals (+-5e-4)
+        check(f"{wname} against the ISO table", g - np.array(list(table.values())), 1.5e-3)
 
 
 def iso_magnitude_wk(f):
@@ -71,7 +75,7 @@ def iso_magnitude_wk(f):
     return abs(hh * hl * ht * hs)
 
 
-# the discretised filter's gain error grows with f/fs: measured -1.5e-6, -7.4e-5, -2.3e-4, -1.2e-3
+# the discretised filter's gain error grows with f/fs
 WK_GAIN_TOL = {1.0: 1e-5, 5.0: 5e-4, 10.0: 1.5e-3, 20.0: 5e-3}
 
 
@@ -83,8 +87,8 @@ def test_discrete_wk_filter_gain_on_sines(f):
     y = A.weight(amp * np.sin(2 * np.pi * f * t), fs, "Wk")
     pp = A.peak_to_peak(y[t > 25.0])          # 0.4 Hz band limit has settled
     expected = 2 * amp * iso_magnitude_wk(f)
-    assert np.max(pp) == pytest.approx(expected, rel=WK_GAIN_TOL[f])
-    assert A.a95(pp) == pytest.approx(expected, rel=WK_GAIN_TOL[f])
+    check(f"Wk gain at {f:g} Hz: max peak-to-peak / expected - 1", np.max(pp) / expected - 1, WK_GAIN_TOL[f])
+    check(f"Wk gain at {f:g} Hz: A95 / expected - 1", A.a95(pp) / expected - 1, WK_GAIN_TOL[f])
 
 
 def test_weighting_rejects_low_sample_rate():
@@ -105,7 +109,7 @@ def test_peak_to_peak_of_pure_sine():
     pp = A.peak_to_peak(x)
     # 2 s at 3 Hz = 12 half cycles; the cut ones at both ends are dropped -> 11 complete, 10 pp values
     assert pp.size == 10
-    assert np.allclose(pp, 2 * amp, rtol=5e-5)                # measured 6.1e-6 (sample grid)
+    check("peak-to-peak / (2 amplitude) - 1 (sample grid)", pp / (2 * amp) - 1, 5e-5)
     peaks = A.half_cycle_peaks(x)
     assert np.allclose(np.abs(peaks), amp, rtol=5e-5) and np.all(peaks[1:] * peaks[:-1] < 0)
 
@@ -156,21 +160,23 @@ def test_trip_summary_of_ideal_round_trip():
     # motion below v_rest = 1 mm/s is not counted: v = j t^2/2 stays below it for sqrt(2 v_rest/j) at each end
     t_counted = t_flight - 2 * math.sqrt(2 * 1e-3 / 1.0)
     for tt in s["trip_times_s"]:
-        assert tt == pytest.approx(t_counted, abs=1e-2)    # measured -2.1e-3 s (2 ms samples, 10 Hz filter)
+        check('tt - t_counted', tt - t_counted, 1e-2)
     assert [r["direction"] for r in s["trips"]] == [1, -1]
-    assert s["stopping_errors_m"][0] == pytest.approx(0.004, abs=2e-6)   # measured -1.9e-7 m
-    assert s["stopping_errors_m"][1] == pytest.approx(0.0, abs=2e-6)     # measured 1.9e-7 m
-    assert s["v_max_m_s"] == pytest.approx(1.6, rel=2.5e-4)              # measured 2.6e-5
+    check('stopping error at 39 m - 4 mm', s["stopping_errors_m"][0] - 0.004, 1.5e-6)
+    check('stopping error at 0 m', s["stopping_errors_m"][1], 1.5e-6)
+    check('s["v_max_m_s"] / 1.6 - 1', s["v_max_m_s"] / 1.6 - 1, 2.5e-4)
     # 10 Hz filtering of the jerk corners adds a few % (Butterworth overshoot)
-    assert s["max_acceleration_m_s2"] == pytest.approx(0.8, rel=5e-3)    # measured 1.5e-3
-    assert s["max_deceleration_m_s2"] == pytest.approx(0.8, rel=5e-3)    # measured 1.5e-3
-    assert s["a95_acceleration_m_s2"] == pytest.approx(0.8, rel=2e-3)    # measured 2.7e-4
-    assert s["max_jerk_m_s3"] == pytest.approx(1.0, rel=0.05)            # measured 3.4e-2
+    check('s["max_acceleration_m_s2"] / 0.8 - 1', s["max_acceleration_m_s2"] / 0.8 - 1, 5e-3)
+    check('s["max_deceleration_m_s2"] / 0.8 - 1', s["max_deceleration_m_s2"] / 0.8 - 1, 5e-3)
+    check('s["a95_acceleration_m_s2"] / 0.8 - 1', s["a95_acceleration_m_s2"] / 0.8 - 1, 2e-3)
+    check('s["max_jerk_m_s3"] / 1.0 - 1', s["max_jerk_m_s3"] / 1.0 - 1, 0.05)
     assert s["vib_pp_max_m_s2"] < 0.01                  # an ideal profile has (almost) no vibration: 3.3e-3
-    # peaks of sines sampled at 2 ms: the grid can miss a peak by at most (1 - cos(w h/2)) = 5e-7 (measured 1.7e-10)
-    assert s["torque_peak_Nm"] == pytest.approx(500.0, rel=1e-6)
-    assert s["traction_ratio_max"] == pytest.approx(1.5, rel=1e-8)      # measured 4.5e-13
-    assert s["traction_utilisation_max"] == pytest.approx(1.5 / 1.599, rel=1e-8)
+    # peaks of sines sampled at 2 ms: the grid can miss a peak by at most 1 - cos(w h/2)
+    grid = "the sampling grid's worst case, 1 - cos(w h/2); this grid happens to pass closer to the peak"
+    check('torque peak / 500 N m - 1', s["torque_peak_Nm"] / 500.0 - 1, 5e-7, reason=grid)
+    check('traction ratio max / 1.5 - 1', s["traction_ratio_max"] / 1.5 - 1, 3e-9, reason=grid)
+    check('traction utilisation max / (1.5 / 1.599) - 1', s["traction_utilisation_max"] / (1.5 / 1.599) - 1, 3e-9,
+          reason=grid)
 
 
 def test_vibration_in_constant_speed_region():
@@ -180,11 +186,11 @@ def test_vibration_in_constant_speed_region():
     t, x, v, a = ideal_record(prof, 31.0, vib=lambda t: 0.1 * np.sin(2 * np.pi * 4.0 * t))
     s = A.trip_summary(t, x, v, a, landings=[0.0, 39.0])
     expected = 2 * 0.1 * iso_magnitude_wk(4.0)
-    assert s["vib_pp_max_m_s2"] == pytest.approx(expected, rel=0.03)    # measured 1.5e-2 (start transient)
-    assert s["vib_pp_a95_m_s2"] == pytest.approx(expected, rel=3e-3)    # measured 4.6e-4
+    check('s["vib_pp_max_m_s2"] / expected - 1', s["vib_pp_max_m_s2"] / expected - 1, 0.03)
+    check('s["vib_pp_a95_m_s2"] / expected - 1', s["vib_pp_a95_m_s2"] / expected - 1, 3e-3)
     n_pp = s["trips"][0]["n_pp"]
     c0, c1 = s["trips"][0]["cs_region_s"]
-    assert n_pp == pytest.approx(2 * 4.0 * (c1 - c0), abs=3)    # two half cycles per period: 145 for 147.0
+    check('n_pp - (2 * 4.0 * (c1 - c0))', n_pp - (2 * 4.0 * (c1 - c0)), 3)  # two half cycles per period: 145 for 147.0
 
 
 def test_bounce_at_rest_is_not_a_trip():

@@ -6,6 +6,7 @@ import numpy as np
 
 from reeve_fmu.cli import main
 from reeve_fmu.core.results import read_csv
+from checks import check_png  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -21,7 +22,7 @@ def test_simulate_writes_csv_and_png(tmp_path, capsys):
         assert name in cols, name
     assert len(cols["time"]) == 101
     assert np.allclose(np.diff(cols["time"]), 0.01)
-    assert (tmp_path / "results.png").stat().st_size > 10_000
+    check_png(tmp_path / "results.png")
     # verdicts with value and limit in summary.json, report.md and on the console
     s = json.loads((tmp_path / "summary.json").read_text(encoding="utf-8"))
     vs = {v["check"]: v for v in s["verdicts"]}

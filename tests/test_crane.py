@@ -23,6 +23,11 @@ from reeve_fmu.studies.crane import load_crane, sweep
 from reeve_fmu.studies.overrides import parse_value
 from reeve_fmu.core.elements.torsion import LAWS, coupling_law, torsion_span, transport_angle, transport_angle_grad
 from reeve_fmu.core.scene import SceneError
+from checks import check_png  # noqa: E402
+from checks import check  # noqa: E402
+SPREAD = "the cases' errors differ by more than 10x: one bound for all"
+ROUNDOFF = "round-off, which differs by platform"
+EXACT = "exact here; round-off in general"
 
 ROOT = Path(__file__).resolve().parents[1]
 TWO = ROOT / "scenes" / "crane_two_fall.toml"
@@ -46,26 +51,26 @@ def test_coupling_law_is_the_derivative_of_w(law):
         dwe = (coupling_law(L, EA, d, k0, k1, GJ0, eps + he, kap)[0] - coupling_law(L, EA, d, k0, k1, GJ0, eps - he, kap)[0]) / (2 * he)
         dwk = (coupling_law(L, EA, d, k0, k1, GJ0, eps, kap + hk)[0] - coupling_law(L, EA, d, k0, k1, GJ0, eps, kap - hk)[0]) / (2 * hk)
         # central differences: measured 2.9e-12, 2.2e-10, 1.6e-10 (E, below)
-        assert S == pytest.approx(dwe, rel=3e-11)
+        check('S - dwe', S - dwe, 1.5e-11 * np.max(np.abs(dwe)), reason=SPREAD)
         assert M == pytest.approx(dwk, rel=2e-9, abs=1e-12)
         # E = d(l w(D/l - 1, Theta/l))/dl at fixed chord D and twist angle Theta
         l, D, Th = 2.0, 2.0 * (1 + eps), 2.0 * kap
         U = lambda ll: ll * coupling_law(L, EA, d, k0, k1, GJ0, D / ll - 1, Th / ll)[0]
-        assert E == pytest.approx((U(l + 1e-6) - U(l - 1e-6)) / 2e-6, rel=1.5e-9)
+        check('E - ((U(l + 1e-6) - U(l - 1e-6)) / 2e-6)', E - ((U(l + 1e-6) - U(l - 1e-6)) / 2e-6), 6.5e-10 * np.max(np.abs(((U(l + 1e-6) - U(l - 1e-6)) / 2e-6))), reason=SPREAD)
     # costello = feyrer with k1 = 0; torque factor at zero twist: M = k0 d S
     a = coupling_law(LAWS["costello"], EA, d, k0, 0.0, GJ0, 2e-3, 0.1)
     b = coupling_law(LAWS["feyrer"], EA, d, k0, 0.0, GJ0, 2e-3, 0.1)
     assert np.allclose(a, b, rtol=1e-14)
     w, S, M, E = coupling_law(L, EA, d, k0, k1, 0.0, 2e-3, 0.0)
-    assert M == pytest.approx(k0 * d * S, rel=1e-12)
+    check('M - (k0 * d * S)', M - (k0 * d * S), 1e-12 * np.max(np.abs((k0 * d * S))), reason=EXACT)
 
 
 def test_torque_factor_law():
     EA, d, k0, k1, GJ0 = 2.28e7, 0.022, 0.08, 0.5, 20.0
     w, S, M, E = coupling_law(LAWS["torque-factor"], EA, d, k0, k1, GJ0, 3e-3, 0.2)
     assert S == EA * 3e-3
-    assert M == pytest.approx(d * S * (k0 + k1 * d * 0.2) + GJ0 * 0.2, rel=1e-14)
-    assert E == pytest.approx(0.5 * EA * 9e-6 - S * 1.003, rel=1e-14)   # axial only: s-rows = tension balance
+    check('M - (d * S * (k0 + k1 * d * 0.2) + GJ0 * 0.2)', M - (d * S * (k0 + k1 * d * 0.2) + GJ0 * 0.2), 1e-14 * np.max(np.abs((d * S * (k0 + k1 * d * 0.2) + GJ0 * 0.2))), reason=EXACT)
+    check('E - (0.5 * EA * 9e-6 - S * 1.003)', E - (0.5 * EA * 9e-6 - S * 1.003), 1e-14 * np.max(np.abs((0.5 * EA * 9e-6 - S * 1.003))), reason=EXACT)  # axial only: s-rows = tension balance
 
 
 def test_transport_angle_follows_frame_rotation_and_branch():
@@ -78,20 +83,20 @@ def test_transport_angle_follows_frame_rotation_and_branch():
         b = _rot(t, th) @ a * rng.uniform(0.5, 2.0)      # v_B: v_A turned about t (any length)
         b += rng.normal() * t                             # plus any component along t
         # round-off: measured 2.2e-15, 2.7e-15 rad
-        assert transport_angle(*t, *a, *b, 0.0) == pytest.approx(th, abs=2e-14)
-        assert transport_angle(*t, *a, *b, th + 2 * math.pi) == pytest.approx(th + 2 * math.pi, abs=2e-14)
+        check('transport_angle(*t, *a, *b, 0.0) - th', transport_angle(*t, *a, *b, 0.0) - th, 2e-14, reason=ROUNDOFF)
+        check('transport_angle(*t, *a, *b, th + 2 * math.pi) - (th + 2 * math.pi)', transport_angle(*t, *a, *b, th + 2 * math.pi) - (th + 2 * math.pi), 2e-14, reason=ROUNDOFF)
         # gradient against central differences
         gt, ga, gb = np.zeros(3), np.zeros(3), np.zeros(3)
         D = transport_angle_grad(t, a, b, th, gt, ga, gb)
-        assert D == pytest.approx(th, abs=2e-14)                 # measured 2.2e-15
+        check('D - th', D - th, 2e-14, reason=ROUNDOFF)
         f = lambda tt, aa, bb: transport_angle(*tt, *aa, *bb, th)
         h = 1e-6
         for k in range(3):      # central differences: measured 1.3e-9, 4.0e-10, 5.2e-10
             e = np.zeros(3)
             e[k] = h
-            assert gt[k] == pytest.approx((f(t + e, a, b) - f(t - e, a, b)) / (2 * h), abs=1e-8)
-            assert ga[k] == pytest.approx((f(t, a + e, b) - f(t, a - e, b)) / (2 * h), abs=1e-8)
-            assert gb[k] == pytest.approx((f(t, a, b + e) - f(t, a, b - e)) / (2 * h), abs=1e-8)
+            check('gt[k] - ((f(t + e, a, b) - f(t - e, a, b)) / (2 * h))', gt[k] - ((f(t + e, a, b) - f(t - e, a, b)) / (2 * h)), 6.5e-09, reason=SPREAD)
+            check('ga[k] - ((f(t, a + e, b) - f(t, a - e, b)) / (2 * h))', ga[k] - ((f(t, a + e, b) - f(t, a - e, b)) / (2 * h)), 2.1e-09, reason=SPREAD)
+            check('gb[k] - ((f(t, a, b + e) - f(t, a, b - e)) / (2 * h))', gb[k] - ((f(t, a, b + e) - f(t, a, b - e)) / (2 * h)), 2.7e-09, reason=SPREAD)
 
 
 @pytest.mark.parametrize("law", ["costello", "feyrer"])
@@ -148,39 +153,39 @@ def test_two_falls_against_the_closed_form():
     # measured 8.0e-4 (-7.6e-4 .. -8.0e-4 at every height: the W1 wraps' rope is counted unstretched,
     # an error that scales with 1/EA; docs/crane.md)
     assert rel.max() < 2e-3, rel.max()
-    assert res.critical_height == pytest.approx(Hc, rel=2e-3)             # measured +7.8e-4
-    assert math.degrees(res.critical_yaw) == pytest.approx(90.0, abs=0.01)  # measured 89.9985 deg
+    check('res.critical_height - Hc', res.critical_height - Hc, 2e-3 * np.max(np.abs(Hc)))
+    check('math.degrees(res.critical_yaw) - 90.0', math.degrees(res.critical_yaw) - 90.0, 0.01)
     # the torque is k d S and the two falls share the load
     S = res.columns["fall1.tension"][ok]
-    assert np.allclose(res.columns["rope.torque"][ok], k * d * S, rtol=1e-8, atol=0)     # measured 1.3e-9
-    assert np.allclose(S, c.weight / 2, rtol=1e-3, atol=0)      # measured 1.0e-4 (the falls' own weight)
+    check("rope torque / (k d S) - 1", res.columns["rope.torque"][ok] / (k * d * S) - 1, 1e-8)
+    check("fall tension / (W/2) - 1 (the falls' own weight)", S / (c.weight / 2) - 1, 1e-3)
 
 
 def test_eight_falls_large_crane():
     """docs/reference-sets.md §5.4: 65 t on 8 falls of a Ø22 mm rope; S_eff = 0.8 m."""
     c = load_crane(EIGHT)
-    assert c.S_eff == pytest.approx(0.80, abs=3e-3)              # measured 0.80031 m
+    check('c.S_eff - 0.80', c.S_eff - 0.80, 3e-3)
     res = sweep(c)
     col = res.columns
     W, n = c.weight, len(c.falls)
     assert n == 8 and res.critical_height is None
     ten = np.array([col[f"fall{i}.tension"] for i in range(1, 9)])
-    assert np.all(np.abs(ten / (W / n) - 1) < 0.05)         # W/n plus the rope's own weight: measured 1.8 %
-    assert np.ptp(ten, axis=0).max() < 4e-7 * W / n          # frictionless sheaves: equal, measured 4.1e-8
+    check("fall tension / (W/n) - 1 (plus the rope's own weight)", ten / (W / n) - 1, 0.05)
+    check('np.ptp(ten, axis=0).max()', np.ptp(ten, axis=0).max(), 4e-7 * W / n)  # frictionless sheaves: equal
     # yaw at 120 m against the two-fall law on the effective spread, sin psi = 4 k d h / S_eff^2 (no rope
     # weight, no GJ): measured 5.638 deg against 5.677 deg (-0.68 %)
     psi120 = col["block.yaw"][-1]
     assert col["height"][-1] == pytest.approx(120.0)
-    assert psi120 == pytest.approx(math.asin(4 * 0.006 * 0.022 * 120.0 / c.S_eff ** 2), rel=0.02)
+    check('psi120 - math.asin(4 * 0.006 * 0.022 * 120.0 / c.S_eff ** 2)', psi120 - math.asin(4 * 0.006 * 0.022 * 120.0 / c.S_eff ** 2), 0.02 * np.max(np.abs(math.asin(4 * 0.006 * 0.022 * 120.0 / c.S_eff ** 2))))
     # the same reeving with a 6-strand rope (k = 0.08) cables inside the hoisting range (~90 m)
     six = parse_value('{law = "costello", diameter = 0.022, k0 = 0.08, GJ0 = 100.0}')
     res8 = sweep(load_crane(EIGHT, {"rope.torsion": six, "crane.heights": 60}))
     assert res8.critical_height is not None and 80.0 < res8.critical_height < 100.0
     H_est = 0.8 ** 2 / (4 * 0.08 * 0.022)
-    assert res8.critical_height == pytest.approx(H_est, rel=0.02)      # measured +0.61 %
+    check('res8.critical_height - H_est', res8.critical_height - H_est, 0.02 * np.max(np.abs(H_est)))
     # k = 0.006: the fold is far beyond the range, near S^2/(4 k d) = 1212 m (rope weight / 100)
     far = sweep(load_crane(EIGHT, {**LIGHT_ROPE, "crane.height_max": 1600.0, "crane.heights": 40}))
-    assert far.critical_height == pytest.approx(0.8 ** 2 / (4 * 0.006 * 0.022), rel=0.03)   # measured +1.4 %
+    check('far.critical_height - (0.8 ** 2 / (4 * 0.006 * 0.022))', far.critical_height - (0.8 ** 2 / (4 * 0.006 * 0.022)), 0.03 * np.max(np.abs((0.8 ** 2 / (4 * 0.006 * 0.022)))))
 
 
 def test_bad_crane_section_names_file_and_key(tmp_path):
@@ -221,8 +226,8 @@ def test_cli_writes_rotation_csv_png_and_summary(tmp_path):
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     # cabling at a b / (4 k d) (test_two_falls_against_the_closed_form): measured +7.6e-4 on 40 heights
     # (the W1 wraps' rope counted unstretched, as in that test)
-    assert s["critical_height"] == pytest.approx(0.5 * 0.5 / (4 * 0.08 * 0.022), rel=3e-3)
-    assert (out / "rotation.png").stat().st_size > 10_000
+    check('s["critical_height"] - (0.5 * 0.5 / (4 * 0.08 * 0.022))', s["critical_height"] - (0.5 * 0.5 / (4 * 0.08 * 0.022)), 3e-3 * np.max(np.abs((0.5 * 0.5 / (4 * 0.08 * 0.022)))))
+    check_png(out / "rotation.png")
     assert main(["crane", str(tmp_path / "missing.toml"), "--out", str(out)]) == 2
 
 

@@ -390,8 +390,8 @@ def test_text_files_are_opened_with_an_explicit_encoding():
 def test_fmpy_container_runs_in_the_c_host_like_the_jacobi_master(fmus, host, tmp_path):
     """The container steps drive and plant with the values of t (Jacobi), like cosimulate(scheme=
     "jacobi"). It counts its own communication points, so the drive's S-curve time can differ from
-    the master's t_k by an ulp: equal to 1e-12 m / 1e-9 N m instead of bit for bit (measured:
-    5e-18 m, 1.3e-11 N m over 2 s)."""
+    the master's t_k by an ulp: equal to round-off level (3.9e-14 m, 1.0e-11 rad/s, 8.9e-9 N m over 2 s
+    here) instead of bit for bit."""
     from reeve_fmu.fmu.container import make_container
 
     fmu = make_container(fmus["plant"], fmus["drive"], tmp_path / "ReevingSystem.fmu")
@@ -412,10 +412,13 @@ def test_fmpy_container_runs_in_the_c_host_like_the_jacobi_master(fmus, host, tm
     ref = run_in_subprocess(f"{JOBS}:fmpy_run", fmus["plant"], fmus["drive"], 2.0, "jacobi", {}, R1_DRIVE, False,
                             timeout=600)
     cols = list(zip(*r["rows"]))
-    # torque: measured 1.1e-8 N m on the creep contact (1.3e-11 on the rigid rim)
-    for i, (name, tol) in enumerate(zip(names, (1e-12, 1e-9, 1e-7, 0.0)), start=1):
-        err = max(abs(a - b) for a, b in zip(cols[i], ref[name]))
-        assert err <= tol, (name, err)
+    from checks import check
+    # the container's communication points differ from the master's t_k by ulps, which the plant's Newton
+    # stop (tolerance 1e-4) turns into differences at round-off level that vary by platform
+    ulps = "an ulp of the communication points, amplified by the plant's Newton stop: platform-dependent"
+    for i, (name, tol) in enumerate(zip(names, (3e-13, 1e-10, 8e-8, 0.0)), start=1):
+        check(f"container in the C host against the Jacobi master: {name}",
+              [a - b for a, b in zip(cols[i], ref[name])], tol, reason=ulps if tol else None)
     assert max(cols[4]) == 1.0 and cols[1][-1] > 0.1
 
 

@@ -36,6 +36,10 @@ from reeve_fmu.hil.buses import make_bus  # noqa: E402
 from reeve_fmu.hil.drive402 import Drive402  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
 from reeve_fmu.hil.run import HilConfig, ensure_multicast, run_hil  # noqa: E402
+from checks import check_png  # noqa: E402
+from checks import check  # noqa: E402
+ROUNDOFF = "round-off, which differs by platform"
+EXACT = "exact here; round-off in general"
 
 JOBS = str(ROOT / "tests" / "hil_jobs.py")
 
@@ -153,7 +157,7 @@ def test_cia402_state_machine():
     assert d.set_mode(P.MODE_CSV) and not d.set_mode(1)
     d.target_velocity, d.torque_offset = 0.5, 100.0
     tq, _ = d.actuation(0.0, 1e-3)
-    assert tq == pytest.approx(970.0 * 0.5 + 100.0, rel=1e-12)
+    check('tq - (970.0 * 0.5 + 100.0)', tq - (970.0 * 0.5 + 100.0), 1e-12 * np.max(np.abs((970.0 * 0.5 + 100.0))), reason=EXACT)
     d.target_velocity = 50.0
     assert d.actuation(0.0, 1e-3)[0] == pytest.approx(d.max_torque)
     d.apply_controlword(P.CW_DISABLE_VOLTAGE)                           # 9
@@ -194,10 +198,10 @@ def test_lockstep_virtual_fmu_reproduces_inprocess_cosimulation(plant_fmu, tmp_p
     assert s["commands_valid"] == 5499 and s["final_state"] == "OPERATION ENABLED"
     assert s["reference"]["max_abs_diff_car_position"] == 0.0
     assert s["reference"]["max_abs_diff_motor_speed"] == 0.0
-    assert s["vs_demo_scheme"]["max_abs_diff_car_position"] < 1e-4      # measured 1.1e-5 m
+    check('s["vs_demo_scheme"]["max_abs_diff_car_position"]', s["vs_demo_scheme"]["max_abs_diff_car_position"], 1e-4)
     x = np.asarray(r["columns"]["car.position"])
-    assert abs(x[-1] - 1.0) < 5e-4             # stopped at the landing: measured -9.7e-5 m (EN 81-20: ±10 mm)
-    assert abs(np.max(x) - 1.0) < 1e-3         # overshoot: measured 1.6e-4 m
+    check('x[-1] - 1.0', x[-1] - 1.0, 5e-4)  # stopped at the landing
+    check('np.max(x) - 1.0', np.max(x) - 1.0, 1e-3)  # overshoot
     assert (out / "summary.json").is_file() and (out / "timing.csv").is_file()
     assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["steps"] == 5500
 
@@ -209,12 +213,21 @@ def test_lockstep_is_deterministic_and_realtime_reports_timing(tmp_path):
     r = _run(tmp_path, t_end=1.5, realtime=True)
     assert r["mode"] == "real-time" and r["steps"] == 1500
     assert r["wall_s"] >= 1.5 - 1e-3                               # paced by the wall clock
-    for k in ("deadline_misses", "step_time_p50_us", "step_time_p99_us", "sync_jitter_p50_us", "sync_jitter_p99_us"):
-        assert r[k] is not None and r[k] >= 0
-    # step-time and SYNC-jitter figures are reported here and measured in benchmarks/hil_lockstep.py
+    assert 0 <= r["deadline_misses"] <= 1500
     assert r["controller_stats"]["operation_enabled_at"] is not None
+    # the reported percentiles are those of the per-cycle log (timing.csv, written with 10 digits); the
+    # figures themselves are machine-dependent and measured in benchmarks/hil_lockstep.py
     cols = np.genfromtxt(tmp_path / "hil" / "timing.csv", delimiter=",", names=True)
-    assert len(cols) == 1500 and "sync_late_us" in cols.dtype.names
+    assert len(cols) == 1500
+    for col, key in (("step_time_us", "step_time"), ("sync_late_us", "sync_jitter")):
+        x = cols[col]
+        p50, p99 = np.percentile(x, 50), np.percentile(x, 99)
+        check(f"{key} p50: summary - timing.csv", r[f"{key}_p50_us"] / p50 - 1, 1e-8, reason="the CSV's 10 significant digits: the difference depends on the run's timings")
+        check(f"{key} p99: summary - timing.csv", r[f"{key}_p99_us"] / p99 - 1, 1e-8, reason="the CSV's 10 significant digits: the difference depends on the run's timings")
+        check(f"{key} max: summary - timing.csv", r[f"{key}_max_us"] / np.max(x) - 1, 1e-8, reason="the CSV's 10 significant digits: the difference depends on the run's timings")
+        assert r[f"{key}_p50_us"] <= r[f"{key}_p99_us"] <= r[f"{key}_max_us"]
+    assert np.all(cols["step_time_us"] > 0.0)        # each cycle's work takes time
+    assert np.all(cols["sync_late_us"] >= 0.0)       # a SYNC is never sent before its time
 
 
 # ------------------------------------------------------------------------------------------------
@@ -263,7 +276,7 @@ def test_delay_shorter_than_a_cycle_is_harmless_longer_is_stale_and_trips():
     assert long["frames_rejected_detail"]["stale"] > 0
     assert long["watchdog_trips"] == 1
     # the last fresh command belongs to cycle 1999; cycles 2000..2002 bring none: trip at SYNC 2003
-    assert long["brake_engaged_at"] == pytest.approx(2.003, abs=1e-9)
+    check('long["brake_engaged_at"] - 2.003', long["brake_engaged_at"] - 2.003, 1e-9, reason=EXACT)
     assert long["machine_stopped_at"] is not None
 
 
@@ -271,7 +284,7 @@ def test_dead_controller_safe_stop_and_bounded_waits():
     s = _run(inject=["controller-dies-at=2.0"], t_end=4.0, stop_when_safe=True)
     assert s["controller_stats"]["died_at"] == pytest.approx(2.0)
     assert s["watchdog_trips"] == 1 and s["fault"]["reason"].startswith("command watchdog")
-    assert s["brake_engaged_at"] == pytest.approx(2.003, abs=1e-9)     # 3 missing SYNC periods at 1 ms
+    check('s["brake_engaged_at"] - 2.003', s["brake_engaged_at"] - 2.003, 1e-9, reason=EXACT)  # 3 missing SYNC periods at 1 ms
     assert s["car_speed_at_fault_m_s"] > 0.3                            # it was moving: measured 0.519 m/s
     # the brake stops it (its deceleration is tested against the closed form in tests/test_brake.py):
     # measured at 2.151 s, after 0.046 m
@@ -294,7 +307,7 @@ def test_corrupt_frames_are_malformed_and_many_trip_the_watchdog():
     heavy = _run(inject=["corrupt=1.0@1.0"], t_end=2.0)
     assert heavy["frames_rejected_detail"]["malformed"] == 1000         # every command from 1.0 s on
     assert heavy["watchdog_trips"] == 1 and heavy["final_state"] == "FAULT"
-    assert heavy["brake_engaged_at"] == pytest.approx(1.003, abs=1e-9)
+    check('heavy["brake_engaged_at"] - 1.003', heavy["brake_engaged_at"] - 1.003, 1e-12, reason=ROUNDOFF)
 
 
 def test_realtime_late_commands_are_stale_and_trip_the_watchdog():
@@ -305,12 +318,15 @@ def test_realtime_late_commands_are_stale_and_trip_the_watchdog():
     assert r["mode"] == "real-time"
     assert r["watchdog_trips"] == 1 and r["fault"]["code"] == "0x8250"
     assert r["fault"]["reason"].startswith("command watchdog")
+    assert r["final_state"] == "FAULT"
     if r["brake_engaged_at"] < 1.0:
-        # a machine that misses 1 ms deadlines of wall time before the injection (heavy load) must still
-        # end in the same safe state, by the same watchdog, from the missed cycles themselves; the exact
-        # timing is tested on a simulated clock (test_realtime_watchdog_on_a_simulated_clock)
-        assert r["deadline_misses"] > 0 and r["final_state"] == "FAULT"
-        return
+        # a machine that misses 1 ms deadlines of wall time before the injection (heavy load) still ends
+        # in the same safe state by the same watchdog, from the missed cycles themselves (checked above);
+        # what follows needs wall-clock deadlines met, and is tested on a simulated clock as well
+        # (test_realtime_watchdog_on_a_simulated_clock)
+        assert r["deadline_misses"] > 0
+        pytest.skip(f"real time: this machine missed {r['deadline_misses']} deadlines of 1 ms and the watchdog "
+                    f"tripped at {r['brake_engaged_at']:.3f} s, before the injected delay at 1.0 s")
     assert r["frames_injected"]["delayed"] > 900
     assert r["frames_rejected_detail"]["stale"] > 900                   # measured 994
     assert 1.0 < r["brake_engaged_at"] < 1.01                           # measured 1.003 s
@@ -536,7 +552,7 @@ def test_lost_controller_heartbeat_faults_the_drive():
     res = _scripted_bench(script, n=60)
     st = res.stats
     assert st.heartbeat_faults == 1 and st.fault_code == P.ERR_HEARTBEAT
-    assert st.fault_at == pytest.approx(0.026, abs=1e-9)               # last heartbeat at 5 ms + 20 ms
+    check('st.fault_at - 0.026', st.fault_at - 0.026, 1e-12, reason=ROUNDOFF)  # last heartbeat at 5 ms + 20 ms
     assert st.watchdog_trips == 0 and st.sdo_requests == 1
 
 
@@ -662,7 +678,7 @@ def test_controller_as_sync_producer_and_sync_loss():
     assert st.steps == 100 and st.frames_rejected == 0
     assert st.commands_valid == 30                                       # one per controller SYNC
     assert st.fault_code == P.ERR_SYNC and st.fault_at == pytest.approx(0.030, abs=1e-9)
-    assert st.brake_engaged_at == pytest.approx(0.030, abs=1e-9)
+    check('st.brake_engaged_at - 0.030', st.brake_engaged_at - 0.030, 1e-9, reason=EXACT)
     assert np.all(res.column("hil.state")[:3] != P.S_OPERATION_ENABLED)
     assert np.all(res.column("hil.state")[3:30] == P.S_OPERATION_ENABLED)
     assert np.all(res.column("hil.brake_command")[31:] == 0.0)
@@ -698,24 +714,25 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
 
     r = _run(tmp_path, t_end=5.5)
     vs = {v["check"]: v for v in r["verdicts"]}
-    for check in ("stopping accuracy", "levelling band", "traction ratio during the trip", "co-simulation coupling",
+    for name in ("stopping accuracy", "levelling band", "traction ratio during the trip", "co-simulation coupling",
                   "drive at its torque/power limit", "car speed / rated speed", "HIL drive fault (watchdog, "
                   "heartbeat, SYNC, plant)", "HIL frames rejected", "HIL lock-step timeouts"):
-        assert check in vs, check
+        assert name in vs, name
     assert all(v["status"] in ("PASS", "WARN", "FAIL") and isinstance(v["limit"], float) for v in vs.values())
     assert "torque.max 1000 N·m" in vs["drive at its torque/power limit"]["source"]
-    assert vs["car speed / rated speed"]["value"] == pytest.approx(100 * r["car_speed_max_m_s"] / 1.6, rel=1e-12)
+    check('vs["car speed / rated speed"]["value"] - (100 * r["car_speed_max_m_...', vs["car speed / rated speed"]["value"] - (100 * r["car_speed_max_m_s"] / 1.6), 1e-12 * np.max(np.abs((100 * r["car_speed_max_m_s"] / 1.6))), reason=EXACT)
     cp = vs["co-simulation coupling"]
     assert cp["status"] == "PASS" and r["coupling"]["coupling_stable"] and cp["limit"] == 1.0
     assert cp["value"] == pytest.approx(max(r["coupling"]["torque_chatter_max"] / 0.05,
                                             r["coupling"]["energy_residual_max_ratio"]), rel=1e-12)
-    assert r["coupling"]["torque_chatter_max"] < 1.5e-3, r["coupling"]["torque_chatter_max"]   # measured 1.6e-4
+    check('r["coupling"]["torque_chatter_max"]', r["coupling"]["torque_chatter_max"], 1.5e-3)
     assert vs["stopping accuracy"]["status"] == "PASS" and vs["HIL drive fault (watchdog, heartbeat, SYNC, plant)"]["status"] == "PASS"
     out = tmp_path / "hil"
     md = (out / "report.md").read_text(encoding="utf-8")
     assert md.count("| **") == len(vs) and f"Overall verdict: **{r['verdict']}**" in md
     for png in ("results.png", "traction.png", "motor.png", "levelling.png"):
-        assert f"]({png})" in md and (out / png).is_file()
+        assert f"]({png})" in md
+        check_png(out / png)
     assert json.loads((out / "summary.json").read_text(encoding="utf-8"))["verdicts"] == r["verdicts"]
     _print_summary(r, HilConfig(out=str(out)))
     printed = capsys.readouterr().out
@@ -758,7 +775,7 @@ def test_hil_coupling_check_flags_an_alternating_torque():
     bad = coupling_report(t, dict(base, **{"hil.torque": 500.0 + 300.0 * (-1.0) ** np.arange(n)}), 1e-3, 1000.0)
     assert bad["coupling_stable"] is False
     assert "torque chatter" in {e["criterion"] for e in bad["instability_episodes"]}
-    assert bad["torque_chatter_max"] == pytest.approx(0.3, rel=1e-9)
+    check('bad["torque_chatter_max"] / 0.3 - 1', bad["torque_chatter_max"] / 0.3 - 1, 1e-9, reason=EXACT)
     ok = coupling_report(t, dict(base, **{"hil.torque": np.full(n, 500.0)}), 1e-3, 1000.0)
     assert ok["coupling_stable"] is True
 

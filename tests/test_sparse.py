@@ -21,6 +21,9 @@ from reeve_fmu.core.system import assemble, workspace
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from scaling import crane, elevator  # noqa: E402
+from checks import check  # noqa: E402
+SPREAD = "the cases' errors differ by more than 10x: one bound for all"
+ROUNDOFF = "round-off, which differs by platform"
 
 
 def _eps(path, eps, **kw):
@@ -92,7 +95,7 @@ def test_coloured_matrix_equals_per_coordinate_differences(name, contact):
                                 ue, J, R, R0, dxs, 1.0, bq, gv, 1e-10) == 1
     A = _dense_matrix(m, SP, st.c, q, v, qdd, ue, bq, gv)
     err = np.max(np.abs(unpack_dense(J, SP) - A)) / np.max(np.abs(A))
-    assert err <= 5e-10, err     # measured <= 6.3e-11 (planar cubic W1)
+    check('err', err, 3.3e-10, reason=SPREAD)
     # and the structure is the whole of it: no residual row outside the pattern moves
     assert pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, q, v, qdd, 0.0, ue, bq, gv) == 0
 
@@ -128,7 +131,7 @@ def test_bordered_band_lu(n, nb, kl, ku):
     x = b.copy()
     bordered_solve(J, piv, n, nb, kl, ku, x)
     err = np.max(np.abs(x - np.linalg.solve(A, b))) / np.max(np.abs(x))
-    assert err <= 1e-13, err     # measured <= 1.4e-14
+    check('err', err, 1e-13, reason=ROUNDOFF)
 
 
 def _ropes_kw(sc, **kw):
@@ -213,14 +216,14 @@ def test_sparse_path_equals_dense_path(name):
         floor = (K.brake_T / K.brake_wreg * abs(K.mot_gain) * np.finfo(float).eps * s
                  / (1.0 + np.max(np.abs(loop_d[:, i]))))
         print("brake.torque floor", floor)
-        assert err_loop[i] <= 2.0 * floor, (err_loop[i], floor)   # measured 3.2e-9 and 5.7e-9 (floor 5.9e-9)
+        check('err_loop[i]', err_loop[i], 2.0 * floor)
         err_loop = np.delete(err_loop, i)
-    assert np.max(err_loop) <= 1e-9, np.max(err_loop)   # floor measured up to 2.5e-10
-    assert np.max(err) <= 1e-9, np.max(err)             # floor measured up to 2.0e-10
+    check('np.max(err_loop)', np.max(err_loop), 1e-9, reason=SPREAD)  # floor
+    check('np.max(err)', np.max(err), 1e-9, reason=SPREAD)  # floor
     # positions, velocities, rim speeds, angles and slips hold the issue's literal 1e-10
     kin = [i for i, n in enumerate(m.output_names) if _quantity(n) in KINEMATIC]
     worst = max(np.max(_rel(loop_s[:, kin], loop_d[:, kin])), np.max(_rel(fresh_s[:, kin], fresh_d[:, kin])))
-    assert worst <= 1e-10, worst     # measured <= 4.6e-11 (a sheave speed, brake_held_8el)
+    check('worst', worst, 1e-10, reason=SPREAD)
 
 
 def test_sparse_difference_is_the_roundoff_floor():

@@ -11,9 +11,9 @@ corruption. So every FMU-loading job runs in its own interpreter and is judged b
           any other string -> Python source executed with `ARGS` bound; it must set `result`.
     args and result travel as JSON (NaN/Inf allowed). Returns the result. Raises
     SubprocessJobError with the child's traceback/stdout/stderr when the job raised, timed out, died
-    before writing its result, or exited non-zero. A single retry is made only when the result file
-    was written completely and the process then died from a signal (exit-time abort, e.g. SIGABRT
-    from `free(): corrupted ...` or SIGSEGV during interpreter shutdown); the retry's outcome counts.
+    before writing its result, or exited non-zero, also after writing its result: a crash at exit is
+    a failure, never retried (the child skips interpreter finalisation once its result is on disk, so
+    a crash there is the job's own).
 
 `SlaveHandle` (context manager)
     h = SlaveHandle.open(fmu_path, "plant")           # extract, instantiate(loggingOn=True)
@@ -37,8 +37,7 @@ from ctypes import byref
 from pathlib import Path
 from typing import Any, Iterable, NamedTuple, Optional, Sequence, Union
 
-__all__ = ["run_in_subprocess", "SubprocessJobError", "SlaveHandle", "LogMessage", "STATUS_NAMES",
-           "last_run_info"]
+__all__ = ["run_in_subprocess", "SubprocessJobError", "SlaveHandle", "LogMessage", "STATUS_NAMES"]
 
 STATUS_NAMES = ("ok", "warning", "discard", "error", "fatal", "pending")
 
@@ -94,10 +93,6 @@ sys.stdout.flush(); sys.stderr.flush()
 os._exit(0)
 """
 
-#: diagnostics of the most recent run_in_subprocess call (attempts, return codes, retried?)
-last_run_info: dict = {}
-
-
 class SubprocessJobError(RuntimeError):
     def __init__(self, msg: str, *, returncode=None, stdout="", stderr="", child_traceback=None):
         self.returncode = returncode
@@ -122,13 +117,6 @@ def _json_default(o):
 
 def _repo_root() -> str:
     return str(Path(__file__).resolve().parents[2])
-
-
-def _exit_time_abort(rc: int) -> bool:
-    """Death by signal (negative rc) or the shell-style 128+signal codes of abort/segv/bus error."""
-    if rc < 0:
-        return True
-    return rc in (128 + signal.SIGABRT, 128 + signal.SIGSEGV, 128 + signal.SIGBUS)
 
 
 def _run_once(spec: str, args_path: str, workdir: str, timeout: float, env: dict, cwd, python):
@@ -161,7 +149,7 @@ def _run_once(spec: str, args_path: str, workdir: str, timeout: float, env: dict
 
 def run_in_subprocess(func_path_or_code: str, *args, timeout: float = 120.0,
                       env: Optional[dict] = None, cwd: Union[str, Path, None] = None,
-                      python: Optional[str] = None, retry_exit_abort: bool = True) -> Any:
+                      python: Optional[str] = None) -> Any:
     """Run an FMU-loading job in a fresh interpreter and return its JSON result (see module doc)."""
     if _FUNC_SPEC.match(func_path_or_code.strip()) and "\n" not in func_path_or_code.strip():
         spec = func_path_or_code.strip()
@@ -173,33 +161,21 @@ def run_in_subprocess(func_path_or_code: str, *args, timeout: float = 120.0,
     child_env["PYTHONPATH"] = root + (os.pathsep + pp if pp else "")
     child_env.setdefault("PYTHONFAULTHANDLER", "1")
     python = python or sys.executable
-    attempts = []
     with tempfile.TemporaryDirectory(prefix="reeve_job_") as workdir:
         args_path = os.path.join(workdir, "args.json")
         with open(args_path, "w", encoding="utf-8") as fh:
             json.dump(list(args), fh, allow_nan=True, default=_json_default)
-        for attempt in (1, 2):
-            rc, payload, out, err = _run_once(spec, args_path, workdir, timeout, child_env,
-                                              cwd, python)
-            attempts.append({"returncode": rc, "status": (payload or {}).get("status")})
-            last_run_info.clear()
-            last_run_info.update(attempts=list(attempts), retried=attempt > 1)
-            if payload is not None and payload.get("status") == "error":
-                raise SubprocessJobError("job raised an exception", returncode=rc, stdout=out,
-                                         stderr=err, child_traceback=payload.get("error"))
-            if payload is None:
-                raise SubprocessJobError(
-                    f"job died without writing its result (exit code {rc})", returncode=rc,
-                    stdout=out, stderr=err)
-            if rc == 0:
-                return payload["result"]
-            if attempt == 1 and retry_exit_abort and _exit_time_abort(rc):
-                continue  # result written, then the interpreter aborted at exit: retry once
-            raise SubprocessJobError(
-                f"job wrote its result but exited with code {rc}"
-                + (" (again, after one retry)" if attempt > 1 else ""),
-                returncode=rc, stdout=out, stderr=err)
-    raise AssertionError("unreachable")  # pragma: no cover
+        rc, payload, out, err = _run_once(spec, args_path, workdir, timeout, child_env, cwd, python)
+    if payload is not None and payload.get("status") == "error":
+        raise SubprocessJobError("job raised an exception", returncode=rc, stdout=out,
+                                 stderr=err, child_traceback=payload.get("error"))
+    if payload is None:
+        raise SubprocessJobError(f"job died without writing its result (exit code {rc})",
+                                 returncode=rc, stdout=out, stderr=err)
+    if rc != 0:
+        raise SubprocessJobError(f"job wrote its result but exited with code {rc}", returncode=rc,
+                                 stdout=out, stderr=err)
+    return payload["result"]
 
 
 # ==================================================================================================
