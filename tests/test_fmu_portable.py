@@ -238,9 +238,12 @@ def _python_locations() -> tuple[list, list]:
     return dirs, files
 
 
-def _without_python_argv(cmd: list) -> list:
+def _without_python_argv(cmd: list, readonly=()) -> list:
+    """argv running cmd in a mount namespace without any Python of this machine; `readonly`: folders
+    made read-only there (an FMU extracted where the host cannot write)."""
     dirs, files = _python_locations()
     mounts = [f"mount -t tmpfs none {d}" for d in dirs] + [f"mount --bind /dev/null {f}" for f in files]
+    mounts += [f"mount --bind {d} {d}; mount -o remount,bind,ro {d}" for d in readonly]
     probe = ("for p in python3 python; do if command -v $p >/dev/null 2>&1 && $p -c pass 2>/dev/null; "
              "then echo \"python found: $p\" >&2; exit 97; fi; done; "
              f"if ls /usr/lib/python3*/os.py {sys.base_prefix}/lib/python*/os.py 2>/dev/null | grep -q .; "
@@ -259,8 +262,8 @@ def _namespace_available() -> str:
 
 def test_standalone_fmu_runs_in_a_native_host_on_a_machine_without_python(fmus, standalone, host, tmp_path):
     """The C host in a mount namespace with every Python location hidden (prefixes, venvs, stdlibs,
-    libpython*, python* executables, the user cache), a minimal environment and an empty kernel cache:
-    2000 steps of the standalone FMUs equal the normal FMUs' fmpy run, exit 0."""
+    libpython*, python* executables, the user cache), a minimal environment, an empty kernel cache and
+    the extracted FMUs read-only: 2000 steps of the standalone FMUs equal the normal FMUs' fmpy run, exit 0."""
     why = _namespace_available()
     if why:
         pytest.skip(why)  # allowed only where it is true (tests/conftest.py SKIP_POLICY): CI runs as root
@@ -268,7 +271,9 @@ def test_standalone_fmu_runs_in_a_native_host_on_a_machine_without_python(fmus, 
     plan.write_text(_plan({**standalone}), encoding="utf-8")
     out = tmp_path / "out.csv"
     env = _minimal_env({"REEVE_FMU_CACHE_DIR": str(tmp_path / "empty-cache")})
-    p = subprocess.run(_without_python_argv([str(host), str(plan), str(out)]), capture_output=True, text=True,
+    argv = _without_python_argv([str(host), str(plan), str(out)], readonly=(standalone["plant_dir"],
+                                                                           standalone["drive_dir"]))
+    p = subprocess.run(argv, capture_output=True, text=True,
                        encoding="utf-8", errors="replace", timeout=900, env=env, cwd=tmp_path)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "[ERROR]" not in p.stderr and "[FATAL]" not in p.stderr and "[WARNING]" not in p.stderr, p.stderr
