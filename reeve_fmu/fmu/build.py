@@ -318,7 +318,7 @@ def _carry(built: Path, reqs, *, kernels: bool, standalone: bool, log) -> None:
     if kernels:
         from . import kernels as kernel_bundle
 
-        found = kernel_bundle.collect(built)
+        found = kernel_bundle.collect(built, log=log)
         if found["files"]:
             kernel_bundle.add_to_fmu(built, found)
         else:

@@ -46,14 +46,29 @@ def _numba_version() -> Optional[str]:
         return None
 
 
-def collect(fmu_path, *, stop_time: float = 1.0, step: float = 1e-3, timeout: float = 1800.0) -> dict:
-    """Run the FMU in a subprocess and gather the kernel cache files it used.
+def _cache_is_cold() -> bool:
+    """No compiled kernel of the current sources in the user's cache yet: the warm-up compiles them."""
+    from ..core import _jit
+
+    if not _jit.JIT or os.environ.get("NUMBA_CACHE_DIR"):
+        return False
+    d = Path(_jit.cache_root()) / "numba" / _jit.source_hash()
+    return not (d.is_dir() and any(d.rglob("*.nbi")))
+
+
+def collect(fmu_path, *, stop_time: float = 1.0, step: float = 1e-3, timeout: float = 1800.0,
+            log=None) -> dict:
+    """Run the FMU in a subprocess and gather the kernel cache files it used; `log` gets one line
+    when that run has to compile the kernels first (the first build on a machine).
 
     Returns {"manifest": {...}, "files": {relative path: bytes}}; {"files": {}, "why": reason} when
     there is nothing to carry (no numba, an unwritable cache, a failed run)."""
     numba_version = _numba_version()
     if numba_version is None:
         return {"files": {}, "why": "numba is not installed: the FMU's model runs as plain Python"}
+    if log is not None and _cache_is_cold():
+        log(f"reeve_fmu: compiling the model's kernels for {Path(fmu_path).stem} (first build with these "
+            f"sources on this machine: about 1-2 minutes on 2 cores; later builds and runs load them)")
     with tempfile.TemporaryDirectory(prefix="reeve_kernels_") as tmp:
         record = Path(tmp) / "indexes.txt"
         script = Path(tmp) / "warmup.py"
