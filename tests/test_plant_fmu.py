@@ -285,7 +285,8 @@ def test_plant_reset_after_errors_reproduces_a_clean_run(fmus):
 def test_drive_errors_are_logged(fmus):
     r = job("drive_errors", fmus["drive"])
     bad = "\n".join(m for s, m in r["bad_param_msgs"] if s == 3)
-    assert r["bad_param_step"] == 2 and "pretorque exceeds T_max" in bad and "Traceback" in bad
+    assert r["bad_param_exit"] == 3 and r["bad_param_step"] == 2          # fmi2Error, then fmi2Discard
+    assert "pretorque exceeds T_max" in bad and "Traceback" in bad
     assert r["ok"] == 0 and r["nan_step"] == 2 and r["recovered"] == 0
     assert "motor.speed = nan is not finite" in "\n".join(m for _, m in r["nan_msgs"])
 
