@@ -265,14 +265,14 @@ def tolerances(d):
     rows = {}
     for r in d:
         f, _, test = r["test"].partition("::")
-        key = (f.removeprefix("tests/"), test.split("[")[0], r["quantity"])
+        key = (f.removeprefix("tests/"), test.split("[")[0], r["quantity"], r.get("kind") or "")
         worst = rows.get(key)
         if worst is None or _margin(r) < _margin(worst):
             rows[key] = dict(r, n=(worst or {}).get("n", 0) + 1)
         else:
             worst["n"] += 1
     out = []
-    for (f, test, q), r in sorted(rows.items()):
+    for (f, test, q, _kind), r in sorted(rows.items()):
         m = _margin(r)
         floor = r.get("kind") == "min"
         out.append([f"`{f}`", test, q.replace("|", "\\|"), g(r["observed"]), ("≥ " if floor else "") + g(r["bound"]),
