@@ -29,8 +29,7 @@ RECORDS: list = []
 #: a bound more than this many times the observed error needs a reason
 RATIO = 10.0
 
-#: reasons shared by many tests
-ROUNDOFF = "round-off, which differs by platform"
+#: the reason of the convergence-order checks
 SECOND_ORDER = ("the error ratio at steps h and h/2 is 4 for a second-order method; +-0.5 tells order 2 from "
                 "orders 1 and 3 (ratios 2 and 8), and how close to 4 it comes depends on the steps")
 
