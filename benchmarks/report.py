@@ -265,20 +265,29 @@ def tolerances(d):
     rows = {}
     for r in d:
         f, _, test = r["test"].partition("::")
-        key = (f.removeprefix("tests/"), test.split("[")[0], r["quantity"])
+        key = (f.removeprefix("tests/"), test.split("[")[0], r["quantity"], r.get("kind") or "")
         worst = rows.get(key)
-        if worst is None or r["observed"] * worst["bound"] > worst["observed"] * r["bound"]:
+        if worst is None or _margin(r) < _margin(worst):
             rows[key] = dict(r, n=(worst or {}).get("n", 0) + 1)
         else:
             worst["n"] += 1
     out = []
-    for (f, test, q), r in sorted(rows.items()):
-        ratio = "—" if r["observed"] == 0 else f"{r['bound'] / r['observed']:.1f}"
-        out.append([f"`{f}`", test, q.replace("|", "\\|"), g(r["observed"]), g(r["bound"]), ratio, r["n"],
-                    (r.get("reason") or "").replace("|", "\\|")])
-    return (f"{len(d)} checks in {len(rows)} rows:\n\n"
-            + table(["file", "test", "quantity", "observed", "bound", "bound / observed", "checks",
+    for (f, test, q, _kind), r in sorted(rows.items()):
+        m = _margin(r)
+        floor = r.get("kind") == "min"
+        out.append([f"`{f}`", test, q.replace("|", "\\|"), g(r["observed"]), ("≥ " if floor else "") + g(r["bound"]),
+                    "—" if m == float("inf") else f"{m:.1f}", r["n"], (r.get("reason") or "").replace("|", "\\|")])
+    return (f"{len(d)} checks in {len(rows)} rows (a bound ≥ x is a floor: the observed value must reach it, "
+            "and the margin is observed / floor):\n\n"
+            + table(["file", "test", "quantity", "observed", "bound", "margin", "checks",
                      "why wider than 10×"], out))
+
+
+def _margin(r) -> float:
+    """bound / observed for an error bound, observed / floor for a floor (tests/checks.py)."""
+    if r.get("kind") == "min":
+        return r["observed"] / r["bound"]
+    return float("inf") if r["observed"] == 0 else r["bound"] / r["observed"]
 
 
 #: NAME -> (JSON file in docs/img, the command that writes it, function of the loaded JSON)

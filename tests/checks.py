@@ -6,6 +6,10 @@ the records of a run to tests/tolerances.json and fails the session on a bound m
 error unless `reason` says why the bound cannot be tighter (round-off that differs between platforms, a
 measured scatter). The observed value is the run's own, so no comment beside the bound goes stale.
 
+`check_min(quantity, observed, floor, reason=None)`: the lower-bound form, for a quantity that must be
+large enough (a run that moved, a count of injected faults): asserts min(observed) >= floor > 0 and
+records it the same way; a floor below a tenth of the observed value needs a reason.
+
 `check_png(path, lines=1)`: the file is a PNG of at least 300 x 200 pixels on which the first `lines`
 colours of matplotlib's colour cycle (C0, C1, ...; also drawn half transparent) each cover at least
 `min_pixels` pixels: data was drawn, not only axes, grid and labels, which are grey or black (an empty or
@@ -25,6 +29,10 @@ RECORDS: list = []
 #: a bound more than this many times the observed error needs a reason
 RATIO = 10.0
 
+#: the reason of the convergence-order checks
+SECOND_ORDER = ("the error ratio at steps h and h/2 is 4 for a second-order method; +-0.5 tells order 2 from "
+                "orders 1 and 3 (ratios 2 and 8), and how close to 4 it comes depends on the steps")
+
 
 def _test_id() -> str:
     return os.environ.get("PYTEST_CURRENT_TEST", "?").rsplit(" (", 1)[0]
@@ -40,12 +48,32 @@ def check(quantity: str, observed, bound: float, reason: str | None = None) -> f
     return obs
 
 
-def too_wide(rec: dict) -> bool:
-    """A bound more than RATIO x its observed error (or above an exact zero) without a reason."""
-    if rec.get("reason"):
-        return False
+def check_min(quantity: str, observed, floor: float, reason: str | None = None) -> float:
+    """Assert min(observed) >= floor (> 0) and record it; returns the observed minimum."""
+    assert floor > 0.0, f"{quantity}: a floor must be positive ({floor!r}); a sign is checked by check()"
+    obs = float(np.min(np.asarray(observed, dtype=float)))
+    caller = sys._getframe(1)
+    RECORDS.append({"test": _test_id(), "quantity": quantity, "observed": obs, "bound": float(floor),
+                    "reason": reason, "kind": "min",
+                    "line": f"{os.path.basename(caller.f_code.co_filename)}:{caller.f_lineno}"})
+    assert obs >= floor, f"{quantity}: {obs:.3g} < floor {floor:.3g}"      # NaN fails too
+    return obs
+
+
+def ratio(rec: dict) -> float:
+    """How far the bound is from what the run saw: bound / observed, or observed / floor (inf at 0)."""
     b, o = rec["bound"], rec["observed"]
-    return b > 0.0 and (o == 0.0 or b > RATIO * o)
+    if rec.get("kind") == "min":
+        return o / b
+    return float("inf") if o == 0.0 else b / o
+
+
+def too_wide(rec: dict) -> bool:
+    """A bound more than RATIO x its observed error (or above an exact zero), or a floor below a RATIO-th
+    of the observed value, without a reason."""
+    if rec.get("reason") or rec["bound"] <= 0.0:
+        return False
+    return ratio(rec) > RATIO
 
 
 def check_png(path, lines: int = 1, min_pixels: int = 50) -> None:

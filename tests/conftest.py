@@ -103,6 +103,12 @@ def pytest_runtest_logreport(report):
 
 
 _RAN: set = set()         # ids of the tests that ran (their records replace the file's)
+_COLLECTED: set = set()   # ids of the tests collected here, before deselection (not on an xdist controller)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(session, config, items):
+    _COLLECTED.update(item.nodeid for item in items)
 
 
 class _XdistRecords:
@@ -126,7 +132,11 @@ def _write_tolerances() -> list:
         except ValueError:
             old = []
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    keep = [r for r in old if r["test"] not in _RAN and os.path.exists(os.path.join(root, r["test"].split("::")[0]))]
+    files = {t.split("::")[0] for t in _COLLECTED}
+    # a record stays while its test exists: its file is there and, where this run collected the file,
+    # the test is among the collected ones (a renamed or removed test's records go)
+    keep = [r for r in old if r["test"] not in _RAN and os.path.exists(os.path.join(root, r["test"].split("::")[0]))
+            and (r["test"].split("::")[0] not in files or r["test"] in _COLLECTED)]
     recs = keep + checks.RECORDS
     recs.sort(key=lambda r: (r["test"], r["quantity"]))
     with open(TOLERANCES, "w", encoding="utf-8") as fh:
@@ -155,10 +165,12 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
             terminalreporter.line(f"{nodeid}: {reason}")
     wide = [r for r in checks.RECORDS if checks.too_wide(r)]
     if wide:
-        terminalreporter.section(f"bounds more than {checks.RATIO:g}x the observed error without a reason: failing")
+        terminalreporter.section(f"bounds more than {checks.RATIO:g}x the observed error (floors below a "
+                                 f"{checks.RATIO:g}th of the observed value) without a reason: failing")
         for r in wide:
+            kind = "floor" if r.get("kind") == "min" else "bound"
             terminalreporter.line(f"{r['line']} {r['test'].split('::', 1)[-1]}: {r['quantity']}: observed "
-                                  f"{r['observed']:.3g}, bound {r['bound']:.3g}")
+                                  f"{r['observed']:.3g}, {kind} {r['bound']:.3g}")
     if checks.RECORDS:
         terminalreporter.line(f"{len(checks.RECORDS)} checked bounds recorded in tests/tolerances.json")
 

@@ -20,7 +20,7 @@ from reeve_fmu.core.solver import Simulator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from linearise import linearised  # noqa: E402
-from checks import check  # noqa: E402
+from checks import SECOND_ORDER, check, check_min  # noqa: E402
 
 ROUNDOFF = "round-off, which differs by platform"
 
@@ -208,10 +208,13 @@ def test_rope_over_sheaves_on_a_rotating_and_a_translating_body():
 
     d1, moved = _run_beam(m, 1e-3, geometry_holds)
     d2, _ = _run_beam(m, 5e-4)
-    assert moved["beam.theta"] < -0.4 and moved["block.z"] < -0.3   # measured -0.43 rad, -0.34 m
-    assert moved["tip.s"] > 0.15 and moved["blk.s"] < -0.25           # rope runs over both (0.20, -0.31 m)
-    check('d1', d1, 1e-6)
-    assert 3.5 < d1 / d2 < 4.5                                         # measured 3.9: second order
+    # both bodies move and the rope runs over both sheaves, so the drift test exercises all of it
+    check_min("beam rotation [rad]", -moved["beam.theta"], 0.4)
+    check_min("block descent [m]", -moved["block.z"], 0.3)
+    check_min("rope run over the tip sheave [m]", moved["tip.s"], 0.15)
+    check_min("rope run over the block sheave [m]", -moved["blk.s"], 0.25)
+    check('relative energy drift at h = 1 ms', d1, 1e-6)
+    check("drift ratio h / (h/2) - 4 (second order)", d1 / d2 - 4, 0.5, reason=SECOND_ORDER)
 
 
 @pytest.mark.parametrize("body, model, key", [

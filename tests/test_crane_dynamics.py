@@ -1,6 +1,7 @@
 """Axial-torsion coupling in the dynamic engine: the hook block's yaw while hoisting against the
-quasi-static closed form of a two-fall reeving, and the torsion forces against the gradient of the
-torsion energy (exact tangents, rotation-vector block, twist coordinates)."""
+quasi-static closed form of a two-fall reeving and against the torque balance of the 8-fall block
+(written in this file), and the torsion forces against the gradient of the torsion energy (exact
+tangents, rotation-vector block, twist coordinates)."""
 import math
 from dataclasses import replace
 
@@ -11,7 +12,7 @@ from reeve_fmu.core.model import build_model, new_state
 from reeve_fmu.core.scene import SceneError, load_scene, parse_scene
 from reeve_fmu.core.solver import Simulator
 from reeve_fmu.core.system import assemble, energy
-from checks import check  # noqa: E402
+from checks import check, check_min  # noqa: E402
 
 SCENE = "scenes/crane_two_fall_hoist.toml"
 K_D_AB = 4 * 0.08 * 0.022 / (0.5 * 0.5)     # 4 k d / (a b): sin(psi) = K_D_AB h
@@ -49,9 +50,9 @@ def test_lowering_follows_the_quasi_static_yaw():
     psi = res["block.rotation.z"]
     ref = _yaw_reference(res.time, h, math.asin(K_D_AB * h[0]))
     span = np.ptp(ref)
-    assert span > 0.29                                             # lowered 10 m: 0.144 -> 0.438 rad
-    # measured 0.13 % of the range (-0.09 % of the yaw): the model's equilibrium is 0.08 % below the
-    # closed form (the W1 wraps' bookkeeping, below); its inertia and damping are the reference's
+    check_min("two-fall yaw range of the lowering [rad]", span, 0.29)     # h 5.1 -> 15.1 m
+    # the model's equilibrium sits slightly below the closed form (the W1 wraps' bookkeeping, below);
+    # its inertia and damping are the reference's
     check('two-fall yaw - one-dof yaw equation', psi - ref, 5e-3 * span)
     st0 = sim.initial_state()
     jd = m.sheave_dof["drum"]
@@ -63,9 +64,8 @@ def test_lowering_follows_the_quasi_static_yaw():
         st = sim._statics(new_state(m, q=q), "rope-length")
         psi_qs.append(st.q[m.body_dofs["block"]["rz"]])
         psi_cf.append(math.asin(K_D_AB * _fall_length(st.q[m.body_dofs["block"]["z"]])))
-    # the equilibrium against the closed form: measured -0.080 % (h = 5.1 m) to -0.084 % (15.1 m) of
-    # the yaw; the torsion moment is 2 k d S to 4e-5, the rest is the W1 wraps' bookkeeping (their
-    # rope counted unstretched and its weight lumped at t = 0: docs/crane.md)
+    # the equilibrium against the closed form: the torsion moment is 2 k d S, the rest is the W1 wraps'
+    # bookkeeping (their rope counted unstretched: docs/crane.md)
     check('static yaw / closed form - 1', np.array(psi_qs) / np.array(psi_cf) - 1.0, 2e-3)
     tilt = np.max(np.abs(res["block.rotation.x"])) + np.max(np.abs(res["block.rotation.y"]))
     check('block tilt while lowering [rad]', tilt, 1e-5)
@@ -125,31 +125,67 @@ def _as_crane(path, **sets):
     return load_crane(path, {"crane.block": "block", "crane.height_min": 2.0, "crane.height_max": 40.0, **sets})
 
 
-def test_eight_fall_slow_hoist_follows_the_quasi_static_sweep():
-    """The 8-fall block lowered 20 m (h = 10.1 -> 30.1 m) at half the scene's rope speed, Costello
-    k0 = 0.006: the dynamic yaw stays within 1 % of the yaw range of the statics `reeve-fmu crane`
-    solves (the same model, the fall length prescribed, the drum free) at the same block height, and
-    settles onto it."""
-    from reeve_fmu.studies.crane import Statics, load_crane
+def _eight_fall_yaw(sc, h):
+    """Quasi-static yaw of the 8-fall block at fall length h, from the torque balance about the vertical,
+    written from the scene's numbers (independent of the engine and of `reeve-fmu crane`).
+
+    At rest every fall hangs vertically from the tip to the block sheave at the same plan position p_i
+    (x = +-R of the block sheave, y its centre). Yawed by psi, the block carries the fall's lower end to
+    R(psi) p_i; a fall of tension S pulls it back with the moment S |p_i|^2 sin(psi) / L_i (L_i its
+    chord). S is the fall's mean tension, W/n + w h/2 (w = rhoA g): the falls share the block's weight
+    W, and their own weight adds half of it on average. The rope torque M is the same in every span at
+    rest (the twist passes the sheaves freely), M = k0 d S + G' kappa with G' = GJ0 - EA d^2 k0^2 (the
+    Costello law at the span's tension S); between the drum and the dead end, where the twist is
+    clamped, the yaw twists each of the n falls by -psi, so with L_r the length of those spans and
+    <S> their length-mean tension, M = k0 d <S> - G' n psi / L_r. The drum span (from the drum to the
+    lead sheave, rising dz) carries the falls' top tension W/n + w h less w dz/2 on average. The
+    balance is n M = sum_i S |p_i|^2 sin(psi) / L_i."""
+    from scipy.optimize import brentq
+
+    g, n = 9.81, 8
+    sh = {x.name: x for x in sc.sheaves}
+    rope, = sc.ropes
+    tor = rope.torsion
+    W, w = sc.bodies[0].mass * g, rope.rhoA * g
+    p2 = [sh[b].radius ** 2 + sh[b].center[1] ** 2 for b in ("B1", "B2", "B3", "B4") for _ in (0, 1)]
+    drum, lead = np.array(sh["drum"].center), np.array(sh["lead"].center)
+    l0 = math.sqrt(np.sum((lead - drum) ** 2) - (sh["drum"].radius - sh["lead"].radius) ** 2)   # cw, cw
+    dz = lead[2] - drum[2]
+    S = W / n + w * h / 2
+    L_r = l0 + n * h
+    S_mean = (l0 * (W / n + w * h - w * dz / 2) + n * h * S) / L_r
+    G = tor.GJ0 - rope.EA * tor.diameter ** 2 * tor.k0 ** 2
+
+    def balance(psi):
+        M = tor.k0 * tor.diameter * S_mean - G * n * psi / L_r
+        return n * M - sum(S * q * math.sin(psi) / math.sqrt(h * h + 2 * q * (1 - math.cos(psi))) for q in p2)
+    return brentq(balance, 0.0, 1.0, xtol=1e-15)
+
+
+def test_eight_fall_slow_hoist_follows_the_quasi_static_yaw():
+    """The 8-fall block lowered 20 m (h = 10 -> 30 m) at half the scene's rope speed, Costello
+    k0 = 0.006: the dynamic yaw starts on the quasi-static yaw of the torque balance (_eight_fall_yaw),
+    stays within 1 % of its range while moving (lag) and settles onto it.
+
+    The rope is 10 x stiffer than the scene's: the model counts a W1 wrap's rope unstretched, which
+    turns this block by about 0.04 of the rope strain at any height (docs/crane.md, "W1 wraps and rope
+    weight"): 0.8 % of the yaw range with the scene's EA, 0.08 % at 10 x EA, where the bounds at rest
+    and settled are 0.2 %. Nothing else in the yaw depends on EA beyond the twist stiffness G', which
+    the closed form carries."""
     sc = load_scene(EIGHT_HOIST)
-    sc = replace(sc, t_end=180.0, drive=replace(sc.drive, v_max=1.0))
+    rope, = sc.ropes
+    sc = replace(sc, t_end=180.0, drive=replace(sc.drive, v_max=1.0), ropes=(replace(rope, EA=10.0 * rope.EA),))
     res = Simulator(build_model(sc)).run()
-    crane = load_crane("scenes/crane_8fall.toml")
-    st = crane.sim.initial_state()
-    S = Statics(crane, st)
-    q = st.q
     idx = np.arange(0, len(res.time), 20)
-    dyn, ref = res["block.rotation.z"][idx], []
-    for i in idx:
-        q, _ = S.solve(q, "height", -(res["block.position.z"][i] + 1.0))   # h: block shaft 1 m above the centre of mass
-        ref.append(q[S.jyaw])
-    ref = np.array(ref)
+    dyn = res["block.rotation.z"][idx]
+    h = -(res["block.position.z"][idx] + 1.0)                 # the block's sheave shaft 1 m above its centre of mass
+    ref = np.array([_eight_fall_yaw(sc, x) for x in h])
     span = np.ptp(ref)
-    assert span > 0.016                                        # 0.0082 -> 0.0246 rad
+    check_min("8-fall yaw range of the lowering [rad]", span, 0.016)      # h 10 -> 30 m
     err = np.abs(dyn - ref) / span
-    check('8-fall yaw - sweep statics, / yaw range (lag while moving)', err.max(), 0.01)
-    check('8-fall yaw - sweep statics at rest, / yaw range', err[0], 1e-6, reason="exact here (the same statics), round-off in general")
-    check('8-fall yaw - sweep statics settled, / yaw range', err[-1], 6e-5)  # settled
+    check('8-fall yaw - closed form, / yaw range (lag while moving)', err.max(), 0.01)
+    check('8-fall yaw - closed form at rest, / yaw range', err[0], 2e-3)
+    check('8-fall yaw - closed form settled, / yaw range', err[-1], 2e-3)
 
 
 def test_cabling_height_by_yaw_continuation_of_the_dynamic_model():
@@ -194,11 +230,14 @@ def test_slow_lowering_cables_where_the_sweep_finds_the_fold():
         run = replace(sc, t_end=2.0 + 64.0 / v + 10.0, drive=replace(sc.drive, distance=64.0, v_max=v))
         res = Simulator(build_model(run)).run()
         past = np.flatnonzero(np.abs(res["block.rotation.z"]) > math.pi / 2)
-        assert len(past) and res["block.rotation.z"][-1] > 10.0          # spun: measured 56, 129 rad
+        assert len(past)
+        check_min("block yaw at the end of the run: spun [rad]", res["block.rotation.z"][-1], 10.0,
+                  reason="past the fold the block spins on until the run ends: how far depends on the time left")
         h90.append(_fall_length(res["block.position.z"][past[0]]))
-    Hc = sweep(_as_crane(SCENE)).critical_height                         # 35.538 m
+    Hc = sweep(_as_crane(SCENE)).critical_height
     lag = np.array(h90) / Hc - 1
-    assert np.all(lag > 0) and np.all(lag < 0.015)                       # measured +0.98 %, +0.60 %
+    assert np.all(lag > 0)                                               # the fold is passed late
+    check("height at 90 deg / sweep's critical height - 1 (slow passage)", lag, 0.015)
     a, b = 0.1 ** (2 / 3), 0.05 ** (2 / 3)
     h0 = (h90[1] * a - h90[0] * b) / (a - b)                             # h90 = h0 + c v^(2/3)
     check('cabling height extrapolated to v -> 0 - sweep [m]', h0 - Hc, 3e-3 * np.max(np.abs(Hc)))

@@ -103,7 +103,7 @@ def test_crane_fmus_build_validate_and_declare_units(fmus):
 def test_crane_fmu_static_tension_and_honest_state(fmus):
     r = job("static_and_state", fmus["plant"])
     assert r["errors"] == []
-    # payload-end rope force at rest = M g; measured -2.1e-8 relative at t = 0 and after 2 s
+    # payload-end rope force at rest = M g, at t = 0 and after 2 s
     for row in (r["t0"], r["t2"]):
         check('row[0] - (M * G)', row[0] - (M * G), 2e-7 * np.max(np.abs((M * G))))
     check('r["t2"][1] - r["t0"][1]', r["t2"][1] - r["t0"][1], 1.8e-11)  # the holding torque holds
@@ -129,8 +129,8 @@ def test_crane_fmu_centripetal_swing_angle(fmus):
     wp = math.sqrt(G / 15.6)
     p, _ = curve_fit(model, t[last], ratio, p0=[1.0, 0.1, 0.1, wp - w, 0.1, 0.1, wp + w])
     check('np.std(ratio - model(t[last], *p))', np.std(ratio - model(t[last], *p)), 0.00015)  # the fit explains the swing
-    # measured 1.0006: the rope's own mass (0.7 % of the load), the box and the rope leaving the
-    # tip sheave at the swing angle are not in the point-mass formula
+    # the rope's own mass (0.7 % of the load), the box and the rope leaving the tip sheave at the swing
+    # angle are not in the point-mass formula
     check('p[0] - 1.0', p[0] - 1.0, 5e-3)
 
 

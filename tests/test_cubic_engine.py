@@ -16,10 +16,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_planar_cubic_elevator_matches_1d_without_bending_stiffness():
     """Vertical spans, EI = 0, no lateral excitation: 3 cubic elements per span in the planar model
-    follow the 1D model (car position to 3e-5 m over 2 s of the trip, measured 1.0e-5: with rope creep
-    on the rim the rim kinematics use the arriving strain, the cubic tangent node's against the span
-    mean of one linear element; the rigid rim gave 1.8e-7. Tensions to 0.1 %, measured 4e-4: the cubic
-    slopes resolve the rope-weight tension gradient that a linear element averages)."""
+    follow the 1D model over 2 s of the trip: the car position to a few um (with rope creep on the rim
+    the rim kinematics use the arriving strain, the cubic tangent node's against the span mean of one
+    linear element), the tensions to 0.1 % (the cubic slopes resolve the rope-weight tension gradient
+    that a linear element averages)."""
     sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml")
     ref = Simulator(build_model(sc)).run(2.0, 1e-2)
     sp = replace(sc, model="planar",

@@ -128,7 +128,7 @@ def test_quadratic_velocity_vector_is_lagrange_form(nd, name, fn):
         h = 1e-6
         Mdot_v = (M_of(qe + h * ve) - M_of(qe - h * ve)) @ ve / (2 * h)
         ref = dTdq - Mdot_v
-        # central differences, h = 1e-6: round-off ~1e-16/h; measured 4.9e-10
+        # central differences, h = 1e-6: round-off ~1e-16/h
         check('Qv - ref', Qv - ref, 6.8e-10 * np.max(np.abs(ref)), reason=SPREAD)
 
 
@@ -170,7 +170,9 @@ def test_tension_only_has_no_force_in_compression(nd, name, fn):
         N = EA * d * d / (2 * (np.sqrt(eps * eps + d * d) - eps))
         check('res[0] / N - 1', res[0] / N - 1, 2e-15, reason=ROUNDOFF)  # round-off
         assert 0.0 < res[0] <= EA * d * d / (4 * abs(eps))
-        assert 0.0 <= res[0] + res[1] <= EA * d             # the clipped total force: measured 0.50 EA d
+        assert res[0] + res[1] >= 0.0
+        check("clipped total force / (EA d)", (res[0] + res[1]) / (EA * d), 1.0,
+              reason="the law's clip limit EA d; how close the random states come to it varies")
         check('res[3]', res[3], 10 * EA * d * d)
         check('Q', Q, EA * d * (1 + 10 * abs(eps)))
 

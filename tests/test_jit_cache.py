@@ -30,7 +30,7 @@ print(json.dumps(jitcheck.jit_cache_probe()))
 def test_processes_starting_together_compile_a_kernel_once(tmp_path):
     """Two processes call the same not-yet-compiled kernel within a millisecond of each other on a
     cold cache: one compiles it (a cache miss), the other waits for it and loads it (a cache hit).
-    Without the compile lock both compile it (measured: 2 misses, 0 hits)."""
+    Without the compile lock both compile it (2 misses, 0 hits)."""
     env = dict(os.environ, REEVE_FMU_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
     procs = [subprocess.Popen([sys.executable, "-c", CODE, str(tmp_path), str(i)], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]

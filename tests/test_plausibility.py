@@ -13,7 +13,7 @@ from reeve_fmu.core.plausibility import PlausibilityError, check_or_raise, check
 from reeve_fmu.core.results import read_csv
 from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.core.solver import Simulator
-from checks import check_png  # noqa: E402
+from checks import check, check_png  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 ELEVATOR = (ROOT / "scenes" / "elevator_2to1.toml").read_text(encoding="utf-8")
@@ -107,15 +107,18 @@ def test_span_shorter_than_min_span_is_an_error_at_build():
 def test_statics_singular_first_step_converges(model):
     """Interior nodes of unloaded spans have no transverse stiffness at the start (a ~1e16 condition
     number): with 3 and 4 linear elements per span and the hook 1 m off its place, the statics
-    converges, and the rope force at the hook is its weight (9810 N; measured to 6.4e-8 N)."""
+    converges, and the rope force at the hook is its weight (9810 N)."""
     sc = load_scene(ROOT / "tests" / "scenes" / "drum_hoist.toml")
+    err = []
     for n in (3, 4):
         for dz in (-1.0, 1.0):
             s2 = replace(sc, model=model, ropes=tuple(replace(r, elements_per_span=n) for r in sc.ropes),
                          bodies=tuple(replace(b, position=(2.0, 0.0, dz)) for b in sc.bodies))
             sim = Simulator(build_model(s2))
             y = dict(zip(sim.model.output_names, sim.outputs(sim.initial_state())))
-            assert abs(y["rope.tension_end"] - 1000.0 * 9.81) < 5e-7, (n, dz)
+            err.append(y["rope.tension_end"] - 1000.0 * 9.81)
+    check("rope force at the hook - its weight [N]", err, 5e-7,
+          reason="round-off of a statics started at a ~1e16 condition number: it differs by model and platform")
 
 
 def test_statics_failure_names_the_body_and_the_force():

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from reeve_fmu.cli import main
+from checks import check  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 R1 = ROOT / "scenes" / "elevator_2to1.toml"
@@ -44,7 +45,7 @@ def test_simulate_writes_every_scene_parameter(tmp_path, capsys):
 def test_crane_simulate_has_the_crane_fmu_sign():
     """simulate and the crane plant FMU give the hoist torque one sign: positive hoists. The slewing crane's
     reel hauls in (hoists) with the engine's negative rotation; simulate's motor.torque at rest equals the
-    crane plant's holding torque (the same statics, measured equal to 1e-12), and motor.speed is positive
+    crane plant's holding torque (the same statics), and motor.speed is positive
     while the payload rises."""
     import reeve_fmu
     from reeve_fmu.core.craneplant import CranePlant
@@ -54,7 +55,9 @@ def test_crane_simulate_has_the_crane_fmu_sign():
     r = reeve_fmu.simulate(scene, t_end=3.0, dt=0.1)
     cp = CranePlant(load_scene(scene), "torque")
     assert cp.hoist_sign == -1.0                                   # the engine's sign is the other one
-    assert r["motor.torque"][0] == pytest.approx(cp.holding_torque(), rel=1e-9) and r["motor.torque"][0] > 0
+    check("simulate's torque at rest / the crane plant's holding torque - 1", r["motor.torque"][0] / cp.holding_torque() - 1,
+          1e-11, reason="the same statics solved twice: round-off, which differs by platform")
+    assert r["motor.torque"][0] > 0
     assert r["motor.speed"][-1] > 0 and r["payload.position.z"][-1] > r["payload.position.z"][0]
     assert r.summary["motor_sign_convention"].startswith("hoist")
     # the elevator keeps the engine's sign, which for R1 raises the car: simulate's torque at rest is the
