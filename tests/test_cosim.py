@@ -92,13 +92,13 @@ def test_demo_writes_results_plots_and_summary(demo):
         assert abs(t - t_counted) < 0.2, (t, t_counted)
     # 10 Hz-filtered, against the profile's a_max 0.8 m/s^2 and jerk 1.0 m/s^3 (the filtered ideal profile:
     # +1.5e-3 and +3.4e-2, tests/test_analysis.py): the rope ringing adds, measured 0.852 m/s^2 (+0.052),
-    # A95 0.838 m/s^2 (+0.038) and 1.786 m/s^3 (+0.786; docs/cosim.md)
+    # A95 0.838 m/s^2 (+0.038) and 1.692 m/s^3 (+0.692; docs/cosim.md; 1.786 without the hitch dampers)
     assert A_MAX < s["max_acceleration_m_s2"] < A_MAX + 0.1
     assert A_MAX < s["a95_acceleration_m_s2"] <= s["max_acceleration_m_s2"]
     assert JERK < s["max_jerk_m_s3"] < 2.0 * JERK
-    assert 0.0 < s["vibration_pp_max_m_s2"] < 0.02                  # measured 0.0042 m/s^2
+    assert 0.0 < s["vibration_pp_max_m_s2"] < 0.02                  # measured 0.0037 m/s^2
     assert s["motor_torque_peak_Nm"] < 1000.0                      # below T_max; measured 837.8 N m
-    # measured 1.643
+    # measured 1.641
     assert s["traction_limit_emergency_braking"] < s["traction_ratio_max"] < s["traction_limit_loading"]
     # EN 81-50 e^(f alpha) written out: loading mu = 0.1, emergency braking mu = 0.1 / (1 + v_rope / 10) with the
     # rope at 2 x 1.6 m/s (2:1); measured bit-equal (1.8582 / 1.5990)
@@ -117,7 +117,7 @@ def test_demo_writes_results_plots_and_summary(demo):
 
 def test_demo_summary_report_and_console_carry_the_verdicts(demo):
     """Every verdict with its value and limit in summary.json, report.md and on the console. The R1 trip's
-    traction ratio (measured 1.643) lies between the EN 81-50 emergency-braking limit 1.599 and the loading
+    traction ratio (measured 1.641) lies between the EN 81-50 emergency-braking limit 1.599 and the loading
     limit 1.858: WARN, and the findings say that this is the parameter set, not a simulation error."""
     out = demo["out"]
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
