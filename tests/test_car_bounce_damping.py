@@ -115,3 +115,22 @@ def test_r1_car_bounce_follows_the_one_degree_of_freedom_estimate(where, c_h):
                              n * hitch.hitch_stiffness, n * hitch.hitch_damping, roping=2.0)
     assert abs(d["zeta"] - z_cf) <= 0.10 * z_cf, (d, z_cf)
     assert abs(d["f_hz"] - f_cf) <= 0.02 * f_cf, (d, f_cf)
+
+
+def test_hitch_damping_override_sets_the_rope_ends_with_a_spring():
+    """--set rope.hitch_damping / ropes.NAME.hitch_damping: the rope ends (anchor stops) that have a hitch
+    spring, nothing else; a rope without hitch springs is an error naming the key (a damper alone in
+    series would let the rope end creep under its load)."""
+    from reeve_fmu.studies.overrides import OverrideError
+
+    r2 = ROOT / "scenes" / "elevator_1to1_highrise.toml"
+    sc, _ = scene_with(r2, {"rope.hitch_damping": 700.0})
+    hoist, comp = sc.ropes
+    assert [st.hitch_damping for st in hoist.route] == [700.0, 0.0, 0.0, 700.0]
+    assert all(st.hitch_damping == 0.0 for st in comp.route)
+    sc, _ = scene_with(r2, {"ropes.hoist.hitch_stiffness": 2e5})
+    assert [st.hitch_stiffness for st in sc.ropes[0].route] == [2e5, 0.0, 0.0, 2e5]
+    with pytest.raises(OverrideError, match="ropes.compensation.hitch_damping: no rope end with a hitch spring"):
+        scene_with(r2, {"ropes.compensation.hitch_damping": 700.0})
+    with pytest.raises(OverrideError, match=r"hitch_damping\] must be >= 0"):
+        scene_with(r2, {"rope.hitch_damping": -1.0})
