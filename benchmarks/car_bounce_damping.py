@@ -11,12 +11,14 @@
    at the landing (peak-to-peak of the 10 Hz car acceleration 1-2 s after each stop), the traction
    ratio, the stopping errors.
 
-    python benchmarks/car_bounce_damping.py [--scene FILE ...] [--hitch-damping 0,500,1000,2000,5000]
+    python benchmarks/car_bounce_damping.py [--scene FILE ...] [--hitch-damping 0,250,500,1000,2000]
                                             [--loads 0,1] [--ride] [--set KEY=VALUE] [--json FILE]
 
-Loads are fractions of the rated load. Where the car rings in more than one mode (the per-cycle
-decrements disagree by more than SPREAD), the table gives the modes the matrix-pencil method finds in the
-car velocity instead (marked *, those with at least 30 % of the largest amplitude). "scene" in --hitch-damping stands for the scene file's own value.
+Loads are fractions of the rated load; "scene" in --hitch-damping stands for the scene file's own value.
+Where the car rings in more than one mode (the per-cycle decrements disagree by more than SPREAD), the
+table gives the modes the matrix-pencil method finds in the car velocity instead (marked *, those with
+at least 30 % of the largest amplitude). Figures in docs/scenes.md "Damping" and docs/studies.md
+"Damping and the ride verdicts".
 """
 from __future__ import annotations
 
