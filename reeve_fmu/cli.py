@@ -241,9 +241,10 @@ def _cfg_sweep(p):
 
 def _cfg_build(p):
     p.add_argument("--scene", default=None, help="plant scene (default: scenes/elevator_2to1.toml); a crane scene "
-                   "(a body on a revolute joint and a hoist drive) builds CranePlant.fmu and CraneDrive.fmu")
+                   "(a body on a revolute joint and a hoist drive) builds a crane plant FMU and CraneDrive.fmu")
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant for the reference "
-                   "scene scenes/elevator_2to1.toml as it is, Plant_<scene name> for any other scene or --set)")
+                   "scene scenes/elevator_2to1.toml as it is, CranePlant for scenes/slewing_crane.toml as it is, "
+                   "Plant_<scene name> for any other scene or --set)")
     p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
     p.add_argument("--standalone", action="store_true", help="FMUs that carry their Python runtime (libpython, "
                    "stdlib, numpy, numba): a native host runs them on a machine without Python (docs/fmu-hosts.md)")

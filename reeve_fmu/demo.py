@@ -82,12 +82,16 @@ def demo_case(args):
 
 def plant_fmu_name(scene_file, scene, name: str | None = None) -> str:
     """The plant FMU's model name, one convention for build, demo and the SSP: `name` when given
-    (explicit), ReevingPlant for the shipped reference scene file as it is (the SSP
-    cosim/ReevingSystem runs it), Plant_<scene name> for any other scene or a scene changed by --set."""
+    (explicit), the reference name for the shipped reference scene file as it is (ReevingPlant for
+    scenes/elevator_2to1.toml, which the SSP cosim/ReevingSystem runs; CranePlant for a crane scene,
+    scenes/slewing_crane.toml), Plant_<scene name> for any other scene or a scene changed by --set."""
     from .fmu import cosim
+    from .fmu.crane import crane_plant_name, is_crane_scene
 
     if name:
         return name
+    if is_crane_scene(scene):
+        return crane_plant_name(scene_file, scene)
     if Path(scene_file).resolve() == cosim.default_scene_path().resolve():
         return cosim.PLANT_NAME
     return "Plant_" + cosim._slug(scene.name)
@@ -257,17 +261,17 @@ def cli_demo(args) -> int:
     return 0
 
 
-def _build_crane(dest: Path, scene: Path, standalone: bool = False) -> int:
-    """A crane scene (a revolute joint and a hoist drive): CranePlant.fmu, CraneDrive.fmu and
-    DEST/CraneDrive.json, the drive parameters sized from the scene."""
+def _build_crane(dest: Path, scene: Path, name: str, standalone: bool = False) -> int:
+    """A crane scene (a revolute joint and a hoist drive): the crane plant FMU `name`, CraneDrive.fmu
+    and DEST/<name>.drive.json, the drive parameters sized from the scene."""
     import json
 
     from .fmu.crane import build_crane_fmus
 
     t0 = time.perf_counter()
-    plant, drive, values = build_crane_fmus(dest, scene, standalone=standalone)
+    plant, drive, values = build_crane_fmus(dest, scene, name=name, standalone=standalone)
     print(f"built {plant} and {drive} ({time.perf_counter() - t0:.1f} s)")
-    p = dest / "CraneDrive.json"
+    p = dest / f"{name}.drive.json"
     p.write_text(json.dumps({"drive": values}, indent=1) + "\n", encoding="utf-8")
     print(f"drive parameters sized for {scene.name} (start values for {drive.name}) -> {p}")
     return 0
@@ -275,10 +279,10 @@ def _build_crane(dest: Path, scene: Path, standalone: bool = False) -> int:
 
 def cli_build(args) -> int:
     """Build the plant FMU of a scene (with --set applied) and the drive FMU (a crane scene: the crane
-    plant and crane drive FMUs, `_build_crane`); for an elevator scene also
-    write DEST/<name>.drive.json, the drive parameters sized from the scene (start values to give the
-    drive FMU, whose built-in defaults are those of the R1 2:1 elevator). The plant FMU is named by
-    `plant_fmu_name`: only the reference scene, or an explicit --name, writes ReevingPlant.fmu."""
+    plant and crane drive FMUs, `_build_crane`), and write DEST/<name>.drive.json, the drive parameters
+    sized from the scene (start values to give the drive FMU, whose built-in defaults are those of the
+    R1 2:1 elevator or of the slewing crane). The plant FMU is named by `plant_fmu_name`: only the
+    reference scene, or an explicit --name, writes ReevingPlant.fmu (CranePlant.fmu for cranes)."""
     import json
 
     from .fmu import cosim
@@ -291,17 +295,19 @@ def cli_build(args) -> int:
     sc, _ = scene_with(scene, scene_sets)
     # a changed reference scene is another plant: it never takes the reference name implicitly
     name = plant_fmu_name(scene if not scene_sets else dest / "changed.toml", sc, getattr(args, "name", None))
-    if name == cosim.PLANT_NAME and (scene_sets or scene.resolve() != cosim.default_scene_path().resolve()):
-        print(f"note: --name {name} replaces the reference plant FMU (scene {cosim.DEFAULT_SCENE}, run by the "
-              f"SSP cosim/ReevingSystem) with {sc.name}")
+    from .fmu.crane import CRANE_NAME, CRANE_REFERENCE_SCENE, is_crane_scene
+    crane = is_crane_scene(sc)
+    reference = (CRANE_NAME, CRANE_REFERENCE_SCENE) if crane else (cosim.PLANT_NAME, cosim.DEFAULT_SCENE)
+    if name == reference[0] and (scene_sets or plant_fmu_name(scene, sc) != reference[0]):
+        print(f"note: --name {name} replaces the reference plant FMU (scene {reference[1]}"
+              + ("" if crane else ", run by the SSP cosim/ReevingSystem") + f") with {sc.name}")
     if scene_sets:
         dest.mkdir(parents=True, exist_ok=True)
         path = dest / f"{name}.scene.toml"
         path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)), encoding="utf-8")
         scene = path
-    from .fmu.crane import is_crane_scene
-    if is_crane_scene(sc):
-        return _build_crane(dest, scene, standalone)
+    if crane:
+        return _build_crane(dest, scene, name, standalone)
     t0 = time.perf_counter()
     plant, _ = cosim.build_plant_fmu(dest, scene, name, standalone=standalone)
     print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")

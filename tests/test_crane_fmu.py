@@ -86,7 +86,7 @@ def test_crane_fmus_build_validate_and_declare_units(fmus):
     from xml.etree import ElementTree as ET
 
     assert fmus["problems"] == {"CranePlant.fmu": [], "CraneDrive.fmu": []}
-    assert (fmus["dir"] / "CraneDrive.json").is_file()
+    assert (fmus["dir"] / "CranePlant.drive.json").is_file()       # <plant name>.drive.json, as for elevators
     root = ET.fromstring(zipfile.ZipFile(fmus["plant"]).read("modelDescription.xml"))
     v = {sv.get("name"): sv for sv in root.find("ModelVariables")}
     for name in ("motor.torque", "slew.torque", "slew.speed"):
@@ -141,3 +141,26 @@ def test_crane_fmu_solver_failure_is_logged_and_discarded(fmus):
     text = "\n".join(m for _, m in r["log"])
     assert "(tip -> payload anchor) is shorter than solver.min_span" in text, text[-2000:]
     assert "motor.torque = nan is not finite" in text
+
+
+def test_crane_build_of_another_scene_is_named_after_it(tmp_path):
+    """The elevator's naming rule for cranes: a crane scene other than scenes/slewing_crane.toml as it
+    is (here the reference changed by --set) builds Plant_<scene name>.fmu with its own entry module and
+    <name>.drive.json; CranePlant.fmu only for the reference scene or an explicit --name (announced)."""
+    import json
+    import subprocess
+    import zipfile
+
+    cmd = [sys.executable, "-m", "reeve_fmu.cli", "build", "--scene", str(SCENE), "--dest", str(tmp_path),
+           "--set", 'scene.name="jib_b"']
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert sorted(f.name for f in tmp_path.glob("*.fmu")) == ["CraneDrive.fmu", "Plant_jib_b.fmu"]
+    assert "hoist.holding_torque" in json.loads((tmp_path / "Plant_jib_b.drive.json").read_text())["drive"]
+    with zipfile.ZipFile(tmp_path / "Plant_jib_b.fmu") as zf:
+        assert 'modelName="Plant_jib_b"' in zf.read("modelDescription.xml").decode()
+        assert zf.read("resources/slavemodule.txt").decode() == "reeve_crane_plant_jib_b_slave"
+    q = subprocess.run(cmd + ["--name", "CranePlant"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert q.returncode == 0, q.stdout + q.stderr
+    assert "replaces the reference plant FMU (scene slewing_crane.toml) with jib_b" in q.stdout
+    assert (tmp_path / "CranePlant.fmu").is_file() and (tmp_path / "CranePlant.drive.json").is_file()

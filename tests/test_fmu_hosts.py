@@ -64,14 +64,14 @@ def unzipped(fmus, tmp_path_factory):
 @pytest.fixture(scope="module")
 def crane_fmus(tmp_path_factory):
     """CranePlant.fmu and CraneDrive.fmu as a user builds them (`reeve-fmu build --scene
-    scenes/slewing_crane.toml`), with the drive's start values sized for the scene (CraneDrive.json)."""
+    scenes/slewing_crane.toml`), with the drive's start values sized for the scene (CranePlant.drive.json)."""
     dest = tmp_path_factory.mktemp("crane_fmus")
     p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--scene",
                         str(ROOT / "scenes" / "slewing_crane.toml"), "--dest", str(dest)],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
     return {"plant": str(dest / "CranePlant.fmu"), "drive": str(dest / "CraneDrive.fmu"),
-            "drive_values": json.loads((dest / "CraneDrive.json").read_text(encoding="utf-8"))["drive"]}
+            "drive_values": json.loads((dest / "CranePlant.drive.json").read_text(encoding="utf-8"))["drive"]}
 
 
 def _run_script(code: str, tmp_path, name: str, env=None, timeout=300) -> subprocess.CompletedProcess:

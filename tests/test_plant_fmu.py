@@ -135,8 +135,8 @@ def test_drive_model_description(fmus):
 
 
 def test_plant_fmu_names_follow_one_convention(tmp_path):
-    """build, demo and the SSP: ReevingPlant only for the reference scene file as it is (or by explicit
-    name), Plant_<scene name> for any other scene and for a scene changed by --set."""
+    """build, demo and the SSP: ReevingPlant (CranePlant for a crane) only for the reference scene file
+    as it is (or by explicit name), Plant_<scene name> for any other scene and for a scene changed by --set."""
     from reeve_fmu.core.scene import load_scene
     from reeve_fmu.demo import plant_fmu_name
 
@@ -147,6 +147,12 @@ def test_plant_fmu_names_follow_one_convention(tmp_path):
     changed.write_text(r1.read_text(encoding="utf-8"), encoding="utf-8")
     assert plant_fmu_name(changed, load_scene(changed)) == "Plant_elevator_2to1"
     assert plant_fmu_name(r2, load_scene(r2), "ReevingPlant") == "ReevingPlant"     # explicit
+    crane = ROOT / "scenes" / "slewing_crane.toml"     # the same rule for the crane plant
+    assert plant_fmu_name(crane, load_scene(crane)) == "CranePlant"
+    copy = tmp_path / "jib.toml"
+    copy.write_text(crane.read_text(encoding="utf-8"), encoding="utf-8")
+    assert plant_fmu_name(copy, load_scene(copy)) == "Plant_slewing_crane"
+    assert plant_fmu_name(copy, load_scene(copy), "CranePlant") == "CranePlant"
 
 
 def test_build_with_scene_is_named_after_the_scene(tmp_path):

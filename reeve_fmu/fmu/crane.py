@@ -1,8 +1,10 @@
 """The crane plant and crane drive FMUs: configuration, build, and an fmpy master for the pair.
 
-* `build_crane_fmus(dest, scene)`: `CranePlant.fmu` from a slewing-crane scene (fmus/reeve_crane_slave.py,
-  model reeve_fmu.core.craneplant.CranePlant) and `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py,
-  reeve_fmu.core.cranedrive.CraneDrive); `reeve-fmu build --scene <crane scene>` calls it.
+* `build_crane_fmus(dest, scene)`: the crane plant FMU of a slewing-crane scene (fmus/reeve_crane_slave.py,
+  model reeve_fmu.core.craneplant.CranePlant), named by `crane_plant_name` (`CranePlant.fmu` for the
+  reference scene scenes/slewing_crane.toml, `Plant_<scene name>.fmu` for any other), and
+  `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py, reeve_fmu.core.cranedrive.CraneDrive);
+  `reeve-fmu build --scene <crane scene>` calls it.
 * `cosimulate_crane(plant_fmu, drive_fmu, ...)`: the hoist-and-slew cycle, Gauss-Seidel (the drive
   steps first with the plant's speeds at t, then the plant holding the drive's new torques).
 
@@ -20,6 +22,7 @@ import numpy as np
 
 CRANE_NAME = "CranePlant"
 CRANE_DRIVE_NAME = "CraneDrive"
+CRANE_REFERENCE_SCENE = "slewing_crane.toml"   # the scene CRANE_NAME stands for
 CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_config)
 CRANE_SCENE = "scene.toml"
 SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
@@ -143,17 +146,44 @@ def _entry(kind: str) -> Path:
     return p
 
 
-def build_crane_fmus(dest, scene, *, standalone: bool = False) -> tuple[Path, Path, dict]:
-    """Build CranePlant.fmu for `scene` (a path) and CraneDrive.fmu into dest; returns their paths
-    and the drive parameters sized for the scene (start values for CraneDrive.fmu)."""
+def crane_plant_name(scene_path, scene=None, name: Optional[str] = None) -> str:
+    """The crane plant FMU's model name, the rule of the elevator plant (demo.plant_fmu_name): `name`
+    when given (explicit), CranePlant for the reference scene file scenes/slewing_crane.toml as it is,
+    Plant_<scene name> for any other scene."""
+    from ..core.scene import default_scene, load_scene
+    from .cosim import _slug
+
+    if name:
+        return name
+    if Path(scene_path).resolve() == Path(default_scene(CRANE_REFERENCE_SCENE)).resolve():
+        return CRANE_NAME
+    return "Plant_" + _slug((scene if scene is not None else load_scene(scene_path)).name)
+
+
+def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
+                     standalone: bool = False) -> tuple[Path, Path, dict]:
+    """Build the crane plant FMU of `scene` (a path; model name `crane_plant_name`, or `name`) and
+    CraneDrive.fmu into dest; returns their paths and the drive parameters sized for the scene (start
+    values for CraneDrive.fmu)."""
     from ..core.scene import load_scene
     from .build import NUMBA, NUMPY, build_fmu
+    from .cosim import _slug
 
     scene_path = Path(scene)
-    cfg = crane_config(scene_path)
+    name = crane_plant_name(scene_path, name=name)
+    if not name.isidentifier() or name == CRANE_DRIVE_NAME:
+        raise ValueError(f"crane plant FMU model name {name!r} must be an identifier other than {CRANE_DRIVE_NAME!r}")
+    cfg = crane_config(scene_path, name)
     res = {CRANE_SCENE: scene_path.read_bytes(), CRANE_CONFIG: (json.dumps(cfg, indent=1) + "\n").encode()}
     dest = Path(dest)
-    plant = build_fmu(_entry("crane"), dest, resources=res, standalone=standalone)
+    with tempfile.TemporaryDirectory(prefix="reeve_crane_entry_") as work:
+        entry = _entry("crane")
+        if name != CRANE_NAME:
+            # a unique entry module per model: two FMUs sharing one run each other's code in a process
+            copy = Path(work) / f"reeve_crane_{_slug(name)}_slave.py"
+            copy.write_bytes(entry.read_bytes())
+            entry = copy
+        plant = build_fmu(entry, dest, resources=res, standalone=standalone)
     drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone)
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 

@@ -168,6 +168,47 @@ def peak_to_peak(x) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------
+# damping from a free decay
+
+def decay_damping_ratio(t, x, *, floor: float = 1e-3, max_cycles: int = 8) -> dict:
+    """Damping ratio of a free decay by the logarithmic decrement.
+
+    x oscillates about zero (the car's velocity, or its acceleration, after a stop). The maxima of x
+    (located by a parabola through the three samples around each) are followed from the largest one
+    while they stay above floor × that maximum, for at most max_cycles cycles; over those n cycles
+    delta = ln(x_0 / x_n) / n and zeta = delta / sqrt(4 pi^2 + delta^2), exact for one exponentially
+    decaying mode. Returns zeta, delta, f_hz (damped frequency from the spacing of the maxima) and
+    n_cycles, and spread: the largest deviation of a single cycle's decrement from delta, relative to
+    delta (near 0 for one mode; beating of two modes makes it large, and then zeta means little); nan
+    values when fewer than two maxima qualify."""
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if t.shape != x.shape or t.ndim != 1:
+        raise ValueError("t and x must be 1-D arrays of the same length")
+    i = np.flatnonzero((x[1:-1] > x[:-2]) & (x[1:-1] >= x[2:])) + 1
+    i = i[x[i] > 0]
+    nan = {"zeta": math.nan, "delta": math.nan, "f_hz": math.nan, "n_cycles": 0, "spread": math.nan}
+    if i.size < 2:
+        return nan
+    y0, y1, y2 = x[i - 1], x[i], x[i + 1]
+    den = y0 - 2 * y1 + y2
+    off = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
+    tp = t[i] + off * (t[i + 1] - t[i])
+    ap = y1 - 0.25 * (y0 - y2) * off
+    k0 = int(np.argmax(ap))
+    tp, ap = tp[k0:], ap[k0:]
+    keep = np.flatnonzero(ap < floor * ap[0])
+    n = min(int(keep[0]) if keep.size else ap.size, max_cycles + 1) - 1
+    if n < 1:
+        return nan
+    delta = math.log(ap[0] / ap[n]) / n
+    cycles = np.log(ap[:n] / ap[1:n + 1])
+    return {"zeta": delta / math.sqrt(4 * math.pi ** 2 + delta ** 2), "delta": delta,
+            "f_hz": float(n / (tp[n] - tp[0])), "n_cycles": n,
+            "spread": float(np.max(np.abs(cycles - delta)) / delta) if delta > 0 else math.inf}
+
+
+# ---------------------------------------------------------------------------------------------------
 # trips and ride metrics
 
 def _fs(t) -> float:

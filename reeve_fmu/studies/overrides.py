@@ -8,6 +8,9 @@ Key forms (docs/studies.md):
 * ``bodies.car.mass``, ``sheaves.traction.mu``, ``ropes.hoist.EA``, ``buffers.pit.stiffness`` ... a key of
   the array entry with that name (or index: ``ropes.0.EA``);
 * ``rope.EA``, ``rope.damping`` ... that key of every rope;
+* ``rope.hitch_damping``, ``ropes.hoist.hitch_damping`` (and ``hitch_stiffness``): that key of the rope
+  ends (anchor stops of the route) of every rope or of the named one; ``hitch_damping`` only where the
+  end has a hitch spring (``hitch_stiffness`` > 0);
 * a drive FMU parameter name (``torque.max``, ``control.Kp``, ``trip.dwell_time``, ``sis.enabled`` ...);
 * ``load`` or ``car.load``: the payload in kg.
 """
@@ -103,13 +106,36 @@ def _check_key(table: str, field: str, key: str):
         raise OverrideError(f"--set {key}: unknown key {field!r} of [{table}]; allowed: {', '.join(sorted(allowed))}")
 
 
+HITCH_KEYS = ("hitch_stiffness", "hitch_damping")
+
+
+def _set_hitch(ropes, field: str, value, key: str) -> None:
+    """Set a route key on the rope ends (anchor stops) of `ropes`: hitch_damping only on ends with a
+    hitch spring (a damper alone in series would let the rope end creep under its load)."""
+    n = 0
+    for rope in ropes:
+        for stop in rope.get("route", []) if isinstance(rope, dict) else []:
+            if not isinstance(stop, dict) or "anchor" not in stop:
+                continue
+            if field == "hitch_damping" and not stop.get("hitch_stiffness", 0):
+                continue
+            stop[field] = value
+            n += 1
+    if n == 0:
+        raise OverrideError(f"--set {key}: no rope end with a hitch spring (route hitch_stiffness > 0) to apply it to"
+                            if field == "hitch_damping" else f"--set {key}: no anchored rope end to apply it to")
+
+
 def apply_to_data(data: dict, sets: dict) -> dict:
     """A deep copy of the scene's TOML data with the scene keys of `sets` applied."""
     data = copy.deepcopy(data)
     for key, value in sets.items():
         parts = key.split(".")
         head = parts[0]
-        if head == "rope" and len(parts) == 2:
+        if head in ("rope", "ropes") and parts[-1] in HITCH_KEYS and len(parts) == (2 if head == "rope" else 3):
+            _set_hitch(data.get("ropes", []) if head == "rope" else [_entry(data, "ropes", parts[1], key)],
+                       parts[-1], value, key)
+        elif head == "rope" and len(parts) == 2:
             _check_key("ropes", parts[1], key)
             for e in data.get("ropes", []):
                 e[parts[1]] = value
