@@ -151,6 +151,10 @@ def cli_demo(args) -> int:
     output_dt = getattr(args, "output_dt", None)
     report.thin_index([0.0, step], output_dt)          # validate before the run
     t0 = time.perf_counter()
+    from .fmu.kernels import cache_is_cold
+    if cache_is_cold():
+        print("compiling the model's kernels for this machine (the first run with these sources: about "
+              "2 minutes on 2 cores; later runs and the FMUs load them)")
     case = demo_case(args)
     scene_file, name = _plant_source(case, out)
     plant_fmu, drive_fmu = cosim.ensure_fmus(fmu_dir(), scene=scene_file, name=name,
@@ -162,7 +166,7 @@ def cli_demo(args) -> int:
           + " / ".join(f"{p:.1f}" for p in pre) + " N·m from the plant's holding torque; drive sized: "
           f"torque.max {drive_values['torque.max']:.0f} N·m, torque.power_max "
           f"{drive_values['torque.power_max'] / 1e3:.1f} kW)")
-    print("instantiating the FMUs (the first run on a machine compiles their numba kernels: ~1 min)")
+    print("instantiating the FMUs")
     bar = progress = None
     if not getattr(args, "no_progress", False):
         from tqdm import tqdm

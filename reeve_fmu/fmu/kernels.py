@@ -46,7 +46,7 @@ def _numba_version() -> Optional[str]:
         return None
 
 
-def _cache_is_cold() -> bool:
+def cache_is_cold() -> bool:
     """No compiled kernel of the current sources in the user's cache yet: the warm-up compiles them."""
     from ..core import _jit
 
@@ -66,7 +66,7 @@ def collect(fmu_path, *, stop_time: float = 1.0, step: float = 1e-3, timeout: fl
     numba_version = _numba_version()
     if numba_version is None:
         return {"files": {}, "why": "numba is not installed: the FMU's model runs as plain Python"}
-    if log is not None and _cache_is_cold():
+    if log is not None and cache_is_cold():
         log(f"reeve_fmu: compiling the model's kernels for {Path(fmu_path).stem} (first build with these "
             f"sources on this machine: about 1-2 minutes on 2 cores; later builds and runs load them)")
     with tempfile.TemporaryDirectory(prefix="reeve_kernels_") as tmp:
