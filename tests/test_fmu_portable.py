@@ -22,7 +22,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-import cosim_jobs  # noqa: E402
 from fmu_host import chost  # noqa: E402
 from reeve_fmu.fmu.native import libpython_path, loader_supported  # noqa: E402
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
@@ -38,20 +37,7 @@ VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
 MINIMAL = {"PATH": "/usr/bin:/bin", "LANG": "C", "LC_ALL": "C"}
 
 
-@pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    return cosim_jobs.ensure_test_fmus(cosim_jobs.session_fmu_dir(tmp_path_factory))
-
-
-@pytest.fixture(scope="module")
-def host(tmp_path_factory):
-    return chost.compile_host(tmp_path_factory.mktemp("chost"))
-
-
-@pytest.fixture(scope="module")
-def unzipped(fmus, tmp_path_factory):
-    base = tmp_path_factory.mktemp("unzipped")
-    return {k: str(chost.extract(fmus[k], base / k)) for k in ("plant", "drive")}
+from test_fmu_hosts import fmus, host, unzipped  # noqa: E402,F401  (the session's FMUs, the C host, extracted)
 
 
 @pytest.fixture(scope="module")
