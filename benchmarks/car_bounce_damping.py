@@ -33,7 +33,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from reeve_fmu.core.elevator import elevator_spec, with_load  # noqa: E402
+from reeve_fmu.components.elevator import elevator_spec, with_load  # noqa: E402
 from reeve_fmu.core.model import build_model  # noqa: E402
 from reeve_fmu.core.plausibility import initial_statics  # noqa: E402
 from reeve_fmu.core.solver import Simulator  # noqa: E402

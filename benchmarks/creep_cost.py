@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from reeve_fmu.core.model import build_model  # noqa: E402
-from reeve_fmu.core.plant import Plant  # noqa: E402
+from reeve_fmu.components.plant import Plant  # noqa: E402
 from reeve_fmu.core.scene import load_scene  # noqa: E402
 from reeve_fmu.core.solver import Simulator  # noqa: E402
 

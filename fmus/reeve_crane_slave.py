@@ -7,7 +7,7 @@ Inputs  motor.torque [N.m] (hoist motor on the reel, positive hoists), slew.torq
         from its previous value).
 Outputs the engine's outputs of the scene (payload position/velocity, jib angle/speed/joint torque,
         rope forces <sheave>.tension_in/out, ...) plus payload.swing_radial, payload.swing_tangential
-        and payload.yaw (reeve_fmu.core.craneplant, docs/crane.md).
+        and payload.yaw (reeve_fmu.components.craneplant, docs/crane.md).
 
 The scene and the output declarations come from the FMU's resources (scene.toml, reeve_crane.json,
 written by reeve_fmu.fmu.crane.crane_config). A solver failure is logged through the FMU logger and the
@@ -46,7 +46,7 @@ class CranePlantSlave(ReeveSlave):
         self.crane = None
 
     def initialize(self):
-        from reeve_fmu.core.craneplant import CranePlant
+        from reeve_fmu.components.craneplant import CranePlant
 
         mode = SLEW_MODES[int(self.values["slew.input"])]
         self._cmd = f"slew.{mode}"

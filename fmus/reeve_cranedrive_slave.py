@@ -1,13 +1,13 @@
 """FMU entry of the crane drive (FMI 2.0 co-simulation): `reeve-fmu build --scene <crane scene>` ->
-CraneDrive.fmu (reeve_fmu.core.cranedrive: hoist and slew speed loops on S-curve references).
+CraneDrive.fmu (reeve_fmu.components.cranedrive: hoist and slew speed loops on S-curve references).
 
 Inputs  motor.speed [rad/s] (hoist motor, positive hoists), slew.angular_velocity [rad/s] (the jib).
 Outputs motor.torque [N.m] (hoist), slew.torque [N.m], slew.speed [rad/s] (the slew reference speed,
         for a plant with a slew speed input), and the references. The drive samples the inputs at the
         start of the step: no output depends directly on an input.
-Parameters reeve_fmu.core.cranedrive.PARAMETERS (fixed).
+Parameters reeve_fmu.components.cranedrive.PARAMETERS (fixed).
 """
-from reeve_fmu.core.cranedrive import PARAMETERS, CraneDrive, CraneDriveParams
+from reeve_fmu.components.cranedrive import PARAMETERS, CraneDrive, CraneDriveParams
 from reeve_fmu.fmu.slave import DefaultExperiment, ReeveSlave
 
 OUTPUTS = (("motor.torque", "Torque", "hoist motor torque (positive hoists), held over the next step"),

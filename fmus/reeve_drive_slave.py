@@ -1,6 +1,6 @@
 """FMU entry of the electric drive (FMI 2.0 co-simulation): `reeve-fmu build` -> fmus/ElectricDrive.fmu.
 
-Wraps reeve_fmu.core.drive.ElectricDrive: trip sequencer (pre-torque, brake lift, jerk-limited S-curve
+Wraps reeve_fmu.components.drive.ElectricDrive: trip sequencer (pre-torque, brake lift, jerk-limited S-curve
 from landing to landing, zero-speed hold, brake drop, torque ramp-down, dwell, next move), speed PI
 with torque feed-forward and position loop, torque and power limits, and the torque path: Level 1
 first-order lag + dead time (default) or Level 2 PMSM dq model with current PI (drive.level = 2).
@@ -14,7 +14,7 @@ Parameters: reeve_fmu.fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built 
 """
 import numpy as np
 
-from reeve_fmu.core.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
+from reeve_fmu.components.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
                                   _X_XREF, PHASE_NAMES)
 from reeve_fmu.fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave

@@ -75,7 +75,7 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
                             f"the scene's own [drive]")
     sc, _ = scene_with(Path(scene), scene_sets)
     if load is not None:
-        from .core.elevator import with_load
+        from .components.elevator import with_load
         sc = with_load(sc, load)
     t_end = sc.t_end if t_end is None else t_end
     dt = sc.output_step if dt is None else dt

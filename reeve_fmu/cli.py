@@ -75,7 +75,7 @@ def _scene_with_sets(path, items):
                             f"simulate runs the scene's own [drive]")
     scene, _ = scene_with(path, scene_sets)
     if load is not None:
-        from .core.elevator import with_load
+        from .components.elevator import with_load
         scene = with_load(scene, load)
     return scene
 

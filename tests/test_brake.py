@@ -9,7 +9,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from reeve_fmu.core.plant import Plant
+from reeve_fmu.components.plant import Plant
 from reeve_fmu.core.scene import loads_scene
 from checks import check  # noqa: E402
 

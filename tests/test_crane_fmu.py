@@ -35,7 +35,7 @@ def job(name, *args, timeout=900.0):
 # core: joint inputs
 # ------------------------------------------------------------------------------------------------
 def test_speed_input_is_integrated_exactly_and_torque_input_equals_the_torque_table():
-    from reeve_fmu.core.plant import Plant, with_joint_input
+    from reeve_fmu.components.plant import Plant, with_joint_input
     from reeve_fmu.core.scene import Motion, SceneError, load_scene
 
     sc = load_scene(SCENE)

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from reeve_fmu.core.drive import (PHASE_DONE, PHASE_IDLE, PHASE_RUN, DriveParams, ElectricDrive)
+from reeve_fmu.components.drive import (PHASE_DONE, PHASE_IDLE, PHASE_RUN, DriveParams, ElectricDrive)
 from checks import check  # noqa: E402
 SPREAD = "the cases' errors differ by more than 10x: one bound for all"
 ROUNDOFF = "round-off, which differs by platform"
@@ -353,7 +353,7 @@ def test_torque_is_held_while_the_brake_closes():
     the zero-speed hold, whatever speed it measures: a measured speed alternating by ±0.5 rad/s from
     step to step (what a loop closed on the engaging brake's stiff spring and sampled at 1 ms sees) leaves
     the torque reference constant; the closed speed loop (Kp = 970 N·m·s/rad) answered it with ±485 N·m."""
-    from reeve_fmu.core.drive import PHASE_DROP, PHASE_HOLD
+    from reeve_fmu.components.drive import PHASE_DROP, PHASE_HOLD
 
     p = r1(landings=(0.0, 1.0), moves=(1,))
     d = ElectricDrive(p)

@@ -1,16 +1,18 @@
-"""The package's layers, bottom to top: core (scene, model, elements, system, solver, plant and drive
-models) -> fmu (FMI slave machinery, FMU build, co-simulation masters) -> studies (bench, fidelity,
-crane continuation, Lagrangian baseline, trip analysis) -> hil (controller in the loop over CAN) ->
-the front ends (cli, demo). A module may import only from its own layer or below, and no two modules
-import each other (directly or through a chain)."""
+"""The package's layers, bottom to top: core (scene, model, elements, system, solver) -> components
+(plant, drive, crane plant and drive, elevator sizing, with their parameter tables and factories) ->
+fmu (FMI slave machinery, FMU build, co-simulation masters) -> studies (bench, fidelity, crane
+continuation, Lagrangian baseline, trip analysis) -> hil (controller in the loop over CAN) -> the
+front ends (cli, demo, api). A module may import only from its own layer or below (so components
+import only core, and core never imports components), and no two modules import each other (directly
+or through a chain)."""
 from __future__ import annotations
 
 import ast
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "reeve_fmu"
-LAYERS = {"core": 0, "fmu": 1, "studies": 2, "hil": 3}
-TOP = 4   # cli.py, demo.py, __init__.py
+LAYERS = {"core": 0, "components": 1, "fmu": 2, "studies": 3, "hil": 4}
+TOP = 5   # cli.py, demo.py, api.py, __init__.py
 
 
 def _module(path: Path) -> str:

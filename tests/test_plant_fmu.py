@@ -72,7 +72,7 @@ def test_plant_model_description(fmus):
     assert cs.get("canInterpolateInputs") == "false"
     # the FMU carries the package (vendored + bootstrap shim), its scene and its config
     assert "resources/scene.toml" in names and "resources/reeve_plant.json" in names
-    assert "resources/reeve_fmu_vendor/reeve_fmu/core/plant.py" in names
+    assert "resources/reeve_fmu_vendor/reeve_fmu/components/plant.py" in names
     assert "resources/reeve_fmu.py" in names and "resources/reeve_plant_slave.py" in names
     assert (ROOT / "scenes" / "elevator_2to1.toml").read_bytes() == \
         zipfile.ZipFile(fmus["plant"]).read("resources/scene.toml")

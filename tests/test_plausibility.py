@@ -242,7 +242,7 @@ def test_crane_without_yaw_stiffness_is_explained():
 
 def test_plant_keeps_the_warnings_for_the_fmu_log():
     """The plant FMU logs Plant.warnings at initialization (fmus/reeve_plant_slave.py)."""
-    from reeve_fmu.core.plant import Plant
+    from reeve_fmu.components.plant import Plant
     plant = Plant(elevator("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -9.5]"))
     assert any("[scene.gravity] |g| = 9.5 m/s^2" in w for w in plant.warnings)
     with pytest.raises(PlausibilityError, match=r"\[ropes\[0\]\.EA\]"):

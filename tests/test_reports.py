@@ -48,7 +48,7 @@ def test_crane_simulate_has_the_crane_fmu_sign():
     crane plant's holding torque (the same statics), and motor.speed is positive
     while the payload rises."""
     import reeve_fmu
-    from reeve_fmu.core.craneplant import CranePlant
+    from reeve_fmu.components.craneplant import CranePlant
     from reeve_fmu.core.scene import load_scene
 
     scene = ROOT / "scenes" / "slewing_crane.toml"

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reeve_fmu.core.elevator import check_load, elevator_spec, with_load
+from reeve_fmu.components.elevator import check_load, elevator_spec, with_load
 from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.studies import overrides as ov
 from reeve_fmu.studies import verdicts as vd

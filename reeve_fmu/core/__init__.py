@@ -9,9 +9,5 @@ kernel     the compiled code's view of the Model (one numba StructRef)
 elements/  element kernels: linear, cubic (ANCF), torsion
 system     assembly of M(q) qdd = Q(q, qdot, t, u) and the outputs
 solver     generalized-alpha, statics, scipy reference methods; Simulator
-plant      the reeving system as a torque-driven component (what the plant FMU steps); joint inputs
-craneplant a slewing crane as a component: hoist torque, slew torque or speed in, payload sway out
-cranedrive hoist and slew speed loops (what the crane drive FMU steps)
-drive      the electric drive (trip sequencer, speed/position loops, torque path, brake)
 results    CSV and overview plots with the documented output names
 """

@@ -217,7 +217,7 @@ SCHEMA_KEYS = {
     "buffers": {"name", "body", "position", "stiffness", "damping", "axis", "side"},
 }
 TOP_LEVEL = {"scene", "solver", "initial", "bodies", "sheaves", "ropes", "drive", "brake", "buffers"}
-EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "traction", "elevator"}   # elevator: core/elevator.py
+EXTRA_SECTIONS = {"accuracy", "fmu", "crane", "traction", "elevator"}   # elevator: components/elevator.py
 
 
 # ------------------------------------------------------------------------------------------ reading

@@ -18,7 +18,7 @@ models with `make_plant`/`make_drive` from this module, so the FMUs and the in-p
 the same code with the same parameter mapping.
 
 Car load: an elevator scene declares in its [elevator] table the rated load and `car_load`, the payload
-its car body's mass includes (reeve_fmu.core.elevator). The plant FMU's parameter `car.load` is the
+its car body's mass includes (reeve_fmu.components.elevator). The plant FMU's parameter `car.load` is the
 payload on top of the *empty* car (mass - car_load); its default is the rated load. A scene without an
 [elevator] table is taken as written: `car.load` (default 0) adds to its car body's mass. Every helper
 here takes the payload explicitly; nothing depends on the scene's name.
@@ -71,7 +71,7 @@ def _scene(scene):
 def scene_load(scene) -> float:
     """Payload (kg) the scene's car mass includes: [elevator].car_load; 0 for a scene without [elevator]
     (taken as written). `scene`: a Scene or a scene file path."""
-    from ..core.elevator import elevator_spec
+    from ..components.elevator import elevator_spec
 
     scene = _scene(scene)
     return elevator_spec(scene).car_load if "elevator" in scene.extra else 0.0
@@ -79,7 +79,7 @@ def scene_load(scene) -> float:
 
 def empty_car_scene(scene):
     """The scene with its declared payload ([elevator].car_load) taken out of the car body's mass."""
-    from ..core.elevator import with_load
+    from ..components.elevator import with_load
 
     scene = _scene(scene)
     return with_load(scene, 0.0) if "elevator" in scene.extra else scene
@@ -88,7 +88,7 @@ def empty_car_scene(scene):
 def plant_defaults(scene) -> dict:
     """Default values of the plant FMU parameters for `scene` (FMU name -> value); car.load: the rated
     load of [elevator] (0 without)."""
-    from ..core.elevator import elevator_spec
+    from ..components.elevator import elevator_spec
 
     scene = _scene(scene)
     return {
@@ -107,7 +107,7 @@ def make_plant(scene, declared_load: float | None = None, params: Optional[Mappi
     `declared_load` is only a consistency check for FMUs built by older versions: when given it must
     equal the scene's [elevator].car_load. Parameters equal to their default leave the scene untouched
     (a scene with ropes of different EA keeps them unless rope.EA is changed)."""
-    from ..core.plant import Plant
+    from ..components.plant import Plant
 
     scene = _scene(scene)
     decl = scene_load(scene)
@@ -121,7 +121,7 @@ def make_plant(scene, declared_load: float | None = None, params: Optional[Mappi
     defaults = plant_defaults(scene)
     load = float(params.get("car.load", defaults["car.load"]))
     if "elevator" in scene.extra:
-        from ..core.elevator import check_load, elevator_spec
+        from ..components.elevator import check_load, elevator_spec
 
         check_load(elevator_spec(scene), load, "car.load")
     kw = {"car_load": load}
@@ -140,7 +140,7 @@ def holding_torques(scene, landings: Sequence[float], load: float,
     plant's `brake.torque` at rest with the car moved to the landing (the counterweight moved by the same
     distance the other way). This is what a load-weighing device gives the drive as pre-torque.
     `params`: other plant FMU parameters (rope.EA, ...); a car.load in them must equal `load`."""
-    from ..core.elevator import car_at
+    from ..components.elevator import car_at
 
     scene = _scene(scene)
     params = dict(params or {})
@@ -209,7 +209,7 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
 def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..core.model import build_model
-    from ..core.plant import plant_scene
+    from ..components.plant import plant_scene
     from ..core.plausibility import check_or_raise
     from ..core.scene import load_scene
 
@@ -307,7 +307,7 @@ SIS_PARAMETERS = {"sis.enabled": ("sis", "1", "1: car-position feedback for the 
 def drive_defaults() -> dict:
     """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
     round trip, pre-torque for the rated load (R1_PRETORQUE)."""
-    from ..core.drive import DriveParams
+    from ..components.drive import DriveParams
 
     p = DriveParams()
     out = {}
@@ -335,7 +335,7 @@ def drive_defaults() -> dict:
 def drive_params(values: Optional[Mapping[str, float]] = None):
     """DriveParams from drive FMU parameter values (missing names take `drive_defaults`) and, in
     process, SIS_PARAMETERS."""
-    from ..core.drive import DriveParams
+    from ..components.drive import DriveParams
 
     vals = drive_defaults()
     kw = {}
@@ -385,7 +385,7 @@ def drive_params(values: Optional[Mapping[str, float]] = None):
 
 def make_drive(values: Optional[Mapping[str, float]] = None):
     """The `ElectricDrive` of the drive FMU for these parameter values."""
-    from ..core.drive import ElectricDrive
+    from ..components.drive import ElectricDrive
 
     return ElectricDrive(drive_params(values))
 

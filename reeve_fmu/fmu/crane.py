@@ -1,9 +1,9 @@
 """The crane plant and crane drive FMUs: configuration, build, and an fmpy master for the pair.
 
 * `build_crane_fmus(dest, scene)`: the crane plant FMU of a slewing-crane scene (fmus/reeve_crane_slave.py,
-  model reeve_fmu.core.craneplant.CranePlant), named by `crane_plant_name` (`CranePlant.fmu` for the
+  model reeve_fmu.components.craneplant.CranePlant), named by `crane_plant_name` (`CranePlant.fmu` for the
   reference scene scenes/slewing_crane.toml, `Plant_<scene name>.fmu` for any other), and
-  `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py, reeve_fmu.core.cranedrive.CraneDrive);
+  `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py, reeve_fmu.components.cranedrive.CraneDrive);
   `reeve-fmu build --scene <crane scene>` calls it.
 * `cosimulate_crane(plant_fmu, drive_fmu, ...)`: the hoist-and-slew cycle, Gauss-Seidel (the drive
   steps first with the plant's speeds at t, then the plant holding the drive's new torques).
@@ -91,7 +91,7 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
 
 def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
-    from ..core.craneplant import CranePlant
+    from ..components.craneplant import CranePlant
     from ..core.plausibility import check_or_raise
     from ..core.scene import load_scene
 
@@ -114,8 +114,8 @@ def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
 def crane_drive_defaults(scene, holding_torque: float) -> dict:
     """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
     scene's hoist and slew profiles as the references."""
-    from ..core.cranedrive import CraneDriveParams
-    from ..core.craneplant import crane_parts
+    from ..components.cranedrive import CraneDriveParams
+    from ..components.craneplant import crane_parts
 
     p = crane_parts(scene)
     v = CraneDriveParams().values()

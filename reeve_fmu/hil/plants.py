@@ -16,7 +16,7 @@ class PlantError(RuntimeError):
 
 
 class InProcessPlant:
-    """reeve_fmu.core.plant.Plant in this process (fast tests, no FMU)."""
+    """reeve_fmu.components.plant.Plant in this process (fast tests, no FMU)."""
 
     kind = "in-process"
 
@@ -161,7 +161,7 @@ def make_default_plant(scene=None, params: dict | None = None):
     try:
         from ..fmu.cosim import make_plant
     except ImportError:  # pragma: no cover - older checkouts
-        from ..core.plant import Plant
+        from ..components.plant import Plant
         if params:
             raise
         return Plant(scene)

@@ -653,8 +653,8 @@ def hoist_convention(scene: Scene, cols: dict) -> str:
 def crane_angles(scene: Scene, cols: dict) -> list:
     """Add to a `simulate` record of a slewing crane (a body on a revolute joint with a hoist) the crane
     plant FMU's derived angles, `payload.swing_radial`, `payload.swing_tangential`, `payload.yaw` [rad]
-    (core.craneplant: the same expressions, from the same outputs); returns the names added."""
-    from ..core.craneplant import DERIVED, CranePlant
+    (components.craneplant: the same expressions, from the same outputs); returns the names added."""
+    from ..components.craneplant import DERIVED, CranePlant
     from ..fmu.crane import is_crane_scene
 
     if not is_crane_scene(scene):

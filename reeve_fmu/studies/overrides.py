@@ -176,7 +176,7 @@ def scene_with(path, scene_sets: dict):
     try:
         scene = parse_scene(data, f"{path} with --set {desc}")
         if "elevator" in scene.extra:
-            from ..core.elevator import elevator_spec
+            from ..components.elevator import elevator_spec
             elevator_spec(scene)
     except SceneError as exc:
         raise OverrideError(str(exc)) from None

@@ -116,7 +116,7 @@ def run_one(study: dict, index: int, params: dict) -> dict:
     try:
         sets = dict(params)
         if "load_percent" in sets:
-            from ..core.elevator import elevator_spec
+            from ..components.elevator import elevator_spec
             from .overrides import scene_with, split
 
             pct = sets.pop("load_percent")

@@ -25,7 +25,7 @@ LANDINGS = (0.0, 39.0)  # m
 
 from .analysis import traction_limits  # noqa: E402,F401  (re-exported)
 
-#: DriveParams field of `core.elevator.size_drive` -> drive FMU parameter
+#: DriveParams field of `components.elevator.size_drive` -> drive FMU parameter
 SIZED = {"sheave_radius": "machine.sheave_radius", "roping": "machine.roping", "J_ff": "control.J_ff",
          "T_max": "torque.max", "P_max": "torque.power_max", "Kp": "control.Kp", "Ti": "control.Ti",
          "Kpos": "control.Kpos", "v_max": "trip.v_max", "a_max": "trip.a_max", "jerk": "trip.jerk"}
@@ -68,8 +68,8 @@ _SIZING_CACHE: dict = {}
 
 
 def sized_drive(scene) -> dict:
-    """Drive FMU parameter values sized from the scene (core.elevator.size_drive), cached per scene."""
-    from ..core.elevator import elevator_spec, size_drive
+    """Drive FMU parameter values sized from the scene (components.elevator.size_drive), cached per scene."""
+    from ..components.elevator import elevator_spec, size_drive
     from .verdicts import holding_torque
 
     key = repr(scene)
@@ -88,7 +88,7 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
     (default the rated load), visiting the landing positions `sequence` (m; default first, last, first
     landing of [elevator].landings), `dwell` s between moves, drive sized from the scene. `sets`: --set
     overrides {key: value} (studies.overrides); `sis`: shaft information system for the approach."""
-    from ..core.elevator import check_load, elevator_spec
+    from ..components.elevator import check_load, elevator_spec
     from ..core.scene import Scene
     from ..fmu.cosim import MAX_LANDINGS, MAX_MOVES, default_scene_path
     from .overrides import scene_with, split
@@ -125,7 +125,7 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
         if path is None:
             raise ValueError(f"landings start at {sequence[0]:g} m but the scene's car is at "
                              f"{car0.position[2]:g} m: pass the scene file's path")
-        from ..core.elevator import car_at
+        from ..components.elevator import car_at
 
         moved = {b.name: b.position for b in car_at(scene, sequence[0]).bodies}
         for name in (spec.car, spec.counterweight):
@@ -191,7 +191,7 @@ def _check_drive(scene, spec, lands, load, hold, dv, drive_sets) -> None:
 def run_parameters(case: TripCase, drive_values: dict | None = None) -> dict:
     """Every parameter a trip ran with: the scene after --set with the trip's load in the car mass, the
     plant's values and the drive's (sized from the scene, then --set; default the case's)."""
-    from ..core.elevator import with_load
+    from ..components.elevator import with_load
     from ..core.scene import scene_parameters
 
     return {"scene": scene_parameters(with_load(case.scene, case.load)), "plant": dict(case.plant_values),

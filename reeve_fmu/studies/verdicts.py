@@ -183,7 +183,7 @@ def static_outputs(scene, load: float, z: float) -> dict:
     equilibrium needs a compressed rope."""
     from dataclasses import replace
 
-    from ..core.elevator import car_at, elevator_spec
+    from ..components.elevator import car_at, elevator_spec
     from ..core.plausibility import statics_or_raise, with_statics_context
     from ..core.solver import SolverError
     from ..fmu.cosim import make_plant
@@ -220,7 +220,7 @@ def en81_traction_cases(scene) -> dict:
     key = repr(scene)
     if key in _EN81_CACHE:
         return _EN81_CACHE[key]
-    from ..core.elevator import car_at, elevator_spec, with_load
+    from ..components.elevator import car_at, elevator_spec, with_load
 
     spec = elevator_spec(scene)
     lo, hi = min(spec.landings), max(spec.landings)
@@ -296,7 +296,7 @@ def en81_verdicts(scene, limits) -> list:
 def brake_cases(scene) -> dict:
     """Holding torques [N m] of the scene's brake cases: {load kg: [torque at each end landing]} for the
     empty car, the rated load and 125 % of it, and the inertia [kg m²] at the motor for each load."""
-    from ..core.elevator import elevator_spec, inertia_at_motor
+    from ..components.elevator import elevator_spec, inertia_at_motor
 
     spec = elevator_spec(scene)
     ends = (min(spec.landings), max(spec.landings))

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 
-from .scene import Scene, SceneError
+from ..core.scene import Scene, SceneError
 
 G = 9.81
 

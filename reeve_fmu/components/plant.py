@@ -12,20 +12,11 @@ import math
 
 import numpy as np
 
-from .model import State, build_model
-from .plausibility import check_or_raise
-from .scene import Body, Rope, Scene, SceneError, load_scene
-from .solver import SolverError, Simulator
-from .system import assemble
-
-# plant parameters a user may tune (name -> (unit, description)); all change the compiled model
-PARAMETERS = {
-    "car.load": ("kg", "payload in the car, added to the car body's mass"),
-    "rope.EA": ("N", "axial stiffness per rope (all ropes of the scene)"),
-    "rope.damping": ("s", "Kelvin-Voigt time constant of the ropes"),
-    "brake.torque": ("N.m", "total static torque of the machine brake"),
-    "motor.inertia": ("kg.m2", "rotor + sheave + brake discs"),
-}
+from ..core.model import State, build_model
+from ..core.plausibility import check_or_raise
+from ..core.scene import Body, Rope, Scene, SceneError, load_scene
+from ..core.solver import SolverError, Simulator
+from ..core.system import assemble
 
 
 def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = None,

@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
+from ..core.scene import Scene, SceneError, load_scene
 from .plant import Plant, with_joint_input
-from .scene import Scene, SceneError, load_scene
 
 SLEW_INPUTS = ("torque", "speed")
 DERIVED = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw")

@@ -29,8 +29,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ._jit import entry_point, njit
-from .profiles import Profile, profile_eval, scurve_phases, trip_sequence
+from ..core._jit import entry_point, njit
+from ..core.profiles import Profile, profile_eval, scurve_phases, trip_sequence
 
 # ---------------------------------------------------------------------------------------------------
 # Phases of the trip state machine (ints so the compiled kernel can use them)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-from .profiles import scurve
+from ..core.profiles import scurve
 
 #: parameter -> (unit, description); the crane drive FMU's parameters (all fixed)
 PARAMETERS = {
