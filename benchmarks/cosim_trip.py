@@ -31,6 +31,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from reeve_fmu.components.drive import make_drive  # noqa: E402
+from reeve_fmu.components.plant import holding_torques, make_plant  # noqa: E402
 from reeve_fmu.fmu import cosim  # noqa: E402
 
 
@@ -145,8 +147,8 @@ def direct_calls(plant_fmu, drive_fmu, drive_values, n, step=1e-3):
 def bare_models(drive_values, n, step=1e-3, plant_fmu=None):
     """Plant.step and ElectricDrive.step coupled in this process (the monolithic loop)."""
     scene, payload = cosim.plant_fmu_model(plant_fmu)
-    plant = cosim.make_plant(scene, payload)
-    drive = cosim.make_drive(drive_values)
+    plant = make_plant(scene, payload)
+    drive = make_drive(drive_values)
     iw, ia = plant.output_names.index("motor.speed"), plant.output_names.index("motor.angle")
     y = np.array([plant.output(name) for name in plant.output_names])
     T = np.zeros((n, 2), dtype=np.int64)
@@ -237,7 +239,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     plant_fmu, drive_fmu = cosim.ensure_fmus(args.fmus)
     scene, payload = cosim.plant_fmu_model(plant_fmu)
-    pre = cosim.holding_torques(scene, (0.0, 39.0), 1000.0)
+    pre = holding_torques(scene, (0.0, 39.0), 1000.0)
     dv = {"pretorque[1]": pre[0], "pretorque[2]": pre[1]}
     if args.accuracy:
         res = accuracy(plant_fmu, drive_fmu, dv, args.png)

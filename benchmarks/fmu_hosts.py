@@ -120,7 +120,9 @@ class Pair:
 
 def bare_models(steps, repeat, h=1e-3):
     """The FMUs' Plant and ElectricDrive objects, coupled in-process like the master (no FMI)."""
-    from reeve_fmu.fmu.cosim import default_scene_path, make_drive, make_plant
+    from reeve_fmu.components.drive import make_drive
+    from reeve_fmu.components.plant import make_plant
+    from reeve_fmu.fmu.cosim import default_scene_path
 
     best, best_wall = float("inf"), float("inf")
     for _ in range(repeat):

@@ -22,6 +22,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from reeve_fmu.components.drive import R1_PRETORQUE  # noqa: E402
 from reeve_fmu.fmu import cosim  # noqa: E402
 
 IMG = ROOT / "docs" / "img"
@@ -31,7 +32,7 @@ SCHEMES = ("gauss-seidel", "jacobi")
 
 def main():
     IMG.mkdir(parents=True, exist_ok=True)
-    dv = {"pretorque[1]": cosim.R1_PRETORQUE[0], "pretorque[2]": cosim.R1_PRETORQUE[1]}
+    dv = {"pretorque[1]": R1_PRETORQUE[0], "pretorque[2]": R1_PRETORQUE[1]}
     t0 = time.perf_counter()
     ref = cosim.monolithic(step=1e-4, record_step=1e-3, drive_values=dv)
     xr = ref["car.position"]

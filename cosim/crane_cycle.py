@@ -4,7 +4,7 @@
                                 [--step 5e-3] [--t-end 30] [--png docs/img/crane_cosim_sway.png]
 
 Builds both FMUs into DIR (default $REEVE_FMU_FMUS, else fmus/) from the scene, sizes the drive from the
-scene (reeve_fmu.fmu.crane.crane_drive_defaults: the scene's hoist and slew S-curves as references, the
+scene (reeve_fmu.components.cranedrive.crane_drive_defaults: the scene's hoist and slew S-curves as references, the
 holding torque as pre-torque), co-simulates with reeve_fmu.fmu.crane.cosimulate_crane and plots the
 payload sway (swing angles, slew speed, hoist motor torque). The FMUs run Python inside this process:
 run it in a fresh interpreter (it is a script, so it is).

@@ -10,13 +10,13 @@ Inputs  motor.speed [rad/s], motor.angle [rad] (from the plant, held over the st
 Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end of the step, plus
         the references and the sequencer phase. No output depends directly on an input (the drive
         samples at the start of the step).
-Parameters: reeve_fmu.fmu.cosim.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
+Parameters: reeve_fmu.components.drive.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
 """
 import numpy as np
 
 from reeve_fmu.components.drive import (_I_MOVE, _I_PHASE, _X_AREF, _X_EPOS, _X_ID, _X_IQ, _X_TREF, _X_VREF,
-                                  _X_XREF, PHASE_NAMES)
-from reeve_fmu.fmu.cosim import DRIVE_PARAMETERS, drive_defaults, make_drive, trip_end_time
+                                        _X_XREF, DRIVE_PARAMETERS, PHASE_NAMES, drive_defaults, make_drive,
+                                        trip_end_time)
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 #: largest communication step (s) the speed loop is meant for: beyond it the drive logs a warning (once)

@@ -18,7 +18,8 @@ master restores an FMU state or resets.
 """
 import json
 
-from reeve_fmu.fmu.cosim import PLANT_CONFIG, PLANT_PARAMETERS, make_plant
+from reeve_fmu.components.plant import PLANT_PARAMETERS, make_plant
+from reeve_fmu.fmu.cosim import PLANT_CONFIG
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 

@@ -137,6 +137,7 @@ def _write_stopped(out: Path, case, exc, output_dt) -> None:
 
 
 def cli_demo(args) -> int:
+    from .components.drive import SIS_PARAMETERS, trip_end_time
     from .fmu import cosim
     from .studies import report
     from .studies.trip import run_case, run_parameters, summarize_case, traction_limits
@@ -159,8 +160,8 @@ def cli_demo(args) -> int:
     scene_file, name = _plant_source(case, out)
     plant_fmu, drive_fmu = cosim.ensure_fmus(fmu_dir(), scene=scene_file, name=name,
                                              rebuild=bool(getattr(args, "rebuild", False)))
-    drive_values = {k: v for k, v in case.drive_values.items() if k not in cosim.SIS_PARAMETERS}
-    t_end = cosim.trip_end_time(case.drive_values)
+    drive_values = {k: v for k, v in case.drive_values.items() if k not in SIS_PARAMETERS}
+    t_end = trip_end_time(case.drive_values)
     pre = [case.holding_torques[x] for x in case.landings]
     print(f"{case.describe()}: {t_end:.2f} s at a {step * 1e3:g} ms communication step (pre-torque "
           + " / ".join(f"{p:.1f}" for p in pre) + " N·m from the plant's holding torque; drive sized: "
@@ -289,6 +290,7 @@ def cli_build(args) -> int:
     reference scene, or an explicit --name, writes ReevingPlant.fmu (CranePlant.fmu for cranes)."""
     import json
 
+    from .components.drive import SIS_PARAMETERS
     from .fmu import cosim
     from .studies.overrides import apply_to_data, dump_toml, load_scene_data, parse_sets, scene_with, split
 
@@ -322,7 +324,7 @@ def cli_build(args) -> int:
         from .studies.trip import trip_case
 
         case = trip_case(scene, load=load, sets=drive_sets)
-        vals = {k: v for k, v in case.drive_values.items() if k not in cosim.SIS_PARAMETERS}
+        vals = {k: v for k, v in case.drive_values.items() if k not in SIS_PARAMETERS}
         p = dest / f"{name}.drive.json"
         p.write_text(json.dumps({"plant": {"car.load": case.load}, "drive": vals}, indent=1) + "\n", encoding="utf-8")
         print(f"drive parameters sized for {sc.name} (start values for {drive.name}) -> {p}")

@@ -71,7 +71,8 @@ def centripetal(plant_fmu, drive_fmu, omega, t_ramp, t_end):
     import numpy as np
 
     from reeve_fmu.core.scene import load_scene
-    from reeve_fmu.fmu.crane import cosimulate_crane, crane_drive_defaults
+    from reeve_fmu.components.cranedrive import crane_drive_defaults
+    from reeve_fmu.fmu.crane import cosimulate_crane
     from reeve_fmu.fmu.runner import SlaveHandle
 
     with SlaveHandle.open(plant_fmu, "probe") as h:

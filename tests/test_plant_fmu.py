@@ -187,7 +187,8 @@ def test_declared_dependencies_match_the_plant():
     """An output has direct feed-through from motor.torque iff the effect of a torque change over a
     step of length dt tends to a non-zero limit as dt -> 0 (1e-7 s vs 1e-8 s: the same value);
     without feed-through the effect scales with dt (10x smaller)."""
-    from reeve_fmu.fmu.cosim import make_plant, plant_output_specs
+    from reeve_fmu.components.plant import make_plant
+    from reeve_fmu.fmu.cosim import plant_output_specs
 
     plant = make_plant(ROOT / "scenes" / "elevator_2to1.toml")
     specs = {s["name"]: s for s in plant_output_specs(plant.output_names, ["car_sheave", "traction", "cw_sheave"])}

@@ -38,7 +38,7 @@ def test_load_is_explicit_and_checked():
 def test_holding_torque_changes_by_load_times_g_r_over_roping():
     """Statics of the plant against the lever rule: adding dL kg to the car changes the holding torque
     by dL g R / roping (rope stretch moves the geometry slightly)."""
-    from reeve_fmu.fmu.cosim import holding_torques
+    from reeve_fmu.components.plant import holding_torques
 
     t0, t1 = (holding_torques(R1, (0.0,), L)[0] for L in (0.0, 1000.0))
     check("holding torque change / (dL g R / roping) - 1", (t1 - t0) / (1000.0 * 9.81 * 0.16 / 2.0) - 1, 2e-4)
@@ -68,7 +68,7 @@ def test_dumped_scene_reads_back_equal():
 
 
 def test_drive_sequence_parameters():
-    from reeve_fmu.fmu.cosim import drive_params
+    from reeve_fmu.components.drive import drive_params
 
     p = drive_params({"trip.landings": 3, "landing[3]": 20.0, "trip.target[1]": 3, "trip.target[2]": 2,
                       "trip.target[3]": 1, "pretorque[3]": 100.0})

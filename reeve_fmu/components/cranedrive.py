@@ -6,6 +6,9 @@ The hoist adds the holding torque as pre-torque (its integrator starts there), s
 not sag when the loop closes. The controllers sample the measured speeds at the start of each
 communication step and hold their torques over it (no direct feed-through). `slew.speed` is the slew
 reference speed at the end of the step, for a plant driven by a slew speed input.
+
+`PARAMETERS` are the crane drive FMU's parameters; `crane_drive_defaults(scene, holding_torque)` sizes
+them from a crane scene.
 """
 from __future__ import annotations
 
@@ -136,3 +139,28 @@ class CraneDrive:
         self.hoist.integral, self.hoist.torque = d["hi"], d["ht"]
         self.slew.integral, self.slew.torque = d["si"], d["st"]
         self.slew_speed_ref = d["sr"]
+
+
+def crane_drive_defaults(scene, holding_torque: float) -> dict:
+    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
+    scene's hoist and slew profiles as the references."""
+    from .craneplant import crane_parts   # here, not at the top: the crane drive FMU loads no plant
+
+    p = crane_parts(scene)
+    v = CraneDriveParams().values()
+    reel = next(s for s in scene.sheaves if s.name == p["reel"])
+    bodies = {b.name: b for b in scene.bodies}
+    jib, pay = bodies[p["slew"]], bodies[p["payload"]]
+    v["hoist.radius"] = reel.radius
+    v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
+    v["hoist.holding_torque"] = float(holding_torque)
+    v["slew.inertia"] = jib.inertia
+    dv = scene.drive
+    if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up
+        v.update({"hoist.distance": -dv.distance, "hoist.v_max": dv.v_max, "hoist.a_max": dv.a_max,
+                  "hoist.jerk": dv.jerk, "hoist.t_start": dv.t_start})
+    mo = jib.motion
+    if mo is not None and mo.kind == "profile":
+        v.update({"slew.distance": mo.distance, "slew.v_max": mo.v_max, "slew.a_max": mo.a_max,
+                  "slew.jerk": mo.jerk, "slew.t_start": mo.t_start})
+    return v

@@ -19,13 +19,17 @@ Brake command: 1.0 = release (open) the brake, 0.0 = apply (close) it.
 The drive is pure Python + numpy; the per-step kernel is compiled with numba when available (`_jit`).
 All hidden state lives in two flat arrays exported by `get_state()` as builtin lists, so FMI
 get/set/serialize FMU state rewinds it bit-identically.
+
+`DRIVE_PARAMETERS` are the drive FMU's parameters (defaults: reference set R1 with the pre-torque
+`R1_PRETORQUE`); `make_drive(values)` builds the ElectricDrive for their values (the FMU, the
+monolithic reference and the HIL controller call it).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
 import numbers
-from typing import Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -693,3 +697,164 @@ class ElectricDrive:
         keys = ("t_pretorque", "t_brake_release", "t_profile_start", "t_profile_end", "t_brake_apply",
                 "t_ramp_down", "t_torque_off", "x_start", "pretorque", "x_target")
         return [dict(zip(keys, (float(v) for v in row))) for row in self._sched]
+
+
+# ---------------------------------------------------------------------------------------------------
+# The drive FMU's parameters (fmus/reeve_drive_slave.py) and the factory the FMU, the monolithic
+# reference and the HIL controller share.
+
+#: R1 pre-torque (N m) for a start at the bottom / top landing with the rated load: the plant's holding
+#: torque (`holding_torques`, scenes/elevator_2to1.toml, car.load = 1000 kg), rounded to 0.1 N m
+R1_PRETORQUE = (522.5, 331.5)
+
+MAX_LANDINGS = 8    # landing[1..8], pretorque[1..8]
+MAX_MOVES = 16      # trip.target[1..16]
+
+# drive FMU parameters: (FMU name, kind, unit, DriveParams field, description, min, max)
+# kind: "real" | "int"; special fields: "landing", "pretorque" (per landing, 1-based index),
+# "moves" (number of moves alternating between landing[1] and landing[2]), "start_landing" (1-based),
+# "n_landings" (landings in use), "target" (explicit move sequence)
+DRIVE_PARAMETERS = [
+    ("drive.level", "int", None, "level", "drive model: 1 = torque lag + dead time, 2 = PMSM dq model", 1, 2),
+    ("trip.v_max", "real", "m/s", "v_max", "rated car speed of the S-curve", 1e-6, None),
+    ("trip.a_max", "real", "m/s2", "a_max", "car acceleration limit of the S-curve", 1e-6, None),
+    ("trip.jerk", "real", "m/s3", "jerk", "car jerk limit of the S-curve", 1e-6, None),
+    *[(f"landing[{k}]", "real", "m", "landing", f"car position at landing {k}", None, None)
+      for k in range(1, MAX_LANDINGS + 1)],
+    ("trip.landings", "int", None, "n_landings", "number of landings in use (landing[1..n])", 2, MAX_LANDINGS),
+    ("trip.start_landing", "int", None, "start_landing", "landing where the car starts (1-based)", 1,
+     MAX_LANDINGS),
+    ("trip.moves", "int", None, "moves", "number of moves, alternating between landing 1 and 2 (used when "
+                                         "trip.target[1] = 0)", 1, 1000),
+    *[(f"trip.target[{k}]", "int", None, "target", f"landing of move {k} (1-based; 0 ends the sequence; "
+                                                   f"all 0: trip.moves alternating moves)", 0, MAX_LANDINGS)
+      for k in range(1, MAX_MOVES + 1)],
+    ("trip.start_delay", "real", "s", "start_delay", "time before the first pre-torque", 0.0, None),
+    ("trip.dwell_time", "real", "s", "dwell_time", "rest between moves", 0.0, None),
+    ("trip.hold_time", "real", "s", "hold_time", "zero-speed hold after the profile", 0.0, None),
+    *[(f"pretorque[{k}]", "real", "N.m", "pretorque", f"load-weighing pre-torque for a start at landing {k} "
+                                                      f"(set to the holding torque at the load)", None, None)
+      for k in range(1, MAX_LANDINGS + 1)],
+    ("pretorque.ramp_time", "real", "s", "pretorque_time", "torque ramp to the pre-torque before the "
+                                                          "brake lifts", 0.0, None),
+    ("torque.ramp_down_time", "real", "s", "torque_ramp_time", "torque ramp to zero after the brake "
+                                                               "has dropped", 0.0, None),
+    ("brake.lift_delay", "real", "s", "brake_lift_delay", "wait after the release command", 0.0, None),
+    ("brake.drop_delay", "real", "s", "brake_drop_delay", "wait after the apply command", 0.0, None),
+    ("machine.sheave_radius", "real", "m", "sheave_radius", "traction sheave pitch radius", 1e-6, None),
+    ("machine.roping", "real", "1", "roping", "roping factor (rope speed / car speed)", 1e-6, None),
+    ("control.J_ff", "real", "kg.m2", "J_ff", "inertia at the motor shaft for the feed-forward", 0.0, None),
+    ("control.Kp", "real", "N.m.s/rad", "Kp", "speed PI proportional gain", 0.0, None),
+    ("control.Ti", "real", "s", "Ti", "speed PI integral time", 1e-9, None),
+    ("control.Kpos", "real", "1/s", "Kpos", "position loop gain", 0.0, None),
+    ("control.Ts", "real", "s", "Ts", "speed-loop sample time", 1e-7, None),
+    ("torque.max", "real", "N.m", "T_max", "torque limit", 1e-6, None),
+    ("torque.power_max", "real", "W", "P_max", "power limit |T w|", 1e-6, None),
+    ("torque.tau", "real", "s", "tau_T", "Level 1: first-order torque lag", 0.0, None),
+    ("torque.dead_time", "real", "s", "dead_time", "Level 1: dead time (whole control.Ts)", 0.0, None),
+    ("pmsm.pole_pairs", "int", None, "pole_pairs", "Level 2: pole pairs", 1, 200),
+    ("pmsm.psi", "real", "Wb", "psi", "Level 2: PM flux linkage (amplitude-invariant dq)", 1e-9, None),
+    ("pmsm.Rs", "real", "Ohm", "Rs", "Level 2: stator resistance", 1e-9, None),
+    ("pmsm.Ld", "real", "H", "Ld", "Level 2: d inductance", 1e-9, None),
+    ("pmsm.Lq", "real", "H", "Lq", "Level 2: q inductance", 1e-9, None),
+    ("pmsm.V_dc", "real", "V", "V_dc", "Level 2: DC-link voltage (|v_dq| <= V_dc/sqrt 3)", 1e-6, None),
+    ("pmsm.Ts_current", "real", "s", "Ts_current", "Level 2: current-loop sample time (divides "
+                                                   "control.Ts)", 1e-8, None),
+]
+
+
+def _index(name: str) -> int:
+    return int(name[name.index("[") + 1:-1])
+
+
+#: in-process only (no FMU variable: the drive FMU has no car-position input): shaft information system
+SIS_PARAMETERS = {"sis.enabled": ("sis", "1", "1: car-position feedback for the approach"),
+                  "sis.resolution": ("sis_resolution", "m", "SIS position quantum"),
+                  "sis.delay": ("sis_delay", "s", "SIS measurement age"),
+                  "sis.zone": ("sis_zone", "m", "approach length over which the loop blends to the SIS (0: braking distance)"),
+                  "sis.filter": ("sis_filter", "s", "low-pass time constant of the SIS - encoder offset")}
+
+
+def drive_defaults() -> dict:
+    """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
+    round trip, pre-torque for the rated load (R1_PRETORQUE)."""
+    p = DriveParams()
+    out = {}
+    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
+        if field == "landing":
+            k = _index(name) - 1
+            v = list(p.landings)[k] if k < 2 else 0.0
+        elif field == "pretorque":
+            k = _index(name) - 1
+            v = R1_PRETORQUE[k] if k < 2 else 0.0
+        elif field == "moves":
+            v = len(list(p.moves))
+        elif field == "start_landing":
+            v = int(p.start_landing) + 1
+        elif field == "n_landings":
+            v = 2
+        elif field == "target":
+            v = 0
+        else:
+            v = getattr(p, field)
+        out[name] = int(v) if kind == "int" else float(v)
+    return out
+
+
+def drive_params(values: Optional[Mapping[str, float]] = None):
+    """DriveParams from drive FMU parameter values (missing names take `drive_defaults`) and, in
+    process, SIS_PARAMETERS."""
+    vals = drive_defaults()
+    kw = {}
+    if values:
+        values = dict(values)
+        for name, (field, _, _) in SIS_PARAMETERS.items():
+            if name in values:
+                v = values.pop(name)
+                kw[field] = bool(v) if field == "sis" else float(v)
+        unknown = set(values) - set(vals)
+        if unknown:
+            raise ValueError(f"unknown drive parameters {sorted(unknown)}; known: {sorted(vals)} and "
+                             f"{sorted(SIS_PARAMETERS)}")
+        vals.update(values)
+    special = ("landing", "pretorque", "moves", "start_landing", "n_landings", "target")
+    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
+        if field in special:
+            continue
+        kw[field] = int(vals[name]) if kind == "int" else float(vals[name])
+    nl = int(vals["trip.landings"])
+    if not 2 <= nl <= MAX_LANDINGS:
+        raise ValueError(f"trip.landings must be 2..{MAX_LANDINGS}, got {nl!r}")
+    start = int(vals["trip.start_landing"]) - 1
+    if not 0 <= start < nl:
+        raise ValueError(f"trip.start_landing must be 1..{nl} (trip.landings), got {vals['trip.start_landing']!r}")
+    targets = []
+    for k in range(1, MAX_MOVES + 1):
+        tg = int(vals[f"trip.target[{k}]"])
+        if tg == 0:
+            break
+        if not 1 <= tg <= nl:
+            raise ValueError(f"trip.target[{k}] = {tg}: must name a landing 1..{nl} (trip.landings)")
+        targets.append(tg - 1)
+    kw["landings"] = tuple(float(vals[f"landing[{k}]"]) for k in range(1, nl + 1))
+    kw["start_landing"] = start
+    if targets:
+        kw["moves"] = tuple(targets)
+    else:
+        n = int(vals["trip.moves"])
+        if nl != 2 or start > 1:
+            raise ValueError("trip.moves alternates between landings 1 and 2; with more landings give "
+                             "trip.target[1..]")
+        kw["moves"] = tuple((start + 1 + i) % 2 for i in range(n))
+    kw["pretorque"] = tuple(float(vals[f"pretorque[{k}]"]) for k in range(1, nl + 1))
+    return DriveParams(**kw)
+
+
+def make_drive(values: Optional[Mapping[str, float]] = None):
+    """The `ElectricDrive` of the drive FMU for these parameter values."""
+    return ElectricDrive(drive_params(values))
+
+
+def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: float = 1.0) -> float:
+    """End of the drive's move sequence (torque off after the last move) plus `settle` seconds."""
+    return make_drive(drive_values).t_end + settle

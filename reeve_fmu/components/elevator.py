@@ -171,7 +171,7 @@ def size_drive(scene: Scene, holding_rated: tuple) -> dict:
     """Drive parameters (DriveParams field names) sized for the scene's elevator.
 
     `holding_rated`: the static motor torque that holds the car with the rated load at the lowest and the
-    highest landing (N m; the plant's statics, `fmu.cosim.holding_torques`). The empty car's holding
+    highest landing (N m; the plant's statics, `plant.holding_torques`). The empty car's holding
     torque follows by linearity, minus rated_load * g * R / roping. The largest torque of a rated trip is
     |holding| + J a_max roping / R over {empty, rated} x {lowest, highest landing}; torque and power
     limits are SIZING_MARGIN times it (and it times the rated motor speed); the speed PI keeps the

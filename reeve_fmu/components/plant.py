@@ -4,11 +4,16 @@
 all step: the scene's drive becomes an external motor-torque input on the driven sheave, the brake
 command is a second input, and everything else is the core engine (Model/State/Simulator). Its state is
 exactly the engine State, so saving and restoring it (FMU get/set/serialize) is copying arrays.
+
+`PLANT_PARAMETERS` are the plant FMU's parameters; `make_plant(scene, params=...)` builds the Plant
+for their values (the FMU, the monolithic reference and the HIL bench call it), and
+`holding_torques` gives the pre-torque that holds a given load at each landing.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 import math
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -17,6 +22,7 @@ from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
 from ..core.solver import SolverError, Simulator
 from ..core.system import assemble
+from .elevator import car_at, check_load, elevator_spec, with_load
 
 
 def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = None,
@@ -189,3 +195,93 @@ class Plant:
         self._y = np.array(d["y"], float)
         for ji, row in zip(self._joints, d.get("joints", ())):
             ji.row[...] = row
+
+
+# ---------------------------------------------------------------------------------------------------
+# The plant FMU's parameters and the factory the FMU (fmus/reeve_plant_slave.py), the monolithic
+# reference and the HIL bench share, so they build the same Plant from the same values.
+
+#: plant FMU parameter -> (Plant keyword, unit, description); all fixed (they change the model)
+PLANT_PARAMETERS = {
+    "car.load": ("car_load", "kg", "payload in the car (on top of the empty car); default: the rated load of [elevator]"),
+    "rope.EA": ("rope_EA", "N", "axial stiffness per rope; a value different from the default sets "
+                                "every rope of the scene"),
+    "rope.damping": ("rope_damping", "s", "Kelvin-Voigt time constant of the ropes (every rope)"),
+    # (not "brake.torque": that is the output of the torque the brake transmits)
+    "brake.static_torque": ("brake_torque", "N.m", "total static torque (capacity) of the machine brake"),
+    "motor.inertia": ("motor_inertia", "kg.m2", "rotor + traction sheave + brake discs"),
+}
+
+
+def _scene(scene):
+    return scene if isinstance(scene, Scene) else load_scene(scene)
+
+
+def scene_load(scene) -> float:
+    """Payload (kg) the scene's car mass includes: [elevator].car_load; 0 for a scene without [elevator]
+    (taken as written). `scene`: a Scene or a scene file path."""
+    scene = _scene(scene)
+    return elevator_spec(scene).car_load if "elevator" in scene.extra else 0.0
+
+
+def empty_car_scene(scene):
+    """The scene with its declared payload ([elevator].car_load) taken out of the car body's mass."""
+    scene = _scene(scene)
+    return with_load(scene, 0.0) if "elevator" in scene.extra else scene
+
+
+def plant_defaults(scene) -> dict:
+    """Default values of the plant FMU parameters for `scene` (FMU name -> value); car.load: the rated
+    load of [elevator] (0 without)."""
+    scene = _scene(scene)
+    return {
+        "car.load": elevator_spec(scene).rated_load if "elevator" in scene.extra else 0.0,
+        "rope.EA": float(scene.ropes[0].EA),
+        "rope.damping": float(scene.ropes[0].damping),
+        "brake.static_torque": float(scene.brake.torque),
+        "motor.inertia": float(scene.drive.motor_inertia),
+    }
+
+
+def make_plant(scene, declared_load: float | None = None, params: Optional[Mapping[str, float]] = None):
+    """The `Plant` of the plant FMU: `scene` (Scene or path) and FMU parameter values
+    {"car.load": kg, "rope.EA": N, ...} (PLANT_PARAMETERS; missing ones take `plant_defaults`).
+
+    `declared_load` is only a consistency check for FMUs built by older versions: when given it must
+    equal the scene's [elevator].car_load. Parameters equal to their default leave the scene untouched
+    (a scene with ropes of different EA keeps them unless rope.EA is changed)."""
+    scene = _scene(scene)
+    decl = scene_load(scene)
+    if declared_load is not None and abs(float(declared_load) - decl) > 1e-9:
+        raise ValueError(f"{scene.source}: the FMU configuration says the car mass includes {declared_load} kg "
+                         f"of payload, the scene's [elevator].car_load says {decl} kg")
+    params = dict(params or {})
+    unknown = set(params) - set(PLANT_PARAMETERS)
+    if unknown:
+        raise ValueError(f"unknown plant parameters {sorted(unknown)}; known: {sorted(PLANT_PARAMETERS)}")
+    defaults = plant_defaults(scene)
+    load = float(params.get("car.load", defaults["car.load"]))
+    if "elevator" in scene.extra:
+        check_load(elevator_spec(scene), load, "car.load")
+    kw = {"car_load": load}
+    for name, (key, _, _) in PLANT_PARAMETERS.items():
+        if name == "car.load":
+            continue
+        v = params.get(name)
+        if v is not None and float(v) != defaults[name]:
+            kw[key] = float(v)
+    return Plant(empty_car_scene(scene), **kw)
+
+
+def holding_torques(scene, landings: Sequence[float], load: float,
+                    params: Optional[Mapping[str, float]] = None) -> list[float]:
+    """Static motor torque (N m) that holds the car with `load` kg of payload at each landing (m): the
+    plant's `brake.torque` at rest with the car moved to the landing (the counterweight moved by the same
+    distance the other way). This is what a load-weighing device gives the drive as pre-torque.
+    `params`: other plant FMU parameters (rope.EA, ...); a car.load in them must equal `load`."""
+    scene = _scene(scene)
+    params = dict(params or {})
+    if "car.load" in params and float(params["car.load"]) != float(load):
+        raise ValueError(f"holding_torques: load = {load} kg but params['car.load'] = {params['car.load']} kg")
+    params["car.load"] = float(load)
+    return [make_plant(car_at(scene, float(x)), None, params).output("brake.torque") for x in landings]

@@ -1,4 +1,5 @@
-"""The FMI layer: FMU machinery, FMU build and the co-simulation masters (physics lives in core).
+"""The FMI layer: FMU machinery, FMU build and the co-simulation masters (the physics lives in core and
+components).
 
 * `reeve_fmu.fmu.slave`   -- `ReeveSlave`, the pythonfmu base class of every reeve_fmu FMU entry
 * `reeve_fmu.fmu.build`   -- `build_fmu`, `fmu_is_stale`, `read_stamp`, `current_package_hash`

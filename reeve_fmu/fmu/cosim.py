@@ -14,8 +14,8 @@ Three ways to run the same closed loop (docs/cosim.md):
   (cosim/run_libcosim.py).
 
 The plant and drive FMU entries (fmus/reeve_plant_slave.py, fmus/reeve_drive_slave.py) build their
-models with `make_plant`/`make_drive` from this module, so the FMUs and the in-process reference are
-the same code with the same parameter mapping.
+models with `make_plant`/`make_drive` of reeve_fmu.components (plant, drive), as `monolithic` does, so
+the FMUs and the in-process reference are the same code with the same parameter mapping.
 
 Car load: an elevator scene declares in its [elevator] table the rated load and `car_load`, the payload
 its car body's mass includes (reeve_fmu.components.elevator). The plant FMU's parameter `car.load` is the
@@ -30,11 +30,9 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
-import sys
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Optional, Sequence
 
@@ -46,110 +44,9 @@ PLANT_CONFIG = "reeve_plant.json"     # resource of the plant FMU (see plant_con
 PLANT_SCENE = "scene.toml"            # resource of the plant FMU: the scene it was built from
 DEFAULT_SCENE = "elevator_2to1.toml"
 
-#: plant FMU parameter -> (Plant keyword, unit, description); all fixed (they change the model)
-PLANT_PARAMETERS = {
-    "car.load": ("car_load", "kg", "payload in the car (on top of the empty car); default: the rated load of [elevator]"),
-    "rope.EA": ("rope_EA", "N", "axial stiffness per rope; a value different from the default sets "
-                                "every rope of the scene"),
-    "rope.damping": ("rope_damping", "s", "Kelvin-Voigt time constant of the ropes (every rope)"),
-    # (not "brake.torque": that is the output of the torque the brake transmits)
-    "brake.static_torque": ("brake_torque", "N.m", "total static torque (capacity) of the machine brake"),
-    "motor.inertia": ("motor_inertia", "kg.m2", "rotor + traction sheave + brake discs"),
-}
-
 # ------------------------------------------------------------------------------------------------
-# plant
+# the plant FMU: output declarations and configuration
 # ------------------------------------------------------------------------------------------------
-
-
-def _scene(scene):
-    from ..core.scene import Scene, load_scene
-
-    return scene if isinstance(scene, Scene) else load_scene(scene)
-
-
-def scene_load(scene) -> float:
-    """Payload (kg) the scene's car mass includes: [elevator].car_load; 0 for a scene without [elevator]
-    (taken as written). `scene`: a Scene or a scene file path."""
-    from ..components.elevator import elevator_spec
-
-    scene = _scene(scene)
-    return elevator_spec(scene).car_load if "elevator" in scene.extra else 0.0
-
-
-def empty_car_scene(scene):
-    """The scene with its declared payload ([elevator].car_load) taken out of the car body's mass."""
-    from ..components.elevator import with_load
-
-    scene = _scene(scene)
-    return with_load(scene, 0.0) if "elevator" in scene.extra else scene
-
-
-def plant_defaults(scene) -> dict:
-    """Default values of the plant FMU parameters for `scene` (FMU name -> value); car.load: the rated
-    load of [elevator] (0 without)."""
-    from ..components.elevator import elevator_spec
-
-    scene = _scene(scene)
-    return {
-        "car.load": elevator_spec(scene).rated_load if "elevator" in scene.extra else 0.0,
-        "rope.EA": float(scene.ropes[0].EA),
-        "rope.damping": float(scene.ropes[0].damping),
-        "brake.static_torque": float(scene.brake.torque),
-        "motor.inertia": float(scene.drive.motor_inertia),
-    }
-
-
-def make_plant(scene, declared_load: float | None = None, params: Optional[Mapping[str, float]] = None):
-    """The `Plant` of the plant FMU: `scene` (Scene or path) and FMU parameter values
-    {"car.load": kg, "rope.EA": N, ...} (PLANT_PARAMETERS; missing ones take `plant_defaults`).
-
-    `declared_load` is only a consistency check for FMUs built by older versions: when given it must
-    equal the scene's [elevator].car_load. Parameters equal to their default leave the scene untouched
-    (a scene with ropes of different EA keeps them unless rope.EA is changed)."""
-    from ..components.plant import Plant
-
-    scene = _scene(scene)
-    decl = scene_load(scene)
-    if declared_load is not None and abs(float(declared_load) - decl) > 1e-9:
-        raise ValueError(f"{scene.source}: the FMU configuration says the car mass includes {declared_load} kg "
-                         f"of payload, the scene's [elevator].car_load says {decl} kg")
-    params = dict(params or {})
-    unknown = set(params) - set(PLANT_PARAMETERS)
-    if unknown:
-        raise ValueError(f"unknown plant parameters {sorted(unknown)}; known: {sorted(PLANT_PARAMETERS)}")
-    defaults = plant_defaults(scene)
-    load = float(params.get("car.load", defaults["car.load"]))
-    if "elevator" in scene.extra:
-        from ..components.elevator import check_load, elevator_spec
-
-        check_load(elevator_spec(scene), load, "car.load")
-    kw = {"car_load": load}
-    for name, (key, _, _) in PLANT_PARAMETERS.items():
-        if name == "car.load":
-            continue
-        v = params.get(name)
-        if v is not None and float(v) != defaults[name]:
-            kw[key] = float(v)
-    return Plant(empty_car_scene(scene), **kw)
-
-
-def holding_torques(scene, landings: Sequence[float], load: float,
-                    params: Optional[Mapping[str, float]] = None) -> list[float]:
-    """Static motor torque (N m) that holds the car with `load` kg of payload at each landing (m): the
-    plant's `brake.torque` at rest with the car moved to the landing (the counterweight moved by the same
-    distance the other way). This is what a load-weighing device gives the drive as pre-torque.
-    `params`: other plant FMU parameters (rope.EA, ...); a car.load in them must equal `load`."""
-    from ..components.elevator import car_at
-
-    scene = _scene(scene)
-    params = dict(params or {})
-    if "car.load" in params and float(params["car.load"]) != float(load):
-        raise ValueError(f"holding_torques: load = {load} kg but params['car.load'] = {params['car.load']} kg")
-    params["car.load"] = float(load)
-    return [make_plant(car_at(scene, float(x)), None, params).output("brake.torque") for x in landings]
-
-
 def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str]) -> list[dict]:
     """FMI declaration of each plant output: unit, declaredType, derivative, description and the
     direct feed-through from motor.torque.
@@ -208,8 +105,9 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
 
 def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
+    from ..components.drive import trip_end_time
+    from ..components.plant import empty_car_scene, plant_defaults, plant_scene, scene_load
     from ..core.model import build_model
-    from ..components.plant import plant_scene
     from ..core.plausibility import check_or_raise
     from ..core.scene import load_scene
 
@@ -227,167 +125,6 @@ def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
         "stop_time": max(float(scene.t_end), trip_end_time()),
         "outputs": plant_output_specs(model.output_names, [s.name for s in scene.sheaves]),
     }
-
-
-# ------------------------------------------------------------------------------------------------
-# drive
-# ------------------------------------------------------------------------------------------------
-#: R1 pre-torque (N m) for a start at the bottom / top landing with the rated load: the plant's holding
-#: torque (`holding_torques`, scenes/elevator_2to1.toml, car.load = 1000 kg), rounded to 0.1 N m
-R1_PRETORQUE = (522.5, 331.5)
-
-MAX_LANDINGS = 8    # landing[1..8], pretorque[1..8]
-MAX_MOVES = 16      # trip.target[1..16]
-
-# drive FMU parameters: (FMU name, kind, unit, DriveParams field, description, min, max)
-# kind: "real" | "int"; special fields: "landing", "pretorque" (per landing, 1-based index),
-# "moves" (number of moves alternating between landing[1] and landing[2]), "start_landing" (1-based),
-# "n_landings" (landings in use), "target" (explicit move sequence)
-DRIVE_PARAMETERS = [
-    ("drive.level", "int", None, "level", "drive model: 1 = torque lag + dead time, 2 = PMSM dq model", 1, 2),
-    ("trip.v_max", "real", "m/s", "v_max", "rated car speed of the S-curve", 1e-6, None),
-    ("trip.a_max", "real", "m/s2", "a_max", "car acceleration limit of the S-curve", 1e-6, None),
-    ("trip.jerk", "real", "m/s3", "jerk", "car jerk limit of the S-curve", 1e-6, None),
-    *[(f"landing[{k}]", "real", "m", "landing", f"car position at landing {k}", None, None)
-      for k in range(1, MAX_LANDINGS + 1)],
-    ("trip.landings", "int", None, "n_landings", "number of landings in use (landing[1..n])", 2, MAX_LANDINGS),
-    ("trip.start_landing", "int", None, "start_landing", "landing where the car starts (1-based)", 1,
-     MAX_LANDINGS),
-    ("trip.moves", "int", None, "moves", "number of moves, alternating between landing 1 and 2 (used when "
-                                         "trip.target[1] = 0)", 1, 1000),
-    *[(f"trip.target[{k}]", "int", None, "target", f"landing of move {k} (1-based; 0 ends the sequence; "
-                                                   f"all 0: trip.moves alternating moves)", 0, MAX_LANDINGS)
-      for k in range(1, MAX_MOVES + 1)],
-    ("trip.start_delay", "real", "s", "start_delay", "time before the first pre-torque", 0.0, None),
-    ("trip.dwell_time", "real", "s", "dwell_time", "rest between moves", 0.0, None),
-    ("trip.hold_time", "real", "s", "hold_time", "zero-speed hold after the profile", 0.0, None),
-    *[(f"pretorque[{k}]", "real", "N.m", "pretorque", f"load-weighing pre-torque for a start at landing {k} "
-                                                      f"(set to the holding torque at the load)", None, None)
-      for k in range(1, MAX_LANDINGS + 1)],
-    ("pretorque.ramp_time", "real", "s", "pretorque_time", "torque ramp to the pre-torque before the "
-                                                          "brake lifts", 0.0, None),
-    ("torque.ramp_down_time", "real", "s", "torque_ramp_time", "torque ramp to zero after the brake "
-                                                               "has dropped", 0.0, None),
-    ("brake.lift_delay", "real", "s", "brake_lift_delay", "wait after the release command", 0.0, None),
-    ("brake.drop_delay", "real", "s", "brake_drop_delay", "wait after the apply command", 0.0, None),
-    ("machine.sheave_radius", "real", "m", "sheave_radius", "traction sheave pitch radius", 1e-6, None),
-    ("machine.roping", "real", "1", "roping", "roping factor (rope speed / car speed)", 1e-6, None),
-    ("control.J_ff", "real", "kg.m2", "J_ff", "inertia at the motor shaft for the feed-forward", 0.0, None),
-    ("control.Kp", "real", "N.m.s/rad", "Kp", "speed PI proportional gain", 0.0, None),
-    ("control.Ti", "real", "s", "Ti", "speed PI integral time", 1e-9, None),
-    ("control.Kpos", "real", "1/s", "Kpos", "position loop gain", 0.0, None),
-    ("control.Ts", "real", "s", "Ts", "speed-loop sample time", 1e-7, None),
-    ("torque.max", "real", "N.m", "T_max", "torque limit", 1e-6, None),
-    ("torque.power_max", "real", "W", "P_max", "power limit |T w|", 1e-6, None),
-    ("torque.tau", "real", "s", "tau_T", "Level 1: first-order torque lag", 0.0, None),
-    ("torque.dead_time", "real", "s", "dead_time", "Level 1: dead time (whole control.Ts)", 0.0, None),
-    ("pmsm.pole_pairs", "int", None, "pole_pairs", "Level 2: pole pairs", 1, 200),
-    ("pmsm.psi", "real", "Wb", "psi", "Level 2: PM flux linkage (amplitude-invariant dq)", 1e-9, None),
-    ("pmsm.Rs", "real", "Ohm", "Rs", "Level 2: stator resistance", 1e-9, None),
-    ("pmsm.Ld", "real", "H", "Ld", "Level 2: d inductance", 1e-9, None),
-    ("pmsm.Lq", "real", "H", "Lq", "Level 2: q inductance", 1e-9, None),
-    ("pmsm.V_dc", "real", "V", "V_dc", "Level 2: DC-link voltage (|v_dq| <= V_dc/sqrt 3)", 1e-6, None),
-    ("pmsm.Ts_current", "real", "s", "Ts_current", "Level 2: current-loop sample time (divides "
-                                                   "control.Ts)", 1e-8, None),
-]
-
-
-def _index(name: str) -> int:
-    return int(name[name.index("[") + 1:-1])
-
-
-#: in-process only (no FMU variable: the drive FMU has no car-position input): shaft information system
-SIS_PARAMETERS = {"sis.enabled": ("sis", "1", "1: car-position feedback for the approach"),
-                  "sis.resolution": ("sis_resolution", "m", "SIS position quantum"),
-                  "sis.delay": ("sis_delay", "s", "SIS measurement age"),
-                  "sis.zone": ("sis_zone", "m", "approach length over which the loop blends to the SIS (0: braking distance)"),
-                  "sis.filter": ("sis_filter", "s", "low-pass time constant of the SIS - encoder offset")}
-
-
-def drive_defaults() -> dict:
-    """Default drive FMU parameter values: reference set R1 (DriveParams defaults), full travel, one
-    round trip, pre-torque for the rated load (R1_PRETORQUE)."""
-    from ..components.drive import DriveParams
-
-    p = DriveParams()
-    out = {}
-    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
-        if field == "landing":
-            k = _index(name) - 1
-            v = list(p.landings)[k] if k < 2 else 0.0
-        elif field == "pretorque":
-            k = _index(name) - 1
-            v = R1_PRETORQUE[k] if k < 2 else 0.0
-        elif field == "moves":
-            v = len(list(p.moves))
-        elif field == "start_landing":
-            v = int(p.start_landing) + 1
-        elif field == "n_landings":
-            v = 2
-        elif field == "target":
-            v = 0
-        else:
-            v = getattr(p, field)
-        out[name] = int(v) if kind == "int" else float(v)
-    return out
-
-
-def drive_params(values: Optional[Mapping[str, float]] = None):
-    """DriveParams from drive FMU parameter values (missing names take `drive_defaults`) and, in
-    process, SIS_PARAMETERS."""
-    from ..components.drive import DriveParams
-
-    vals = drive_defaults()
-    kw = {}
-    if values:
-        values = dict(values)
-        for name, (field, _, _) in SIS_PARAMETERS.items():
-            if name in values:
-                v = values.pop(name)
-                kw[field] = bool(v) if field == "sis" else float(v)
-        unknown = set(values) - set(vals)
-        if unknown:
-            raise ValueError(f"unknown drive parameters {sorted(unknown)}; known: {sorted(vals)} and "
-                             f"{sorted(SIS_PARAMETERS)}")
-        vals.update(values)
-    special = ("landing", "pretorque", "moves", "start_landing", "n_landings", "target")
-    for name, kind, _, field, *_ in DRIVE_PARAMETERS:
-        if field in special:
-            continue
-        kw[field] = int(vals[name]) if kind == "int" else float(vals[name])
-    nl = int(vals["trip.landings"])
-    if not 2 <= nl <= MAX_LANDINGS:
-        raise ValueError(f"trip.landings must be 2..{MAX_LANDINGS}, got {nl!r}")
-    start = int(vals["trip.start_landing"]) - 1
-    if not 0 <= start < nl:
-        raise ValueError(f"trip.start_landing must be 1..{nl} (trip.landings), got {vals['trip.start_landing']!r}")
-    targets = []
-    for k in range(1, MAX_MOVES + 1):
-        tg = int(vals[f"trip.target[{k}]"])
-        if tg == 0:
-            break
-        if not 1 <= tg <= nl:
-            raise ValueError(f"trip.target[{k}] = {tg}: must name a landing 1..{nl} (trip.landings)")
-        targets.append(tg - 1)
-    kw["landings"] = tuple(float(vals[f"landing[{k}]"]) for k in range(1, nl + 1))
-    kw["start_landing"] = start
-    if targets:
-        kw["moves"] = tuple(targets)
-    else:
-        n = int(vals["trip.moves"])
-        if nl != 2 or start > 1:
-            raise ValueError("trip.moves alternates between landings 1 and 2; with more landings give "
-                             "trip.target[1..]")
-        kw["moves"] = tuple((start + 1 + i) % 2 for i in range(n))
-    kw["pretorque"] = tuple(float(vals[f"pretorque[{k}]"]) for k in range(1, nl + 1))
-    return DriveParams(**kw)
-
-
-def make_drive(values: Optional[Mapping[str, float]] = None):
-    """The `ElectricDrive` of the drive FMU for these parameter values."""
-    from ..components.drive import ElectricDrive
-
-    return ElectricDrive(drive_params(values))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -546,11 +283,6 @@ class CosimError(RuntimeError):
     (the failed step's start) set; both are None for a failure before the first step."""
     result = None
     time = None
-
-
-def trip_end_time(drive_values: Optional[Mapping[str, float]] = None, settle: float = 1.0) -> float:
-    """End of the drive's move sequence (torque off after the last move) plus `settle` seconds."""
-    return make_drive(drive_values).t_end + settle
 
 
 # ------------------------------------------------------------------------------------------------
@@ -834,6 +566,7 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     buffers (`_Exchange`); run the communication steps (`_master_loop`); close the FMUs; assemble the
     result (`_cosim_result`).
     """
+    from ..components.drive import trip_end_time
     from .runner import SlaveHandle
 
     if not (step > 0.0 and math.isfinite(step)):
@@ -1091,6 +824,9 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     reference of the co-simulation error (docs/cosim.md). The plant comes from `scene` (default: the
     shipped elevator_2to1 scene) or, if given, from the scene the plant FMU `plant_fmu` carries.
     `monitor`/`on_instability`: the CouplingMonitor at the coupling step, as in `cosimulate`."""
+    from ..components.drive import make_drive
+    from ..components.plant import make_plant
+
     if scheme not in ("gauss-seidel", "jacobi"):
         raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
     if on_instability not in ON_INSTABILITY:

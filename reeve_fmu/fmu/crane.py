@@ -111,32 +111,6 @@ def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     }
 
 
-def crane_drive_defaults(scene, holding_torque: float) -> dict:
-    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
-    scene's hoist and slew profiles as the references."""
-    from ..components.cranedrive import CraneDriveParams
-    from ..components.craneplant import crane_parts
-
-    p = crane_parts(scene)
-    v = CraneDriveParams().values()
-    reel = next(s for s in scene.sheaves if s.name == p["reel"])
-    bodies = {b.name: b for b in scene.bodies}
-    jib, pay = bodies[p["slew"]], bodies[p["payload"]]
-    v["hoist.radius"] = reel.radius
-    v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
-    v["hoist.holding_torque"] = float(holding_torque)
-    v["slew.inertia"] = jib.inertia
-    dv = scene.drive
-    if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up
-        v.update({"hoist.distance": -dv.distance, "hoist.v_max": dv.v_max, "hoist.a_max": dv.a_max,
-                  "hoist.jerk": dv.jerk, "hoist.t_start": dv.t_start})
-    mo = jib.motion
-    if mo is not None and mo.kind == "profile":
-        v.update({"slew.distance": mo.distance, "slew.v_max": mo.v_max, "slew.a_max": mo.a_max,
-                  "slew.jerk": mo.jerk, "slew.t_start": mo.t_start})
-    return v
-
-
 def _entry(kind: str) -> Path:
     from .cosim import repo_root
 
@@ -165,6 +139,7 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
     """Build the crane plant FMU of `scene` (a path; model name `crane_plant_name`, or `name`) and
     CraneDrive.fmu into dest; returns their paths and the drive parameters sized for the scene (start
     values for CraneDrive.fmu)."""
+    from ..components.cranedrive import crane_drive_defaults
     from ..core.scene import load_scene
     from .build import NUMBA, NUMPY, build_fmu
     from .cosim import _slug

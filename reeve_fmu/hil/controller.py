@@ -28,7 +28,7 @@ from .protocol import (COB_EMCY, COB_HB_CONTROLLER, COB_HB_DRIVE, COB_NMT, COB_R
 class ControllerConfig:
     dt: float = 1e-3
     n_steps: int = 1000                 # SYNC cycles to serve
-    drive_values: dict | None = None    # drive FMU parameter values (reeve_fmu.fmu.cosim.drive_params)
+    drive_values: dict | None = None    # drive FMU parameter values (reeve_fmu.components.drive.drive_params)
     dies_at: float | None = None        # s of simulated time: stop sending (dead controller)
     start_timeout: float = 60.0         # s to wait for the drive's boot-up / heartbeat
     sync_timeout: float = 5.0           # s to wait for the next SYNC before giving up
@@ -76,8 +76,8 @@ class ControllerStats:
 
 
 def make_electric_drive(values=None):
-    """The demo's drive model: reeve_fmu.fmu.cosim.make_drive (R1, rated-load pre-torque, round trip)."""
-    from ..fmu.cosim import make_drive
+    """The demo's drive model: reeve_fmu.components.drive.make_drive (R1, rated-load pre-torque, round trip)."""
+    from ..components.drive import make_drive
 
     return make_drive(values)
 

@@ -152,14 +152,14 @@ class FmuPlant:
 
 
 def make_default_plant(scene=None, params: dict | None = None):
-    """The in-process twin of the plant FMU: reeve_fmu.fmu.cosim.make_plant (car.load = rated load) of the
+    """The in-process twin of the plant FMU: reeve_fmu.components.plant.make_plant (car.load = rated load) of the
     2:1 elevator scene, or Plant(scene) when the co-simulation module is not available. `params` are plant
     FMU parameter names ({"car.load": ..., "rope.EA": ...})."""
     from ..core.scene import default_scene
 
     scene = scene if scene is not None else default_scene("elevator_2to1.toml")
     try:
-        from ..fmu.cosim import make_plant
+        from ..components.plant import make_plant
     except ImportError:  # pragma: no cover - older checkouts
         from ..components.plant import Plant
         if params:

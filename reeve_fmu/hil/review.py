@@ -17,7 +17,7 @@ SOURCE = "HIL bench (docs/hil.md)"
 
 def run_sequence(drive_values) -> tuple:
     """Landing positions (m) the drive visits, starting at its start landing."""
-    from ..fmu.cosim import drive_params
+    from ..components.drive import drive_params
 
     p = drive_params(drive_values)
     return tuple([p.landings[p.start_landing]] + [p.landings[m] for m in p.moves])
@@ -27,6 +27,7 @@ def hil_case(cfg, plant):
     """The trip as the bench ran it: the plant's scene (the FMU's own, or the default scene in process),
     the load of cfg.plant_values, the landings the drive visits, and the drive parameters the controller
     ran (the drive FMU's defaults updated with cfg.drive_values)."""
+    from ..components.drive import drive_defaults
     from ..fmu import cosim
     from ..studies.trip import trip_case
 
@@ -34,7 +35,7 @@ def hil_case(cfg, plant):
     scene = cosim.plant_fmu_model(path)[0] if path is not None else cosim.default_scene_path()
     load = (cfg.plant_values or {}).get("car.load")
     case = trip_case(scene, load=None if load is None else float(load), sequence=run_sequence(cfg.drive_values))
-    dv = cosim.drive_defaults()
+    dv = drive_defaults()
     dv.update(cfg.drive_values or {})
     case.drive_values = dv
     return case

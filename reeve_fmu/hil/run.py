@@ -154,7 +154,7 @@ class HilConfig:
     dt: float = 1e-3
     plant: str = "fmu"                         # fmu | in-process
     fmu_path: str | None = None                # default: fmus/ReevingPlant.fmu (built when missing/stale)
-    drive_values: dict | None = None           # drive parameters (cosim DRIVE_PARAMETERS names); None: the demo's
+    drive_values: dict | None = None           # drive parameters (components.drive.DRIVE_PARAMETERS names); None: the demo's
     plant_values: dict | None = None           # plant FMU parameters (car.load, ...); None: the demo's
     out: str | None = "results/hil"
     lockstep_timeout: float = 0.5
@@ -579,7 +579,7 @@ SUMMARY_KEYS = ("mode", "steps", "wall_s", "steps_per_s", "watchdog_trips", "bra
 def _hil_sets(items) -> dict:
     """--set for hil: the load, the plant FMU's parameters (rope.EA, ...) and drive parameters on top of
     the demo's scenario; other scene keys need a plant FMU built with them (reeve-fmu build --set)."""
-    from ..fmu.cosim import PLANT_PARAMETERS
+    from ..components.plant import PLANT_PARAMETERS, holding_torques
     from ..studies.overrides import OverrideError, parse_sets, split
 
     sets = parse_sets(items)
@@ -597,8 +597,8 @@ def _hil_sets(items) -> dict:
         from ..fmu import cosim
         from ..studies import trip as demo
 
-        pre = cosim.holding_torques(load_scene(cosim.default_scene_path()), demo.LANDINGS, pv["car.load"],
-                                    params={k: v for k, v in pv.items() if k != "car.load"})
+        pre = holding_torques(load_scene(cosim.default_scene_path()), demo.LANDINGS, pv["car.load"],
+                              params={k: v for k, v in pv.items() if k != "car.load"})
         dv.update({"pretorque[1]": pre[0], "pretorque[2]": pre[1]})
     dv.update(drive_sets)
     return {"plant_values": pv, "drive_values": dv}

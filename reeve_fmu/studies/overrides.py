@@ -59,7 +59,7 @@ def parse_sets(items) -> dict:
 
 
 def drive_names() -> set:
-    from ..fmu.cosim import DRIVE_PARAMETERS, SIS_PARAMETERS
+    from ..components.drive import DRIVE_PARAMETERS, SIS_PARAMETERS
 
     return {p[0] for p in DRIVE_PARAMETERS} | set(SIS_PARAMETERS)
 

@@ -90,7 +90,8 @@ def trip_case(scene=None, *, load: float | None = None, sequence=None, dwell: fl
     overrides {key: value} (studies.overrides); `sis`: shaft information system for the approach."""
     from ..components.elevator import check_load, elevator_spec
     from ..core.scene import Scene
-    from ..fmu.cosim import MAX_LANDINGS, MAX_MOVES, default_scene_path
+    from ..components.drive import MAX_LANDINGS, MAX_MOVES
+    from ..fmu.cosim import default_scene_path
     from .overrides import scene_with, split
 
     scene_sets, drive_sets, set_load = split(dict(sets or {}))

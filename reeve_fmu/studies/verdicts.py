@@ -186,7 +186,7 @@ def static_outputs(scene, load: float, z: float) -> dict:
     from ..components.elevator import car_at, elevator_spec
     from ..core.plausibility import statics_or_raise, with_statics_context
     from ..core.solver import SolverError
-    from ..fmu.cosim import make_plant
+    from ..components.plant import make_plant
 
     key = (repr(scene), float(load), float(z))
     if key not in _STATICS_CACHE:
