@@ -5,7 +5,7 @@ measured in one run (each call in a fresh process):
   empty one (`REEVE_FMU_CACHE_DIR` a new folder: the FMU copies its precompiled kernels there); with
   `--without-kernels` also the same FMU stripped of its kernels, cold (what every FMU cost before they
   travelled with it: a full compile);
-* the C host (tests/fmu_host): 1000 steps of plant + drive, a minimal environment (PATH=/usr/bin:/bin,
+* the C host (tests/support/fmu_host): 1000 steps of plant + drive, a minimal environment (PATH=/usr/bin:/bin,
   LANG=C), warm and cold; with `--standalone` also the standalone FMUs in a mount namespace where every
   Python of the machine is hidden (root only), cold;
 * `--cpu`: the 2:1 trip's cost per step with kernels compiled for a generic x86-64 CPU (the default)
@@ -29,7 +29,7 @@ import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))
 
 SIMULATE = """
 import sys, time
@@ -109,7 +109,7 @@ def main() -> None:
     ap.add_argument("--cpu", action="store_true")
     ap.add_argument("--json", type=Path)
     a = ap.parse_args()
-    from fmu_host import chost
+    from tests.support.fmu_host import chost
     import test_fmu_portable as portable
 
     out = {"load_start": os.getloadavg()[0]}

@@ -13,7 +13,7 @@ the start of the R1 trip: pre-torque, brake lift, acceleration):
   read around every call; `clock_reads_per_step_us` is what those reads cost per step);
 * in-process (no FMI): the models' step methods, the slaves' step() hooks and the slaves' do_step
   with the inputs held (`in_process_us`): what the slave layer adds in Python;
-* C host (tests/fmu_host/fmu_host.c, no LD_PRELOAD): us/step of the trivial slaves and of the FMUs,
+* C host (tests/support/fmu_host/fmu_host.c, no LD_PRELOAD): us/step of the trivial slaves and of the FMUs,
   fast path on and off;
 * the ratios FMUs / floor and C host / fmpy, and the load average at start and end.
 
@@ -36,7 +36,6 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from reeve_fmu.fmu import fastlink  # noqa: E402
 from trivial_slave import INPUTS, OUTPUTS, build  # noqa: E402
@@ -210,7 +209,7 @@ def slave_layers(plant, drive, tmp, steps, repeat):
 
 
 def c_host(exe, plan, tmp, steps, env=None, timeout=600.0):
-    from fmu_host import chost
+    from tests.support.fmu_host import chost
 
     r = chost.run_host(exe, plan, tmp, env=chost.clean_env(env), timeout=timeout)
     if r["returncode"] != 0:
@@ -277,7 +276,7 @@ def measure_fmpy(out, triv, plant, drive, tmp, n, R):
 
 
 def measure_c_host(out, triv, plant, drive, tmp, n, R):
-    from fmu_host import chost
+    from tests.support.fmu_host import chost
 
     try:
         exe = chost.compile_host(tmp)

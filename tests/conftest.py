@@ -8,6 +8,8 @@ reason.
 
 Early returns: a test that ends early passes without checking what follows, so a `return` in a test
 function fails that test; a test that cannot check something here skips with the reason instead.
+
+Shared fixture: `fmus`, the session's plant and drive FMUs (the FMU host fixtures are in tests/fmu/conftest.py).
 """
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ import textwrap
 
 import pytest
 
-import checks
+from tests.support import checks, cosim_jobs
 
 TOLERANCES = os.path.join(os.path.dirname(__file__), "tolerances.json")
 
@@ -204,3 +206,10 @@ def _no_early_return(request):
         pytest.fail(f"{request.node.name} returns early at line(s) {list(lines)}: a test checks everything "
                     "it claims or skips with the reason (tests/conftest.py)", pytrace=False)
     yield
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    """The plant and drive FMUs of the default scene, built once per session and shared by the test files
+    that load them (tests/support/cosim_jobs.py, ensure_test_fmus)."""
+    return cosim_jobs.ensure_test_fmus(cosim_jobs.session_fmu_dir(tmp_path_factory))

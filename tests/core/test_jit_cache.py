@@ -1,0 +1,46 @@
+"""numba's on-disk cache across processes (reeve_fmu/core/_jit.py): processes that need the same kernel
+at the same moment compile it once; the others load it from the cache."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from reeve_fmu.core._jit import JIT as _JIT   # the compiled-kernel cache tests need numba
+from tests.support import ROOT
+
+# each process imports the package, says it is ready, waits for "go", then calls the probe kernel
+CODE = """
+import json, os, sys, time
+from reeve_fmu.fmu import jitcheck
+open(os.path.join(sys.argv[1], "ready" + sys.argv[2]), "w").close()
+while not os.path.exists(os.path.join(sys.argv[1], "go")):
+    time.sleep(0.001)
+print(json.dumps(jitcheck.jit_cache_probe()))
+"""
+
+
+@pytest.mark.skipif(not _JIT, reason="REEVE_FMU_NO_JIT=1 or numba not installed: the kernels run as plain Python and there is no compiled-kernel cache to test")
+def test_processes_starting_together_compile_a_kernel_once(tmp_path):
+    """Two processes call the same not-yet-compiled kernel within a millisecond of each other on a
+    cold cache: one compiles it (a cache miss), the other waits for it and loads it (a cache hit).
+    Without the compile lock both compile it (2 misses, 0 hits)."""
+    env = dict(os.environ, REEVE_FMU_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT))
+    procs = [subprocess.Popen([sys.executable, "-c", CODE, str(tmp_path), str(i)], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    deadline = time.monotonic() + 600      # hang guard: generous under load
+    while not all((tmp_path / f"ready{i}").exists() for i in range(2)):
+        assert time.monotonic() < deadline and all(p.poll() is None for p in procs), "a process did not start"
+        time.sleep(0.01)
+    (tmp_path / "go").touch()
+    res = []
+    for p in procs:
+        out, err = p.communicate(timeout=600)
+        assert p.returncode == 0, err
+        res.append(json.loads(out))
+    assert res[0]["jit"]
+    assert sorted((r["cache_misses"], r["cache_hits"]) for r in res) == [(0, 1), (1, 0)]

@@ -1,0 +1,118 @@
+"""Jobs for tests/fmu/test_crane_fmu.py, each run in a fresh interpreter by
+reeve_fmu.fmu.runner.run_in_subprocess (one process per FMU-loading job). The jobs import reeve_fmu
+from this checkout before an FMU loads, so the FMUs run the checkout's package and share its numba
+cache (cosim_jobs._host_package)."""
+import math
+import os
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+G = 9.81
+M = 2500.0          # payload of scenes/slewing_crane.toml
+
+
+def _host():
+    import reeve_fmu  # noqa: F401  (the checkout: run_in_subprocess puts it on the job's PYTHONPATH)
+
+
+def build(dest):
+    """`reeve-fmu build --scene scenes/slewing_crane.toml --dest dest` in this process (the CLI's code)."""
+    _host()
+    from reeve_fmu.cli import main
+
+    rc = main(["build", "--scene", os.path.join(REPO, "scenes", "slewing_crane.toml"), "--dest", dest])
+    from fmpy.validation import validate_fmu
+
+    return {"rc": rc, "problems": {n: [str(p) for p in validate_fmu(os.path.join(dest, n))]
+                                   for n in ("CranePlant.fmu", "CraneDrive.fmu")}}
+
+
+def static_and_state(plant_fmu):
+    """Payload-end tension at rest with the holding torque (t = 0 and after 2 s), and get/set/serialize
+    state: rewind and re-step bit-identically, also in a new instance from the serialized blob."""
+    _host()
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    outs = ["hoist.tension_end", "payload.position.z", "payload.swing_tangential", "jib.angle", "motor.speed"]
+    with SlaveHandle.open(plant_fmu, "crane") as h:
+        h.setup(0.0, start_values={"slew.input": 1})
+        hold = h.get("hoist.holding_torque")
+        t0 = h.get_many(outs)
+        for k in range(400):
+            assert h.do_step(k * 5e-3, 5e-3) == 0
+        t2 = h.get_many(outs)
+
+        def run(h, k0, n):
+            rows = []
+            for k in range(k0, k0 + n):
+                h.set_many({"motor.torque": hold * (1.0 + 0.02 * math.sin(k / 7.0)), "slew.speed": 0.002 * k})
+                assert h.do_step(k * 5e-3, 5e-3) == 0
+                rows.append(h.get_many(outs))
+            return rows
+        s = h.get_state()
+        blob = h.serialize_state(s)
+        a = run(h, 400, 60)
+        h.set_state(s)
+        b = run(h, 400, 60)
+        errors = [str(m) for m in h.errors(2)]
+    with SlaveHandle.open(plant_fmu, "crane2") as h2:
+        h2.setup(0.0, start_values={"slew.input": 1})
+        h2.set_state(h2.deserialize_state(blob))
+        c = run(h2, 400, 60)
+    return {"hold": hold, "t0": t0, "t2": t2, "a": a, "b": b, "c": c, "errors": errors}
+
+
+def centripetal(plant_fmu, drive_fmu, omega, t_ramp, t_end):
+    """Slew speed ramped (S-curve) to omega by CraneDrive.fmu, hoist held by its speed loop; returns
+    the time series of the radial and tangential swing and the payload's centre of mass radius."""
+    _host()
+    import numpy as np
+
+    from reeve_fmu.core.scene import load_scene
+    from reeve_fmu.components.cranedrive import crane_drive_defaults
+    from reeve_fmu.fmu.crane import cosimulate_crane
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    with SlaveHandle.open(plant_fmu, "probe") as h:
+        hold = h.get("hoist.holding_torque")
+    vals = crane_drive_defaults(load_scene(os.path.join(REPO, "scenes", "slewing_crane.toml")), hold)
+    a = omega / t_ramp * 2.0
+    vals.update({"hoist.distance": 0.0, "slew.distance": 1e3, "slew.v_max": omega, "slew.a_max": a,
+                 "slew.jerk": a * a / omega, "slew.t_start": 0.0})
+    res = cosimulate_crane(plant_fmu, drive_fmu, t_end=t_end, slew_input="speed", drive_values=vals,
+                           record=("payload.swing_radial", "payload.swing_tangential", "payload.position.x",
+                                   "payload.position.y", "jib.angular_velocity", "payload.position.z"))
+    r = np.hypot(res["payload.position.x"], res["payload.position.y"])
+    return {"t": res.time.tolist(), "radial": res["payload.swing_radial"].tolist(),
+            "tangential": res["payload.swing_tangential"].tolist(), "r": r.tolist(),
+            "w": res["jib.angular_velocity"].tolist(), "z": res["payload.position.z"].tolist()}
+
+
+def solver_failure(plant_fmu):
+    """A hoist torque far above the holding torque reels the payload into the jib-tip sheave: the step
+    fails (a span vanishes), is logged and returns fmi2Discard; later steps are refused."""
+    _host()
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    with SlaveHandle.open(plant_fmu, "crane") as h:
+        h.setup(0.0)
+        h.set("motor.torque", 40.0 * h.get("hoist.holding_torque"))
+        statuses = []
+        for k in range(400):
+            st = h.do_step(k * 5e-3, 5e-3)
+            statuses.append(st)
+            if st != 0:
+                break
+        st2 = h.do_step(len(statuses) * 5e-3, 5e-3)
+        h.set("motor.torque", float("nan"))
+        return {"statuses": statuses, "after": st2, "log": [(m.status, m.message) for m in h.messages]}
+
+
+def cosim(plant_fmu, drive_fmu, drive_values, t_end, record):
+    """fmpy's crane co-simulation (reeve_fmu.fmu.crane.cosimulate_crane, 5 ms, slew by speed): time and
+    the recorded plant outputs, the reference of the C host's run (tests/fmu/test_fmu_hosts.py)."""
+    _host()
+    from reeve_fmu.fmu.crane import cosimulate_crane
+
+    res = cosimulate_crane(plant_fmu, drive_fmu, step=5e-3, t_end=t_end, slew_input="speed",
+                           drive_values=drive_values, record=tuple(record))
+    return {"time": res.time.tolist(), **{n: res[n].tolist() for n in record}}
