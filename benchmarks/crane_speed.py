@@ -4,7 +4,7 @@ under load), best of `--repeat` runs after a warm-up, statics excluded, outputs 
 * `linear`: scenes/slewing_crane.toml (slew and hoist, one linear element per span, exact tangents, a
   rigid box payload); target >= 50x real time;
 * `cubic`: the same with cubic elements, two per span (the first sway mode of every span: the jib
-  span's 6.43 Hz within 1e-4 of the taut string, tests/test_cubic_tangents.py); target >= 5x;
+  span's 6.43 Hz within 1e-4 of the taut string, tests/core/test_cubic_tangents.py); target >= 5x;
 * `8fall`: scenes/crane_8fall_hoist.toml when it exists (the 8-fall dynamic hoist); target >= 1x;
 * the 2:1 elevator trip (benchmarks/trip_2to1_compare.py compares it with another checkout).
 

@@ -20,7 +20,7 @@ FAIL verdict: never a PASS, never a traceback.
     python benchmarks/fuzz_physical.py [--jobs 2] [--timeout 120] [--json docs/img/fuzz_physical.json]
 
 prints the counts (cases, errors, warnings, runs, failures) that docs/hard-cases.md quotes.
-tests/test_physical_fuzz.py runs a deterministic sample of the same cases.
+tests/studies/test_physical_fuzz.py runs a deterministic sample of the same cases.
 """
 from __future__ import annotations
 

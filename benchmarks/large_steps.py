@@ -5,7 +5,7 @@ car position error against the monolithic reference (same models coupled every 0
     python benchmarks/large_steps.py            # -> docs/img/hard_large_steps.png, .json
 
 The runs use the in-process coupling `cosim.monolithic(step=h)`, which is bit-identical to the fmpy
-co-simulation of the FMUs at the same step (tests/test_cosim.py), so the figures hold for the FMUs.
+co-simulation of the FMUs at the same step (tests/fmu/test_cosim.py), so the figures hold for the FMUs.
 """
 from __future__ import annotations
 

@@ -284,7 +284,7 @@ def tolerances(d):
 
 
 def _margin(r) -> float:
-    """bound / observed for an error bound, observed / floor for a floor (tests/checks.py)."""
+    """bound / observed for an error bound, observed / floor for a floor (tests/support/checks.py)."""
     if r.get("kind") == "min":
         return r["observed"] / r["bound"]
     return float("inf") if r["observed"] == 0 else r["bound"] / r["observed"]

@@ -8,7 +8,7 @@ fixed-step algorithm, i.e. Jacobi coupling: every FMU steps from t to t + h with
 The FMUs are those `reeve-fmu build` wrote into fmus/ (SystemStructure.ssd refers to
 ../../fmus/*.fmu). libcosimpy is an optional dependency: pip install -e '.[cosim]'.
 
-`run_ssp()` is what tests/test_cosim.py calls (in a fresh interpreter: the FMUs run Python inside
+`run_ssp()` is what tests/fmu/test_cosim.py calls (in a fresh interpreter: the FMUs run Python inside
 this process, docs/cosim.md, 'pythonfmu and fmpy' item 4). It imports nothing from reeve_fmu, so the FMUs load the package they
 carry, as in any third-party host.
 """

@@ -7,7 +7,7 @@ a fresh temporary directory on every run (fmpy ``extract``, libcosim, ...). numb
 cache by the source file's path and stamp (mtime, size), so a fresh directory is a guaranteed cache
 miss: every instantiate would pay the full JIT compile again.
 
-The fix (verified by tests/test_fmu_machinery.py): the FMU does not expose the package directly.
+The fix (verified by tests/fmu/test_fmu_machinery.py): the FMU does not expose the package directly.
 ``build_fmu`` puts
 
 * ``resources/reeve_fmu_vendor/reeve_fmu/``  the package sources (no ``__pycache__``),

@@ -51,7 +51,7 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
     """FMI declaration of each plant output: unit, declaredType, derivative, description and the
     direct feed-through from motor.torque.
 
-    Feed-through (measured, tests/test_plant_fmu.py::test_declared_dependencies_match_the_plant):
+    Feed-through (measured, tests/fmu/test_plant_fmu.py::test_declared_dependencies_match_the_plant):
     with the torque held over the step, body accelerations and the rope forces at the sheaves (and
     the traction ratio) react to a torque change within an arbitrarily short step; positions, speeds,
     angles, the hitch forces, the brake torque and engagement do not (they integrate it). No output
@@ -551,7 +551,7 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     timing        measure every plant and drive doStep (info["plant_doStep_ns"], ...)
     ns_step_differences   pass communicationStepSize = t_(k+1) - t_k of the nanosecond time grid (it
                   differs from `step` by one ulp on most steps) instead of `step`: what libcosim does;
-                  only for bit-for-bit comparisons with it (tests/test_cosim.py)
+                  only for bit-for-bit comparisons with it (tests/fmu/test_cosim.py)
     monitor       run the CouplingMonitor on the exchanged torque/speed/angle (info["coupling_stable"],
                   info["instability_detected_at"], info["instability"], ...); the torque scale is the
                   drive's torque.max

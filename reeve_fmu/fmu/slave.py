@@ -23,7 +23,7 @@ and pythonfmu does not do (docs/cosim.md, 'pythonfmu and fmpy', items 1-3):
   instance comes back fresh as long as all mutable state lives on `self` (never in module or class
   globals). Verified by the machinery tests.
 
-Subclass contract (see the example in tests/fmu_toy/reeve_toy_slave.py)::
+Subclass contract (see the example in tests/support/fmu_toy/reeve_toy_slave.py)::
 
     class MyPlant(ReeveSlave):
         description = "..."

@@ -3,7 +3,7 @@
 Source of truth for frame layouts is `reeve_fmu/data/reeve_drive.dbc` (read with cantools); the drive's
 object dictionary and default PDO mapping is `reeve_fmu/data/reeve_drive.eds` (read with canopen). The
 two describe the same bytes: RPDO1 = TorqueCmd, RPDO2 = VelocityCmd, TPDO1 = DriveStatus,
-TPDO2 = DriveFeedback, TPDO3 = PlantStatus (tests/test_hil.py checks the EDS mapping against the DBC).
+TPDO2 = DriveFeedback, TPDO3 = PlantStatus (tests/hil/test_hil.py checks the EDS mapping against the DBC).
 
 cantools needs 15-23 us to encode or decode one of these frames (measured); a 1 kHz loop moves 6-7 frames
 per cycle, so `FrameCodec` compiles each DBC message into shifts and masks on one Python int
