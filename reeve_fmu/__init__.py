@@ -2,8 +2,9 @@
 
 Layers (nothing below imports from above): core (scene, model, elements, solver) -> components (plant,
 drive, crane plant and drive, elevator sizing) -> fmu (FMU machinery, co-simulation masters) -> studies
-(trips, verdicts, sweeps, bench, fidelity, crane) -> hil -> front ends (cli, demo, api). The scripting API (docs/api.md) — `simulate`, `cosimulate`,
-`Result` and the exceptions a caller catches — is imported on first use.
+(trips, verdicts, sweeps, bench, fidelity, crane) -> hil -> front ends (cli, demo, api). The scripting
+API (docs/api.md) — `simulate`, `cosimulate`, `Result` and the exceptions a caller catches — is imported
+on first use.
 """
 __version__ = "0.1.0"
 

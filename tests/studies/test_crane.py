@@ -4,7 +4,8 @@ height sweep of `reeve-fmu crane` on the dynamic model's statics (studies/crane.
 Oracles:
 - the coupling laws are the derivatives of their energy density (S = dw/deps, M = dw/dkappa) and the
   torsion span's generalized forces are the gradient of its potential (finite differences); the
-  dynamic model's forces against its energy: tests/oracles/test_crane_dynamics.py, test_crane_wrap_energy.py;
+  dynamic model's forces against its energy: tests/oracles/test_crane_dynamics.py,
+  tests/core/test_crane_wrap_energy.py;
 - two falls, torque-factor law M = k S d, no torsional stiffness: sin psi = 4 k d h / (a b) and the
   critical height a b / (4 k d) (closed form, docs/theory.md §5.3);
 - 8 falls (docs/reference-sets.md §5.4): tensions about W/n; low-rotation rope k = 0.006 no cabling up to 120 m
