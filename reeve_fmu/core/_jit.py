@@ -276,7 +276,7 @@ def entry_point(dispatcher, first=None):
     return dispatcher
 
 
-def gated(feature: int, fn, off=None):
+def gated(feature: int, fn, off=None, inline: bool = False):
     """`fn` behind a compile-time switch: compiled code calls `gate(K, *args)` and gets `fn(*args)`
     only when the type of the compiled kernel K carries `feature` (kernel.kernel_features); for a
     kernel without it the call compiles to `off(*args)` (or nothing), so `fn` and what it calls are
@@ -309,5 +309,7 @@ def gated(feature: int, fn, off=None):
 
     ns["choose"] = choose
     exec(compile(f"def typer({params}):\n    return choose(K_)\n", f"<gate {py.__name__}>", "exec"), ns)
-    overload(gate, jit_options={"error_model": "numpy"})(ns["typer"])
+    # inline: numba's IR inlining of the gate into its callers (for a small fn on a hot path; a large
+    # fn would be typed twice). Otherwise the gate is a function of its own.
+    overload(gate, jit_options={"error_model": "numpy"}, inline="always" if inline else "never")(ns["typer"])
     return gate

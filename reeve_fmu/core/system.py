@@ -123,29 +123,34 @@ def groove_strain_cubic(d0, d1, d2, v0, v1, v2, tonly):
     return e, (d0 * v0 + d1 * v1 + d2 * v2) / n
 
 
+_groove_cubic = gated(CUBIC, groove_strain_cubic, lambda d0, d1, d2, v0, v1, v2, tonly: (0.0, 0.0), inline=True)
+_groove_linear = gated(MULTI_D, groove_strain_linear,
+                       lambda d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly: (0.0, 0.0), inline=True)
+
+
 @njit(cache=True, inline="always")
-def groove_strains(T, X, XD, k, nd, cubic):
+def groove_strains(K, T, X, XD, k, nd, cubic):
     """(e_in, r_in, e_out, r_out): the groove strains and rates of creep sheave k's arriving element
     at its end and leaving element at its start (0 where there is none), from the creep table T and
     the element arrays X, XD (coordinates, velocities)."""
     ei = int(T[k, CT_IN])
     eo = int(T[k, CT_OUT])
-    e_in, r_in = _groove_end(X, XD, ei, 1, nd, cubic, T[k, CT_WIN], T[k, CT_WIN + 1], T[k, CT_WIN + 2],
+    e_in, r_in = _groove_end(K, X, XD, ei, 1, nd, cubic, T[k, CT_WIN], T[k, CT_WIN + 1], T[k, CT_WIN + 2],
                              T[k, CT_TIN])
-    e_out, r_out = _groove_end(X, XD, eo, 0, nd, cubic, T[k, CT_WOUT], T[k, CT_WOUT + 1],
+    e_out, r_out = _groove_end(K, X, XD, eo, 0, nd, cubic, T[k, CT_WOUT], T[k, CT_WOUT + 1],
                                T[k, CT_WOUT + 2], T[k, CT_TOUT])
     return e_in, r_in, e_out, r_out
 
 
 @njit(cache=True, inline="always")
-def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
+def _groove_end(K, X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
     """Groove strain and rate of element ie at its start (end 0) or end (1); (0, 0) for ie < 0.
     Element coordinates: linear [r_1, r_2, s_1, s_2], cubic [r_1, d_1, s_1, r_2, d_2, s_2]."""
     if ie < 0:
         return 0.0, 0.0
     if cubic:
         o = nd if end == 0 else 3 * nd + 1
-        return groove_strain_cubic(X[ie, o], X[ie, o + 1] if nd > 1 else 0.0, X[ie, o + 2] if nd > 2 else 0.0,
+        return _groove_cubic(K, X[ie, o], X[ie, o + 1] if nd > 1 else 0.0, X[ie, o + 2] if nd > 2 else 0.0,
                                    XD[ie, o], XD[ie, o + 1] if nd > 1 else 0.0,
                                    XD[ie, o + 2] if nd > 2 else 0.0, tonly)
     l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
@@ -158,21 +163,29 @@ def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
     v1 = XD[ie, nd + 1] - XD[ie, 1]
     d2 = X[ie, nd + 2] - X[ie, 2] if nd > 2 else 0.0
     v2 = XD[ie, nd + 2] - XD[ie, 2] if nd > 2 else 0.0
-    return groove_strain_linear(d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly)
+    return _groove_linear(K, d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly)
 
 
 @njit(cache=True, inline="always")
 def creep_terms(K, QE, VE, v, k, kw):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly
     (sheave_terms)."""
-    return sheave_terms(K.crp_tab, QE, VE, v, k, kw, K.crp_vreg, K.nd, K.el_type == 1)
+    return sheave_terms(K, K.crp_tab, QE, VE, v, k, kw, K.crp_vreg, K.nd, K.el_type == 1)
+
+
+@njit(cache=True)
+def creep_terms_at(K, QE, VE, v, k, kw):
+    """creep_terms compiled once as a function of its own, for the callers outside the residual (step
+    inputs, outputs, power): each inlined copy of the groove-strain tree costs seconds of compile
+    time; the residual (creep_forces) keeps its inlined copy, where the call would cost speed."""
+    return creep_terms(K, QE, VE, v, k, kw)
 
 
 @njit(cache=True, inline="always")
-def sheave_terms(T, QE, VE, v, k, kw, vreg, nd, cubic):
+def sheave_terms(K, T, QE, VE, v, k, kw, vreg, nd, cubic):
     """creep_terms from the creep table T and the kernel's crp_vreg, nd and element kind (what
     creep_forces reads once per residual): the groove strains, blended (_blend)."""
-    e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, nd, cubic)
+    e_in, r_in, e_out, r_out = groove_strains(K, T, QE, VE, k, nd, cubic)
     return _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[int(T[k, CT_S])] / vreg, kw,
                   e_in, r_in, e_out, r_out)
 
@@ -247,7 +260,7 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
                 gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             if K.crp_el_out[k] >= 0:
                 gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-        kr[0, k], kr[1, k], _ = creep_terms(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
+        kr[0, k], kr[1, k], _ = creep_terms_at(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
     creep_input_set(K, q, info, ue, h, kr)
 
 
@@ -349,7 +362,7 @@ def creep_power(K, c, q, v):
         if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
             gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-            P -= creep_terms(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
+            P -= creep_terms_at(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
     return P
 
 
@@ -546,7 +559,7 @@ def creep_forces(K, W, v, u, gain):
     for k in range(T.shape[0]):
         j = int(T[k, CT_S])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = sheave_terms(T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
+        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
         Q[j] += fc
         if full:
             u[i + 6] = kap
@@ -731,7 +744,7 @@ def cubic_tension(K, QE, VE, i, end):
 @njit(cache=True)
 def creep_kappa_at(K, QE, VE, v, u, k):
     """kappa of creep sheave k at the element arrays' state (creep_terms)."""
-    return creep_terms(K, QE, VE, v, k, creep_wound(u, k))[0]
+    return creep_terms_at(K, QE, VE, v, k, creep_wound(u, k))[0]
 
 
 _cubic_tension = gated(CUBIC, cubic_tension, lambda K, QE, VE, i, end: 0.0)
