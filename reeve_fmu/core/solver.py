@@ -728,6 +728,20 @@ class Simulator:
             return integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
         return integrate_sparse(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
 
+    def compile_stepping(self) -> None:
+        """Compile the dense stepping kernel for this model (or load it from the cache) without running
+        anything: a process started beside a first run compiles it on the other core (the models
+        small enough for the dense Newton matrix: every elevator)."""
+        if self.method != "gen-alpha" or not hasattr(integrate, "compile") or self.sparse:
+            return
+        if self.sparse is None and len(self.model.K.free) >= SPARSE_MIN_FREE:
+            return
+        from numba import typeof
+        st = new_state(self.model)
+        ybuf = np.empty((1, len(self.model.output_names) + 1))
+        integrate.compile(tuple(typeof(x) for x in (self.model.KJ, st.arrays(), 0.0, self.h, 1, self.params,
+                                                    ybuf, 1)))
+
     # ------------------------------------------------------------------ statics / initial state
     def initial_state(self, statics: str | None = None, t0: float = 0.0) -> State:
         """Static equilibrium at t0 (scene's [initial] statics mode unless given), at rest."""
