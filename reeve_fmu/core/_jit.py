@@ -214,9 +214,12 @@ def _one_compile_at_a_time(dispatcher):
     import hashlib
     compile_ = dispatcher.compile
     name = f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
-    path = os.path.join(_LOCK_DIR, hashlib.sha1(name.encode()).hexdigest()[:20] + ".lock")
 
     def compile(sig):
+        # one lock per kernel and signature: two scenes with different features (a kernel type
+        # each, kernel.kernel_features) compile side by side
+        key = f"{name}{sig}".encode()
+        path = os.path.join(_LOCK_DIR, hashlib.sha1(key).hexdigest()[:20] + ".lock")
         with global_compiler_lock:
             try:
                 os.makedirs(_LOCK_DIR, exist_ok=True)
@@ -237,6 +240,14 @@ def njit(*args, **kwargs):
         # numpy error model: float division by zero gives inf/nan instead of a branch + exception
         # on every division (measurably faster in the element kernels); callers check finiteness.
         kwargs.setdefault("error_model", "numpy")
+        if not (len(args) == 1 and callable(args[0])) and os.environ.get("REEVE_EXP_NOINLINE"):
+            return lambda f: njit(f, **kwargs)
+        _exp = os.environ.get("REEVE_EXP_NOINLINE")
+        if _exp and kwargs.get("inline") == "always":
+            _f = args[0] if args and callable(args[0]) else None
+            _keep = set(os.environ.get("REEVE_EXP_KEEP", "").split(","))
+            if _exp == "all" or (_f is not None and _f.__name__ not in _keep):
+                kwargs.pop("inline")
         if _LOCK_DIR is None or not kwargs.get("cache"):
             return _numba.njit(*args, **kwargs)
         if len(args) == 1 and callable(args[0]):
@@ -247,15 +258,58 @@ def njit(*args, **kwargs):
     return lambda f: f
 
 
-def entry_point(dispatcher):
-    """The compiled specialization's entry point, when the dispatcher has exactly one: calling it skips
-    numba's per-call argument typing (about 0.4 us for a call with five arrays). The caller must pass
-    arguments of exactly that signature's types. Otherwise (several signatures, no numba) the
-    dispatcher itself."""
+def entry_point(dispatcher, first=None):
+    """The compiled specialization's entry point: calling it skips numba's per-call argument typing
+    (about 0.4 us for a call with five arrays). The caller must pass arguments of exactly that
+    signature's types. With `first` (the first argument the caller passes, e.g. a compiled kernel)
+    the one signature whose first type is that argument's; else the only signature. Otherwise
+    (several candidates, no numba) the dispatcher itself."""
     try:
         sigs = dispatcher.signatures
+        if first is not None:
+            ty = _numba.typeof(first)
+            sigs = [s for s in sigs if s[0] == ty]
         if len(sigs) == 1:
             return dispatcher.overloads[sigs[0]].entry_point
-    except AttributeError:
+    except (AttributeError, ValueError):
         pass
     return dispatcher
+
+
+def gated(feature: int, fn, off=None, inline: bool = False):
+    """`fn` behind a compile-time switch: compiled code calls `gate(K, *args)` and gets `fn(*args)`
+    only when the type of the compiled kernel K carries `feature` (kernel.kernel_features); for a
+    kernel without it the call compiles to `off(*args)` (or nothing), so `fn` and what it calls are
+    never typed or compiled for that scene. The caller keeps its run-time test of the feature; the
+    gate only removes code the test makes unreachable. Without numba the gate calls `fn`."""
+    import inspect
+    py = getattr(fn, "py_func", fn)
+    names = list(inspect.signature(py).parameters)
+    arglist = ", ".join(names)
+    # explicit parameters (numba's IR inliner takes no *args); "K" is the gate's own first argument
+    params = ", ".join(["K_"] + names)
+    src = (f"def gate({params}):\n    return fn({arglist})\n"
+           f"def on({params}):\n    return fn({arglist})\n"
+           f"def skip({params}):\n    return None\n"
+           f"def other({params}):\n    return off({arglist})\n")
+    ns = {"fn": fn, "off": None}
+    if _numba is not None and off is not None:
+        ns["off"] = _numba.njit(inline="always")(off)   # IR-inlined into the gate: nothing to cache
+    exec(compile(src, f"<gate {py.__name__}>", "exec"), ns)
+    gate = ns["gate"]
+    gate.__name__ = gate.__qualname__ = f"gated_{py.__name__}"
+    if _numba is None:
+        return gate
+    from numba.extending import overload
+
+    def choose(K_):
+        if getattr(K_, "features", -1) & feature:
+            return ns["on"]
+        return ns["skip"] if off is None else ns["other"]
+
+    ns["choose"] = choose
+    exec(compile(f"def typer({params}):\n    return choose(K_)\n", f"<gate {py.__name__}>", "exec"), ns)
+    # inline: numba's IR inlining of the gate into its callers (for a small fn on a hot path; a large
+    # fn would be typed twice). Otherwise the gate is a function of its own.
+    overload(gate, jit_options={"error_model": "numpy"}, inline="always" if inline else "never")(ns["typer"])
+    return gate

@@ -52,6 +52,34 @@ Kernel = namedtuple("Kernel", [
     "tq_el", "tq_phi", "tq_phic", "tq_vb", "tq_v0", "tq_p", "tq_dref", "tq_out",
 ])
 
+# Features the compiled code of a kernel is specialised for: the compiled kernel's numba type carries
+# them (compiled_kernel), and code a scene cannot reach is not compiled for it (_jit.gated). Bits 1, 2
+# and 4 are those of nl_on.
+NL_ROWS, JOINTS, TORSION, CUBIC, CREEP, MULTI_D = 1, 2, 4, 8, 16, 32
+ALL_FEATURES = 63
+
+
+def kernel_features(K) -> int:
+    """The features of K (the run-time tests of the compiled code, read once): nonlinear rows, joints
+    or spatial rigid bodies, torsion, cubic elements, creep sheaves, a planar or spatial model."""
+    f = int(K.nl_on) & (NL_ROWS | JOINTS | TORSION)
+    if int(K.el_type) == 1:
+        f |= CUBIC
+    if len(K.crp_s):
+        f |= CREEP
+    if int(K.nd) > 1:
+        f |= MULTI_D
+    return f
+
+
+def compiled_features(K) -> int:
+    """The feature set K's code is compiled for: a 1D model without bodies, joints or bending (every
+    elevator) gets the 1D variant, creep sheaves included; anything else the full code. Two variants,
+    not one per feature set: each variant is a compile of its own (the test suite runs every kind of
+    scene), and the 1D variant is the one a first run needs."""
+    return CREEP if kernel_features(K) & ~CREEP == 0 else ALL_FEATURES
+
+
 # Columns of Kernel.crp_tab, one row per creep sheave: its sigma coordinate, arriving (in) and leaving
 # (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, the two elements'
 # tension-only flags, 1 / R, and for linear elements the weight grading of the groove strain (x, y, z)
@@ -70,6 +98,13 @@ if JIT:
 
     @structref.register
     class KernelType(types.StructRef):
+        """The kernel's fields and the features its code is compiled for (one type per feature set:
+        numba compiles and caches a kernel function per type)."""
+        def __init__(self, fields, features=ALL_FEATURES):
+            self.features = features
+            super().__init__(fields)
+            self.name = f"{self.name}[features={features}]"
+
         def preprocess_fields(self, fields):
             return tuple((name, types.unliteral(t)) for name, t in fields)
 
@@ -380,10 +415,31 @@ if JIT:
         return k
 
 
-def compiled_kernel(K: Kernel):
-    """StructRef twin of K for the compiled kernels (K itself without numba)."""
+_KERNEL_TYPES = {}
+
+
+def _kernel_type(features: int):
+    if features not in _KERNEL_TYPES:
+        _KERNEL_TYPES[features] = KernelType(KERNEL_TYPE._fields, features)
+    return _KERNEL_TYPES[features]
+
+
+def compiled_kernel(K: Kernel, features: int | None = None):
+    """StructRef twin of K for the compiled kernels (K itself without numba), typed with K's features
+    (kernel_features) or `features` (a superset: ALL_FEATURES compiles every path)."""
     if not JIT:
         return K
+    ref = _compiled_kernel_all(K)
+    f = compiled_features(K) if features is None else features
+    if f & kernel_features(K) != kernel_features(K):
+        raise ValueError(f"features {f} lack the kernel's {kernel_features(K)}")
+    if f == ALL_FEATURES:
+        return ref
+    # the same object (fields, memory) under the type of its feature set
+    return KernelRef._numba_box_(_kernel_type(f), ref._meminfo)
+
+
+def _compiled_kernel_all(K: Kernel):
     args = []
     for name, value in zip(K._fields, K):
         if isinstance(value, np.ndarray):

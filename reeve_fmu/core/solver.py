@@ -21,9 +21,9 @@ import math
 
 import numpy as np
 
-from ._jit import entry_point, njit
+from ._jit import entry_point, gated, njit
 from .jacobian import jacobian_analytic
-from .kernel import CT_IR, CT_KIND, CT_S
+from .kernel import CREEP, CT_IR, CT_KIND, CT_S, NL_ROWS
 from .model import Model, State, new_state
 from .sparse import (bordered_solve, build_sparse, colour_columns, jac_shape, jacobian_sparse, newton_matrix_sparse,
                      newton_pattern, pattern_leaks, residual_sparse, unpack_sparse)
@@ -181,7 +181,15 @@ def _coloured_columns(K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv):
                 jac[fi, fj] = (r[fi] - r0[fi]) / dx
 
 
-@njit(cache=True, inline="always")
+_coloured = gated(NL_ROWS, _coloured_columns)   # column groups exist only with nonlinear rows
+# the creep sheaves' part of a step (the call sites test for creep sheaves at run time)
+_set_prescribed_creep = gated(CREEP, set_prescribed_creep)
+_creep_input_set = gated(CREEP, creep_input_set)
+_creep_inputs = gated(CREEP, creep_inputs)
+_wound_record = gated(CREEP, wound_record)
+
+
+@njit(cache=True)
 def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     """Finite-difference Newton matrix d r / d qdd_free at the current iterate (q and v follow
     through the Newmark relations; column groups K.nl_grp: _coloured_columns). Returns -1
@@ -196,7 +204,7 @@ def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     # at most, it does not change the solution
     K.nl_frz[0] = 1
     if K.nl_grp[0] > 0:
-        _coloured_columns(K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv)
+        _coloured(K, K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv)
         K.nl_frz[0] = 0
         return 1 if lu_factor(jac, piv) else 0
     for fj in range(nf):
@@ -216,7 +224,7 @@ def _build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     return 1 if lu_factor(jac, piv) else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, r, r0,
                  am, af, beta, gamma, tol, maxit):
     """One generalized-alpha step from (qo, vo, ao, qddo) to t1 = t0 + h. Modified Newton with the
@@ -229,7 +237,7 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
     if K.mot_crp >= 0:
-        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
     else:
         set_prescribed(K, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
@@ -288,7 +296,7 @@ def _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac,
     return 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic):
     """The factorised banded Newton matrix: element Jacobians (core/jacobian.py) or coloured
     differences (core/sparse.py)."""
@@ -307,7 +315,7 @@ def _newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, 
     bq = h * h * beta * (1.0 - af) / (1.0 - am)
     gv = h * gamma * (1.0 - af) / (1.0 - am)
     if K.mot_crp >= 0:
-        set_prescribed_creep(K, ue, t1 - h, t1, q, v, qdd)
+        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
     else:
         set_prescribed(K, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
@@ -380,6 +388,20 @@ def _creep_close_all(K, q, ue, info, kr):
         kr[1, k] = ue[i + 7]
         if T[k, CT_KIND] == 0.0:
             info[INFO_CREEP + k] = creep_angle_at(ue, k, kap, q[int(T[k, CT_S])], T[k, CT_IR], k == mot)
+
+
+_creep_close = gated(CREEP, _creep_close_all)
+
+
+@njit(cache=True, inline="always")
+def _copy4(dq, dv, da, dd, sq, sv, sa, sd):
+    """Copy four state vectors of one length (an element loop: slice assignment would compile
+    numba's shape-mismatch error formatting into the stepping loop, seconds of compile time)."""
+    for i in range(dq.shape[0]):
+        dq[i] = sq[i]
+        dv[i] = sv[i]
+        da[i] = sa[i]
+        dd[i] = sd[i]
 
 
 @njit(cache=True)
@@ -460,10 +482,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     for step in range(nsteps):
         t1 = t0 + (step + 1) * h
         # start of the step (kept for a retry with substeps)
-        q1[:] = q
-        v1[:] = v
-        a1[:] = a
-        qdd1[:] = qdd
+        _copy4(q1, v1, a1, qdd1, q, v, a, qdd)
         e1 = info[5]
         z1 = info[6]
         zt1 = info[8]
@@ -476,10 +495,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
             hs = h / nsub
             decay = math.exp(-hs / K.brake_tau) if K.brake_tau > 0.0 else 0.0
             if level > 0:
-                q[:] = q1
-                v[:] = v1
-                a[:] = a1
-                qdd[:] = qdd1
+                _copy4(q, v, a, qdd, q1, v1, a1, qdd1)
                 info[5] = e1
                 info[6] = z1
                 info[8] = zt1
@@ -498,16 +514,13 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     ue[6] = q[K.trac_th]
                     ue[7] = info[9]
                 if wfresh:     # computed once at the end of the last step (below)
-                    creep_input_set(K, q, info, ue, hs, kr)
+                    _creep_input_set(K, K, q, info, ue, hs, kr)
                 elif ncrp > 0:
                     # fresh = False as a runtime bool (ncrp > 0 here), not the literal False: numba
                     # then compiles one creep_inputs for this call and the Python callers' (a
                     # literal argument is a signature of its own, compiled again)
-                    creep_inputs(K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
-                qo[:] = q
-                vo[:] = v
-                ao[:] = a
-                qddo[:] = qdd
+                    _creep_inputs(K, K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
+                _copy4(qo, vo, ao, qddo, q, v, a, qdd)
                 if SP is None:
                     status = _newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
                                           piv, info, r, r0, am, af, beta, gamma, tol, maxit)
@@ -521,10 +534,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                         status = 4     # stored rope (s in [0, sigma]) used up: an event, not a retry
                         info[7] = k
                 if status != 0:
-                    q[:] = qo   # _newton_step leaves its last iterate
-                    v[:] = vo
-                    a[:] = ao
-                    qdd[:] = qddo
+                    _copy4(q, v, a, qdd, qo, vo, ao, qddo)   # _newton_step leaves its last iterate
                     break
                 if K.brake_T > 0.0:
                     info[6] = brake_deflection(K, q, ue)
@@ -532,21 +542,18 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     info[8] = traction_deflection(K, q, ue)
                     info[9] = traction_slip(K, q, ue)
                 if ncrp > 0:   # the last residual left the creep sheaves' (kappa, rate) in ue
-                    _creep_close_all(K, q, ue, info, kr)
+                    _creep_close(K, K, q, ue, info, kr)
             if status == 0 and drums:
                 for k in range(ncrp):   # a drum's wound rope, once per accepted step (not per substep)
                     if K.crp_el_in[k] < 0:
-                        wound_record(K, info, k, q1[K.crp_s[k]], q[K.crp_s[k]], th1[k], info[INFO_CREEP + k])
+                        _wound_record(K, K, info, k, q1[K.crp_s[k]], q[K.crp_s[k]], th1[k], info[INFO_CREEP + k])
             if status == 0 or status == 4:
                 break
             # no convergence (1), or an iterate with a span below min_span (2): substeps. A span that
             # really vanishes does so in the substeps too (then reported); a diverging iterate (a 2 m
             # span "vanished" in one Newton update, slack ropes snapping) does not
         if status != 0:
-            q[:] = q1
-            v[:] = v1
-            a[:] = a1
-            qdd[:] = qdd1
+            _copy4(q, v, a, qdd, q1, v1, a1, qdd1)
             info[5] = e1
             info[6] = z1
             info[8] = zt1
@@ -720,6 +727,20 @@ class Simulator:
         if SP is None:
             return integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
         return integrate_sparse(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
+
+    def compile_stepping(self) -> None:
+        """Compile the dense stepping kernel for this model (or load it from the cache) without running
+        anything: a process started beside a first run compiles it on the other core (the models
+        small enough for the dense Newton matrix: every elevator)."""
+        if self.method != "gen-alpha" or not hasattr(integrate, "compile") or self.sparse:
+            return
+        if self.sparse is None and len(self.model.K.free) >= SPARSE_MIN_FREE:
+            return
+        from numba import typeof
+        st = new_state(self.model)
+        ybuf = np.empty((1, len(self.model.output_names) + 1))
+        integrate.compile(tuple(typeof(x) for x in (self.model.KJ, st.arrays(), 0.0, self.h, 1, self.params,
+                                                    ybuf, 1)))
 
     # ------------------------------------------------------------------ statics / initial state
     def initial_state(self, statics: str | None = None, t0: float = 0.0) -> State:
@@ -1062,7 +1083,7 @@ class Simulator:
             self._steprow = buf[0, 1:]      # the returned view, made once
             status, t, done = self._integrate(st, t0, h, n, buf, n)
             self._sp_state = st
-            self._fast_integrate = entry_point(integrate if self._sp is None else integrate_sparse)
+            self._fast_integrate = entry_point(integrate if self._sp is None else integrate_sparse, self.model.KJ)
         else:
             if st is not self._sp_state:
                 self._newton_path(st)

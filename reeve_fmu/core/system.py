@@ -11,13 +11,13 @@ import math
 
 import numpy as np
 
-from ._jit import njit
+from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import (SLACK_STRAIN, end_tension, linear_element, linear_element_1d_at,
                               linear_element_at)
 from .bodies import nl_convect, nl_update, rigid_terms, wrap_weight
 from .elements.torsion import torsion_energy, torsion_terms
-from .kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT,
+from .kernel import (CREEP, CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT,
                      new_work)
 from .profiles import profile_eval
 
@@ -123,29 +123,34 @@ def groove_strain_cubic(d0, d1, d2, v0, v1, v2, tonly):
     return e, (d0 * v0 + d1 * v1 + d2 * v2) / n
 
 
+_groove_cubic = gated(CUBIC, groove_strain_cubic, lambda d0, d1, d2, v0, v1, v2, tonly: (0.0, 0.0), inline=True)
+_groove_linear = gated(MULTI_D, groove_strain_linear,
+                       lambda d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly: (0.0, 0.0), inline=True)
+
+
 @njit(cache=True, inline="always")
-def groove_strains(T, X, XD, k, nd, cubic):
+def groove_strains(K, T, X, XD, k, nd, cubic):
     """(e_in, r_in, e_out, r_out): the groove strains and rates of creep sheave k's arriving element
     at its end and leaving element at its start (0 where there is none), from the creep table T and
     the element arrays X, XD (coordinates, velocities)."""
     ei = int(T[k, CT_IN])
     eo = int(T[k, CT_OUT])
-    e_in, r_in = _groove_end(X, XD, ei, 1, nd, cubic, T[k, CT_WIN], T[k, CT_WIN + 1], T[k, CT_WIN + 2],
+    e_in, r_in = _groove_end(K, X, XD, ei, 1, nd, cubic, T[k, CT_WIN], T[k, CT_WIN + 1], T[k, CT_WIN + 2],
                              T[k, CT_TIN])
-    e_out, r_out = _groove_end(X, XD, eo, 0, nd, cubic, T[k, CT_WOUT], T[k, CT_WOUT + 1],
+    e_out, r_out = _groove_end(K, X, XD, eo, 0, nd, cubic, T[k, CT_WOUT], T[k, CT_WOUT + 1],
                                T[k, CT_WOUT + 2], T[k, CT_TOUT])
     return e_in, r_in, e_out, r_out
 
 
 @njit(cache=True, inline="always")
-def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
+def _groove_end(K, X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
     """Groove strain and rate of element ie at its start (end 0) or end (1); (0, 0) for ie < 0.
     Element coordinates: linear [r_1, r_2, s_1, s_2], cubic [r_1, d_1, s_1, r_2, d_2, s_2]."""
     if ie < 0:
         return 0.0, 0.0
     if cubic:
         o = nd if end == 0 else 3 * nd + 1
-        return groove_strain_cubic(X[ie, o], X[ie, o + 1] if nd > 1 else 0.0, X[ie, o + 2] if nd > 2 else 0.0,
+        return _groove_cubic(K, X[ie, o], X[ie, o + 1] if nd > 1 else 0.0, X[ie, o + 2] if nd > 2 else 0.0,
                                    XD[ie, o], XD[ie, o + 1] if nd > 1 else 0.0,
                                    XD[ie, o + 2] if nd > 2 else 0.0, tonly)
     l = X[ie, 2 * nd + 1] - X[ie, 2 * nd]
@@ -158,21 +163,29 @@ def _groove_end(X, XD, ie, end, nd, cubic, w0, w1, w2, tonly):
     v1 = XD[ie, nd + 1] - XD[ie, 1]
     d2 = X[ie, nd + 2] - X[ie, 2] if nd > 2 else 0.0
     v2 = XD[ie, nd + 2] - XD[ie, 2] if nd > 2 else 0.0
-    return groove_strain_linear(d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly)
+    return _groove_linear(K, d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly)
 
 
 @njit(cache=True, inline="always")
 def creep_terms(K, QE, VE, v, k, kw):
     """(kappa, d kappa/dt, creep force) of creep sheave k from the element arrays of an assembly
     (sheave_terms)."""
-    return sheave_terms(K.crp_tab, QE, VE, v, k, kw, K.crp_vreg, K.nd, K.el_type == 1)
+    return sheave_terms(K, K.crp_tab, QE, VE, v, k, kw, K.crp_vreg, K.nd, K.el_type == 1)
+
+
+@njit(cache=True)
+def creep_terms_at(K, QE, VE, v, k, kw):
+    """creep_terms compiled once as a function of its own, for the callers outside the residual (step
+    inputs, outputs, power): each inlined copy of the groove-strain tree costs seconds of compile
+    time; the residual (creep_forces) keeps its inlined copy, where the call would cost speed."""
+    return creep_terms(K, QE, VE, v, k, kw)
 
 
 @njit(cache=True, inline="always")
-def sheave_terms(T, QE, VE, v, k, kw, vreg, nd, cubic):
+def sheave_terms(K, T, QE, VE, v, k, kw, vreg, nd, cubic):
     """creep_terms from the creep table T and the kernel's crp_vreg, nd and element kind (what
     creep_forces reads once per residual): the groove strains, blended (_blend)."""
-    e_in, r_in, e_out, r_out = groove_strains(T, QE, VE, k, nd, cubic)
+    e_in, r_in, e_out, r_out = groove_strains(K, T, QE, VE, k, nd, cubic)
     return _blend(int(T[k, CT_IN]), int(T[k, CT_OUT]), T[k, CT_EA], v[int(T[k, CT_S])] / vreg, kw,
                   e_in, r_in, e_out, r_out)
 
@@ -247,7 +260,7 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
                 gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             if K.crp_el_out[k] >= 0:
                 gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-        kr[0, k], kr[1, k], _ = creep_terms(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
+        kr[0, k], kr[1, k], _ = creep_terms_at(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
     creep_input_set(K, q, info, ue, h, kr)
 
 
@@ -258,7 +271,7 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
 # the bin at the step start's sigma is a constant kernel input (ue[.. + 5]), so the Newton residual
 # stays smooth and the FMU state is the State's arrays as before.
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _wound_at(K, info, k):
     """info index of creep sheave k's wound-rope record (0: none)."""
     i = INFO_CREEP + K.crp_s.shape[0] + k
@@ -321,7 +334,7 @@ def creep_kappa(K, u, k):
     return u[i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def creep_angle(K, q, u, k, kap):
     """Sheave angle of creep sheave k at the current sigma, kap = its kappa there: the step start's
     angle - kappa_mean (sigma - sigma_start) / R with the trapezoidal mean of kappa (the mean of the
@@ -331,7 +344,7 @@ def creep_angle(K, q, u, k, kap):
     return creep_angle_at(u, k, kap, q[int(T[k, CT_S])], T[k, CT_IR], k == K.mot_crp and K.presc.shape[0] > 0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def creep_angle_at(u, k, kap, sigma, ir, driven):
     """creep_angle from sheave k's sigma and 1 / R; driven: speed-driven (the predicted kappa)."""
     i = UE_CREEP + UE_STRIDE * k
@@ -349,11 +362,11 @@ def creep_power(K, c, q, v):
         if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
             gather(K, c, q, v, K.crp_el_in[k], QE, VE)
             gather(K, c, q, v, K.crp_el_out[k], QE, VE)
-            P -= creep_terms(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
+            P -= creep_terms_at(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
     return P
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _trac_kappa(K, u):
     for k in range(K.crp_s.shape[0]):
         if K.crp_kind[k] == 1:
@@ -361,7 +374,7 @@ def _trac_kappa(K, u):
     return 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def brake_deflection(K, q, u):
     """Elasto-plastic brake: effective spring deflection z (rad of the motor angle) after turning from
     the step's start. Kernel inputs u = [motor torque, brake engagement e, brake z at step start,
@@ -378,7 +391,7 @@ def brake_torque(K, q, v, u):
     return -u[1] * (K.brake_T / K.brake_wreg) * brake_deflection(K, q, u)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _static_end_tension(K, QE, QEs, ie, end):
     """Rope force at an element end from its forces without inertia (for the friction capacity)."""
     nd = K.nd
@@ -399,7 +412,7 @@ def _static_end_tension(K, QE, QEs, ie, end):
     return T
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def traction_deflection(K, q, u):
     """Rope-groove friction deflection z [m]: relative displacement of the rope along the route
     against the rim since the step's start, elasto-plastic with band zmax = creep."""
@@ -408,14 +421,14 @@ def traction_deflection(K, q, u):
     return _elastoplastic(z, K.trac_zmax)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def traction_slip(K, q, u):
     """Cumulative slip [m] of the rope against the rim (rope minus rim along the route): u[7] at the
     step start plus the step's relative displacement, the rope's at the strain it arrives with."""
     return u[7] - _trac_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def traction_force(K, q, u, QE, QEs):
     """Friction force on the rope along the route [N]. Capacity (Euler-Eytelwein):
     T_slack (e^(f alpha) - 1), T_slack the smaller static end tension of the two spans at the sheave;
@@ -469,6 +482,15 @@ def gather(K, c, q, v, ie, QE, VE):
         VE[ie, a] = xd
 
 
+# What a scene without the feature never compiles (kernel.kernel_features, _jit.gated); each call
+# site keeps its run-time test.
+_cubic_at = gated(CUBIC, cubic_element_at)
+_linear_nd_at = gated(MULTI_D, linear_element_at)
+_nl_update = gated(NL_ROWS, nl_update)
+_rigid_terms = gated(JOINTS, rigid_terms)
+_torsion_terms = gated(TORSION, torsion_terms)
+
+
 @njit(cache=True)
 def workspace(K, dense=True):
     """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work). dense=False: no q-space
@@ -489,7 +511,7 @@ def assemble(K, c, q, v, t, u, M, Q):
     return assemble_ws(K, W, c, q, v, t, u)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
     """Gather element ie and evaluate its kernel into MEs[ie], QEs[ie] (the element step of
     assemble_ws, which writes it out for speed). Returns (status, evaluated):
@@ -504,14 +526,14 @@ def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
         if not QE[ie, ne - 1] - QE[ie, 2 * nd] > 0.0:
             return status, False
     if K.el_type == 1:
-        cubic_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
-                         K.el_g, QE, VE, MEs, QEs, ie)
+        _cubic_at(K, nd, K.el_rhoA[ie], K.el_EA[ie], K.el_EI[ie], K.el_nu[ie], K.el_tonly[ie] != 0,
+                  K.el_g, QE, VE, MEs, QEs, ie)
     elif nd == 1:
         linear_element_1d_at(K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g[ie, 0],
                              K.el_C[ie], QE, VE, MEs, QEs, ie)
     else:
-        linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g,
-                          K.el_C[ie], QE, VE, MEs, QEs, ie)
+        _linear_nd_at(K, nd, K.el_rhoA[ie], K.el_EA[ie], K.el_nu[ie], K.el_tonly[ie] != 0, K.el_g,
+                      K.el_C[ie], QE, VE, MEs, QEs, ie)
     return status, True
 
 
@@ -537,7 +559,7 @@ def creep_forces(K, W, v, u, gain):
     for k in range(T.shape[0]):
         j = int(T[k, CT_S])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = sheave_terms(T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
+        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
         Q[j] += fc
         if full:
             u[i + 6] = kap
@@ -549,6 +571,9 @@ def creep_forces(K, W, v, u, gain):
                 if k == mot:
                     gain *= kap
     return gain
+
+
+_creep_forces = gated(CREEP, creep_forces, lambda K, W, v, u, gain: gain)
 
 
 @njit(cache=True, inline="always")
@@ -580,7 +605,7 @@ def q_terms(K, W, q, v, t, u):
         Q[j] -= 0.5 * K.drum_rhoA[k] * v[j] * v[j]
     gain = K.mot_gain       # d(motor angle) / d(motor coordinate)
     if K.crp_s.shape[0] > 0:
-        gain = creep_forces(K, W, v, u, gain)
+        gain = _creep_forces(K, K, W, v, u, gain)
     if K.nl_on & 2:   # joints: torque (force) tables, gravity moments of revolute bodies
         for k in range(K.jt_dof.shape[0]):
             Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
@@ -632,7 +657,7 @@ def assemble_ws(K, W, c, q, v, t, u):
     flags = K.nl_on     # bit 1: nonlinear rows, bit 2: joints or spatial rigid bodies (one read)
     nl = (flags & 1) != 0
     if nl and K.nl_frz[0] == 0:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the
-        nl_update(K, c, q, v)     # nonlinear rows (nl_frz: kept from the last update, solver)
+        _nl_update(K, K, c, q, v)   # nonlinear rows (nl_frz: kept from the last update, solver)
     for ie in range(el_map.shape[0]):
         # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
         # this loop cost ~30 % of the 1D step
@@ -642,14 +667,14 @@ def assemble_ws(K, W, c, q, v, t, u):
             if not QE[ie, ne - 1] - QE[ie, 2 * nd] > 0.0:
                 continue
         if K.el_type == 1:
-            cubic_element_at(nd, rhoA[ie], EA[ie], K.el_EI[ie], nu[ie], tonly[ie] != 0, G,
-                             QE, VE, MEs, QEs, ie)
+            _cubic_at(K, nd, rhoA[ie], EA[ie], K.el_EI[ie], nu[ie], tonly[ie] != 0, G,
+                      QE, VE, MEs, QEs, ie)
         elif nd == 1:
             linear_element_1d_at(rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G[ie, 0], C[ie],
                                  QE, VE, MEs, QEs, ie)
         else:
-            linear_element_at(nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
-                              QE, VE, MEs, QEs, ie)
+            _linear_nd_at(K, nd, rhoA[ie], EA[ie], nu[ie], tonly[ie] != 0, G, C[ie],
+                          QE, VE, MEs, QEs, ie)
         for a in range(ne):
             for wa in range(nw):
                 ba = el_coef[ie, a, wa]
@@ -662,12 +687,12 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
-        _nl_convect_all(K, MEs, QEs, Q, q)
+        _nl_convect(K, K, MEs, QEs, Q, q)
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
-        rigid_terms(K, q, v, M, Q)
+        _rigid_terms(K, K, q, v, M, Q)
     if flags & 4:   # axial-torsion coupling of torsion ropes (after nl_update: the frames' rotations)
-        torsion_terms(K, QE, q, Q)
+        _torsion_terms(K, K, QE, q, Q)
     Md = W.Md
     for j in range(nq):
         M[j, j] += Md[j]
@@ -696,6 +721,35 @@ def _nl_convect_all(K, MEs, QEs, Q, q):
                 if ba != 0.0:
                     Q[el_map[ie, a, wa]] += ba * d
     wrap_weight(K, Q, q, False)
+
+
+_nl_convect = gated(NL_ROWS, _nl_convect_all)
+_wrap_weight = gated(NL_ROWS, wrap_weight, lambda K, Q, q, total: 0.0)
+
+
+@njit(cache=True)
+def cubic_tension(K, QE, VE, i, end):
+    """The axial force EA(|d| - 1) of cubic element i at its start (end 0) or end (1): slopes are
+    nodal unknowns."""
+    ne = K.el_idx.shape[1]
+    MEsc = np.empty((1, ne, ne))
+    QEsc = np.empty((1, ne))
+    QEc = QE[i:i + 1].copy()
+    VEc = VE[i:i + 1].copy()
+    res = cubic_element_at(K.nd, K.el_rhoA[i], K.el_EA[i], K.el_EI[i], K.el_nu[i],
+                           K.el_tonly[i] != 0, K.el_g[i:i + 1], QEc, VEc, MEsc, QEsc, 0)
+    return res[0] if end == 0 else res[1]
+
+
+@njit(cache=True)
+def creep_kappa_at(K, QE, VE, v, u, k):
+    """kappa of creep sheave k at the element arrays' state (creep_terms)."""
+    return creep_terms_at(K, QE, VE, v, k, creep_wound(u, k))[0]
+
+
+_cubic_tension = gated(CUBIC, cubic_tension, lambda K, QE, VE, i, end: 0.0)
+_creep_kappa_at = gated(CREEP, creep_kappa_at, lambda K, QE, VE, v, u, k: 1.0)
+_creep_angle = gated(CREEP, creep_angle, lambda K, q, u, k, kap: 0.0)
 
 
 @njit(cache=True)
@@ -729,7 +783,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
     n = K.out_kind.shape[0]
     if fresh:
         for k in range(K.crp_s.shape[0]):
-            kaps[k] = creep_terms(K, QE, VE, v, k, creep_wound(u, k))[0]
+            kaps[k] = _creep_kappa_at(K, K, QE, VE, v, u, k)
     for k in range(n):
         kind = K.out_kind[k]
         i = K.out_i[k]
@@ -743,14 +797,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
         elif kind == 2:
             y[k] = qdd[i] * s
         elif kind == 3 and K.el_type == 1:
-            # cubic: the axial force at the node, EA(|d| - 1) (slopes are nodal unknowns)
-            MEsc = np.empty((1, ne, ne))
-            QEsc = np.empty((1, ne))
-            QEc = QE[i:i + 1].copy()
-            VEc = VE[i:i + 1].copy()
-            res = cubic_element_at(nd, K.el_rhoA[i], K.el_EA[i], K.el_EI[i], K.el_nu[i],
-                                   K.el_tonly[i] != 0, K.el_g[i:i + 1], QEc, VEc, MEsc, QEsc, 0)
-            T = res[0] if K.out_j[k] == 0 else res[1]
+            T = _cubic_tension(K, K, QE, VE, i, K.out_j[k])
             y[k] = T if (K.el_tonly[i] == 0 or T > 0.0) else 0.0
         elif kind == 3:
             for a in range(ne):   # element accelerations B qdd
@@ -799,7 +846,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             y[k] = traction_force(K, q, u, QE, QEs)
         elif kind == 11:
             i = K.out_i[k]
-            y[k] = creep_angle(K, q, u, i, kaps[i])
+            y[k] = _creep_angle(K, K, q, u, i, kaps[i])
         elif kind == 12:
             i = K.out_i[k]
             y[k] = -kaps[i] * v[K.crp_s[i]] / K.crp_R[i]
@@ -814,6 +861,16 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             y[k] = r
         elif kind == 14:   # torsion span: rope torque [N m] (j = 0) or twist [rad/m] (j = 1)
             y[k] = K.tq_out[K.out_i[k], K.out_j[k]]
+
+
+@njit(cache=True)
+def cubic_strain_energy(nd, EA, EI, tonly, qe, ve, qs):
+    return cubic_elastic(nd, EA, EI, 0.0, tonly, qe, ve, qs)[0]
+
+
+_cubic_gravity = gated(CUBIC, cubic_gravity, lambda nd, rhoA, g, qe, qs: 0.0)
+_cubic_strain_energy = gated(CUBIC, cubic_strain_energy, lambda nd, EA, EI, tonly, qe, ve, qs: 0.0)
+_torsion_energy = gated(TORSION, torsion_energy, lambda K, QE, q: 0.0)
 
 
 @njit(cache=True)
@@ -851,9 +908,9 @@ def energy_u(K, c, q, v, u):
     for ie in range(n_el):
         gather(K, c, q, zero, ie, QE, VE)
         if K.el_type == 1:
-            Vg += cubic_gravity(nd, K.el_rhoA[ie], K.el_g[ie], QE[ie], QEs[ie])
-            U += cubic_elastic(nd, K.el_EA[ie], K.el_EI[ie], 0.0, K.el_tonly[ie] != 0, QE[ie], VE[ie],
-                               QEs[ie])[0]
+            Vg += _cubic_gravity(K, nd, K.el_rhoA[ie], K.el_g[ie], QE[ie], QEs[ie])
+            U += _cubic_strain_energy(K, nd, K.el_EA[ie], K.el_EI[ie], K.el_tonly[ie] != 0, QE[ie], VE[ie],
+                                      QEs[ie])
             continue
         l = QE[ie, 2 * nd + 1] - QE[ie, 2 * nd]
         res = linear_element_at(nd, K.el_rhoA[ie], K.el_EA[ie], 0.0, K.el_tonly[ie] != 0,
@@ -864,13 +921,13 @@ def energy_u(K, c, q, v, u):
         j = K.spr_dof[k]
         U += 0.5 * K.spr_k[k] * q[j] * q[j]
     if K.nl_on & 1:
-        Vg += wrap_weight(K, Q, q, True)
+        Vg += _wrap_weight(K, K, Q, q, True)
     if K.nl_on & 4:
-        U += torsion_energy(K, QE, q)
+        U += _torsion_energy(K, K, QE, q)
     return T, Vg, U
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def set_joints(K, t, q, v, qdd):
     """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
     pose, as the profile at its start): q = x(t)."""
@@ -884,7 +941,7 @@ def set_joints(K, t, q, v, qdd):
         qdd[j] = xdd
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def set_prescribed(K, q_ref, t, q, v, qdd):
     """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile)),
     and the prescribed joints."""
@@ -901,7 +958,7 @@ def set_prescribed(K, q_ref, t, q, v, qdd):
         qdd[j] = gsc * xdd
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
     """set_prescribed for a speed-driven creep sheave over the step t0 -> t1 (q holds the step start):
     the profile prescribes the rim, so sigma follows it at the arriving strain,

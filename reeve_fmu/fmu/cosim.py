@@ -232,19 +232,24 @@ def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
                 log: Optional[Callable[[str], None]] = print) -> tuple[Path, Path]:
-    """Build the plant and drive FMUs into `dest` if missing, stale or `rebuild`; return their paths."""
-    out = []
-    for what, fn in (("plant", lambda f: build_plant_fmu(dest, scene, name, force=f)),
-                     ("drive", lambda f: build_drive_fmu(dest, force=f))):
+    """Build the plant and drive FMUs into `dest` if missing, stale or `rebuild`; return their paths.
+    The two builds run side by side (each build's warm-up is a subprocess that may compile kernels:
+    two cores, two compiles)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    def build(fn):
         t0 = time.perf_counter()
         path, built = fn(rebuild)
+        return path, built, time.perf_counter() - t0
+
+    with ThreadPoolExecutor(2) as pool:
+        jobs = [pool.submit(build, lambda f: build_plant_fmu(dest, scene, name, force=f)),
+                pool.submit(build, lambda f: build_drive_fmu(dest, force=f))]
+        results = [j.result() for j in jobs]
+    for path, built, dt in results:
         if log is not None:
-            if built:
-                log(f"built {path} ({time.perf_counter() - t0:.1f} s)")
-            else:
-                log(f"{path} is up to date")
-        out.append(path)
-    return out[0], out[1]
+            log(f"built {path} ({dt:.1f} s)" if built else f"{path} is up to date")
+    return results[0][0], results[1][0]
 
 
 # ------------------------------------------------------------------------------------------------

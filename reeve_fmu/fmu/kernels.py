@@ -27,7 +27,7 @@ from typing import Optional
 
 from ._bootstrap import KERNELS_DIR
 
-__all__ = ["collect", "add_to_fmu", "WARMUP"]
+__all__ = ["collect", "add_to_fmu", "compile_beside", "WARMUP"]
 
 #: what the warm-up subprocess runs: the FMU as a user's first fmpy call would (1 s at 1 ms)
 WARMUP = """
@@ -54,6 +54,28 @@ def cache_is_cold() -> bool:
         return False
     d = Path(_jit.cache_root()) / "numba" / _jit.source_hash()
     return not (d.is_dir() and any(d.rglob("*.nbi")))
+
+
+#: what compile_beside's subprocess runs: the scene's stepping kernel, compiled without a run
+_STEPPING = """
+import sys
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import load_scene
+from reeve_fmu.core.solver import Simulator
+Simulator(build_model(load_scene(sys.argv[1]))).compile_stepping()
+"""
+
+
+def compile_beside(scene_path) -> Optional[subprocess.Popen]:
+    """On a cold cache, start compiling the scene's stepping kernel in a subprocess, on the other core,
+    while this process compiles what it needs first (statics, outputs): the kernel cache's locks make
+    each kernel compile once, and whoever needs it next loads it. Returns the process (wait for it,
+    or let it finish on its own; a failure only means the kernel is compiled later, where it is
+    first used), or None when the cache is warm."""
+    if not cache_is_cold():
+        return None
+    return subprocess.Popen([sys.executable, "-c", _STEPPING, str(scene_path)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
 
 
 def collect(fmu_path, *, stop_time: float = 1.0, step: float = 1e-3, timeout: float = 1800.0,

@@ -213,7 +213,7 @@ def linear_element(nd, rhoA, EA, nu, tonly, g, C, qe, ve, Me, Qe):
     return res
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def end_tension(nd, rhoA, QE, VE, ae, MEs, QEs, ie, end):
     """Rope force at an element end (end = 0: node 1, 1: node 2), from the element's consistent nodal
     force minus inertia and minus the convective momentum flux rhoA rdot s_dot (which the support
