@@ -3,7 +3,7 @@
 The element kernels and the step loop are written in the subset of Python that numba compiles. With
 numba installed (a declared dependency) they run compiled; where it is missing (an FMU imported into an
 interpreter without numba) or REEVE_FMU_NO_JIT=1, the same code runs as plain Python: identical
-results bit for bit (tests/test_no_jit.py), about 240x slower.
+results bit for bit (tests/core/test_no_jit.py), about 240x slower.
 """
 from __future__ import annotations
 

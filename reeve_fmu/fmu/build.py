@@ -33,6 +33,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import zipfile
 from pathlib import Path
 from typing import Iterable, Mapping, Optional, Union
@@ -233,8 +234,6 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
     # the FMU is written into a private directory next to its destination and only moved into
     # place (atomic rename) after validation: a failed build never clobbers a good FMU
     out_tmp = Path(tempfile.mkdtemp(prefix=".reeve_fmu_out_", dir=dest_dir))
-    saved_path = list(sys.path)
-    saved_mod = sys.modules.pop(stem, None)
     try:
         # 1. vendored package + shim + stamp + requirements
         vendor = staging / VENDOR_DIR
@@ -272,14 +271,23 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                 raise FmuBuildError(f"project file {pf} clashes with a reserved resources entry")
             files.append(pf)
 
-        # 2. pythonfmu build (imports and instantiates the slave class in this interpreter)
-        try:
-            fmu_path = FmuBuilder.build_FMU(entry, dest=out_tmp, project_files=files, **opts)
-        except FmuBuildError:
-            raise
-        except Exception as exc:
-            raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
-                                f"{type(exc).__name__}: {exc}") from exc
+        # 2. pythonfmu build (imports and instantiates the slave class in this interpreter, through
+        # sys.path: one build at a time in a process; the rest of two builds runs side by side)
+        with _IMPORT_LOCK:
+            saved_path = list(sys.path)
+            saved_mod = sys.modules.pop(stem, None)
+            try:
+                fmu_path = FmuBuilder.build_FMU(entry, dest=out_tmp, project_files=files, **opts)
+            except FmuBuildError:
+                raise
+            except Exception as exc:
+                raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
+                                    f"{type(exc).__name__}: {exc}") from exc
+            finally:
+                sys.path[:] = saved_path
+                sys.modules.pop(stem, None)
+                if saved_mod is not None:
+                    sys.modules[stem] = saved_mod
         built = Path(fmu_path)
         # 3. the native loader in front of pythonfmu's linux64 binary
         if compiler is not None:
@@ -304,13 +312,12 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
         final = dest_dir / built.name
         os.replace(built, final)
     finally:
-        sys.path[:] = saved_path
-        sys.modules.pop(stem, None)
-        if saved_mod is not None:
-            sys.modules[stem] = saved_mod
         shutil.rmtree(staging, ignore_errors=True)
         shutil.rmtree(out_tmp, ignore_errors=True)
     return final
+
+
+_IMPORT_LOCK = threading.Lock()
 
 
 def _carry(built: Path, reqs, *, kernels: bool, standalone: bool, log) -> None:

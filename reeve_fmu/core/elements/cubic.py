@@ -31,7 +31,7 @@ Everything follows from the element's energies written in xi, including their de
     tension-only optional: w_axial = 0 where eps <= 0 (pointwise)
 
 With s1dot = s2dot = 0 and s fixed the element is the standard gradient-deficient ANCF cable: the
-e-e block of M is the classical cable matrix, Q_v has zero e-rows (tests/test_cubic.py).
+e-e block of M is the classical cable matrix, Q_v has zero e-rows (tests/core/test_cubic.py).
 
 Assembly (same convention as linear.py): `cubic_element_at(nd, rhoA, EA, EI, nu, tonly, G, QE, VE,
 MEs, QEs, ie)` fills MEs[ie] (ne x ne) and QEs[ie] (ne) = Q_v + Q_g + Q_el + Q_d from QE[ie],
