@@ -108,9 +108,19 @@ _RAN: set = set()         # ids of the tests that ran (their records replace the
 _COLLECTED: set = set()   # ids of the tests collected here, before deselection (not on an xdist controller)
 
 
+# The quick tier, `python -m pytest -m "not slow"` (docs/testing.md): the files below take most of a warm
+# run (FMU builds, native hosts and libcosim, HIL, the engine without numba, Lagrangian and fidelity
+# studies). The README's command and CI run everything.
+SLOW_FILES = frozenset({
+})
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(session, config, items):
     _COLLECTED.update(item.nodeid for item in items)
+    for item in items:
+        if item.nodeid.split("::")[0] in SLOW_FILES:
+            item.add_marker(pytest.mark.slow)
 
 
 class _XdistRecords:
@@ -121,6 +131,7 @@ class _XdistRecords:
 
 
 def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: outside the quick tier (-m 'not slow'; tests/conftest.py SLOW_FILES)")
     if config.pluginmanager.hasplugin("xdist") and _is_controller(config):
         config.pluginmanager.register(_XdistRecords(), "reeve-tolerances")
 
