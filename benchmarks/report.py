@@ -259,6 +259,28 @@ def crane_sweep(d):
                    "—" if r.get("critical_height") is None else f"{r['critical_height']:.2f} m"] for r in d])
 
 
+def compile_cost(d):
+    fam = {}
+    for r in d["families"]:
+        fam.setdefault(r["family"], {})[r["checkout"]] = r
+    rows = []
+    for name, by in fam.items():
+        this, base = by.get("this checkout", {}), by.get("baseline", {})
+        ratio = f"{this['cpu_s'] / base['cpu_s']:.2f}" if "cpu_s" in this and "cpu_s" in base else "—"
+        rows.append([name, f"{this.get('cpu_s', '—')}", str(this.get("specializations", "—")),
+                     f"{base.get('cpu_s', '—')}", str(base.get("specializations", "—")), ratio])
+    out = [table(["kernel family (one short run, empty cache)", "CPU s", "specializations", "baseline CPU s",
+                  "baseline specializations", "ratio"], rows)]
+    if d.get("demo"):
+        rows = [[r["checkout"], f"{r['cold_wall_s']} s ({r['cold_cpu_s']} s CPU)", f"{r['warm_wall_s']} s",
+                 f"**{r['cold_over_warm']}×**"] for r in d["demo"] if "cold_wall_s" in r]
+        out.append(table(["`reeve-fmu demo`", "cold (wall)", "warm (wall)", "cold / warm"], rows))
+    if d.get("suite"):
+        rows = [[r["checkout"], f"{r['wall_s']} s", f"{r['cpu_s']} s", r["summary"]] for r in d["suite"]]
+        out.append(table(["test suite, cold", "wall", "CPU", "result"], rows))
+    return "\n\n".join(out)
+
+
 def tolerances(d):
     """One row per test function and quantity (parametrizations and loops together): the check whose
     observed error comes closest to its bound, and the reason a bound may be wider than 10x."""
@@ -313,6 +335,9 @@ TABLES = {
     "fmi_floor": ("fmi_floor.json", "python benchmarks/fmi_floor.py --json docs/img/fmi_floor.json", fmi_floor),
     "sweep": ("sweep_throughput_quiet3.json", "python benchmarks/sweep_throughput.py --runs 200 --json FILE", sweep),
     "fmu_hosts": ("fmu_hosts_quiet.json", "python benchmarks/fmu_hosts.py --json FILE", fmu_hosts),
+    "compile_cost": ("compile_cost.json",
+                     "python benchmarks/compile_cost.py --baseline OTHER_CHECKOUT --json docs/img/compile_cost.json",
+                     compile_cost),
     "tolerances": ("tolerances.json", "python -m pytest ...; python benchmarks/report.py --tolerances tests/tolerances.json",
                    tolerances),
 }

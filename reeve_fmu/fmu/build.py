@@ -195,7 +195,6 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
     the destination is then left untouched (the new one replaces it atomically only when valid).
     """
     from pythonfmu import __version__ as pythonfmu_version
-    from pythonfmu.builder import FmuBuilder
 
     entry = Path(entry_script).resolve()
     if not entry.is_file() or entry.suffix != ".py":
@@ -271,24 +270,8 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
                 raise FmuBuildError(f"project file {pf} clashes with a reserved resources entry")
             files.append(pf)
 
-        # 2. pythonfmu build (imports and instantiates the slave class in this interpreter, through
-        # sys.path: one build at a time in a process; the rest of two builds runs side by side)
-        with _IMPORT_LOCK:
-            saved_path = list(sys.path)
-            saved_mod = sys.modules.pop(stem, None)
-            try:
-                fmu_path = FmuBuilder.build_FMU(entry, dest=out_tmp, project_files=files, **opts)
-            except FmuBuildError:
-                raise
-            except Exception as exc:
-                raise FmuBuildError(f"pythonfmu failed to build {entry.name}: "
-                                    f"{type(exc).__name__}: {exc}") from exc
-            finally:
-                sys.path[:] = saved_path
-                sys.modules.pop(stem, None)
-                if saved_mod is not None:
-                    sys.modules[stem] = saved_mod
-        built = Path(fmu_path)
+        # 2. pythonfmu build (imports and instantiates the slave class in this interpreter)
+        built = _pythonfmu_build(entry, stem, out_tmp, files, opts)
         # 3. the native loader in front of pythonfmu's linux64 binary
         if compiler is not None:
             try:
@@ -318,6 +301,28 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
 
 
 _IMPORT_LOCK = threading.Lock()
+
+
+def _pythonfmu_build(entry: Path, stem: str, out_dir: Path, files, opts) -> Path:
+    """pythonfmu's build of `entry` into out_dir. It imports the entry script through sys.path: one
+    build at a time in a process (the rest of two builds runs side by side), sys.path and the entry's
+    module restored after."""
+    from pythonfmu.builder import FmuBuilder
+
+    with _IMPORT_LOCK:
+        saved_path = list(sys.path)
+        saved_mod = sys.modules.pop(stem, None)
+        try:
+            return Path(FmuBuilder.build_FMU(entry, dest=out_dir, project_files=files, **opts))
+        except FmuBuildError:
+            raise
+        except Exception as exc:
+            raise FmuBuildError(f"pythonfmu failed to build {entry.name}: {type(exc).__name__}: {exc}") from exc
+        finally:
+            sys.path[:] = saved_path
+            sys.modules.pop(stem, None)
+            if saved_mod is not None:
+                sys.modules[stem] = saved_mod
 
 
 def _carry(built: Path, reqs, *, kernels: bool, standalone: bool, log) -> None:
