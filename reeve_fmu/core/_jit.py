@@ -276,6 +276,11 @@ def entry_point(dispatcher, first=None):
     return dispatcher
 
 
+def _inline_off(expr, caller_info, callee_info) -> bool:
+    """numba's inlining cost model for a gate: inline the stand-ins, not the gate that calls fn."""
+    return callee_info.func_ir.func_id.func_name != "on"
+
+
 def gated(feature: int, fn, off=None, inline: bool = False):
     """`fn` behind a compile-time switch: compiled code calls `gate(K, *args)` and gets `fn(*args)`
     only when the type of the compiled kernel K carries `feature` (kernel.kernel_features); for a
@@ -309,7 +314,8 @@ def gated(feature: int, fn, off=None, inline: bool = False):
 
     ns["choose"] = choose
     exec(compile(f"def typer({params}):\n    return choose(K_)\n", f"<gate {py.__name__}>", "exec"), ns)
-    # inline: numba's IR inlining of the gate into its callers (for a small fn on a hot path; a large
-    # fn would be typed twice). Otherwise the gate is a function of its own.
-    overload(gate, jit_options={"error_model": "numpy"}, inline="always" if inline else "never")(ns["typer"])
+    # inline: numba's IR inlining of the gate into its callers when the feature is off (the stand-in
+    # costs nothing where it is); where it is on, the gate is a function of its own that inlines fn
+    # (inlining both, an inlined fn with branches, trips numba's IR checks). Otherwise never.
+    overload(gate, jit_options={"error_model": "numpy"}, inline=_inline_off if inline else "never")(ns["typer"])
     return gate
