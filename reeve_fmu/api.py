@@ -85,7 +85,7 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
     cols = res.as_dict()
     time_ = np.asarray(cols.pop("time"))
     from .studies.crane import hoist_convention
-    from .studies.report import scene_parameters
+    from .core.scene import scene_parameters
     from .studies.verdicts import explain, scene_verdicts, worst
 
     convention = hoist_convention(sc, cols)

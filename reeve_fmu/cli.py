@@ -14,7 +14,6 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 
 
-from .core.scene import default_scene  # noqa: E402,F401  (re-exported)
 
 
 def cmd_simulate(args) -> int:
@@ -84,6 +83,7 @@ def _simulate_extras(args, scene, time_, cols, out):
     """--output-dt / --parquet tables, and the checks of any scene run (slack rope, buffer contact,
     traction against EN 81-50): console, verdicts added to DIR/summary.json, DIR/report.md."""
     import json
+    from .core.scene import scene_parameters
     from .studies import report
     from .studies.verdicts import explain, print_verdicts, scene_verdicts, worst
 
@@ -100,7 +100,7 @@ def _simulate_extras(args, scene, time_, cols, out):
                                                            "motor sign": summary.get("motor_sign_convention", "")},
                         [], vs, ["results.png"] + (["crane.png"] if (out / "crane.png").is_file() else []),
                         command="reeve-fmu simulate",
-                        parameters={"Scene (after --set)": report.scene_parameters(scene)})
+                        parameters={"Scene (after --set)": scene_parameters(scene)})
     print_verdicts(vs)
 
 
@@ -124,7 +124,8 @@ def _write_run(out, scene, time_, cols, warnings, stop, wall, convention=""):
     """results.csv, results.png (the event marked) and summary.json of a simulate run."""
     import json
     from .core.results import plot_overview, write_csv
-    from .studies.report import _json_default, scene_parameters
+    from .core.scene import scene_parameters
+    from .studies.report import _json_default
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", time_, cols)
     event = None

@@ -15,8 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from .studies.trip import LANDINGS, RATED_LOAD_KG  # noqa: F401  (re-exported)
-from .fmu.cosim import fmu_dir  # noqa: E402,F401  (re-exported)
+from .fmu.cosim import fmu_dir
 
 
 def _rows(summary: dict) -> list:
@@ -140,7 +139,8 @@ def cli_demo(args) -> int:
     from .components.drive import SIS_PARAMETERS, trip_end_time
     from .fmu import cosim
     from .studies import report
-    from .studies.trip import run_case, run_parameters, summarize_case, traction_limits
+    from .studies.analysis import traction_limits
+    from .studies.trip import run_case, run_parameters, summarize_case
     from .studies.verdicts import explain, levelling_verdicts, print_verdicts, worst
 
     out = Path(getattr(args, "out", None) or "results")

@@ -169,7 +169,7 @@ def make_default_plant(scene=None, params: dict | None = None):
 
 
 def default_plant_fmu(dest=None, *, build: bool = True, log=None) -> Path:
-    """The demo's plant FMU (reeve_fmu.demo.fmu_dir(): $REEVE_FMU_FMUS or fmus/ of the checkout) /
+    """The demo's plant FMU (reeve_fmu.fmu.cosim.fmu_dir(): $REEVE_FMU_FMUS or fmus/ of the checkout) /
     ReevingPlant.fmu, built, or rebuilt when stale, with reeve_fmu.fmu.cosim.build_plant_fmu."""
     from ..fmu.cosim import PLANT_NAME, build_plant_fmu
 

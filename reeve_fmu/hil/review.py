@@ -89,7 +89,8 @@ def bench_verdicts(summary: dict, injected: bool) -> list:
 def add_verdicts(summary: dict, cfg, plant, faults_injected: bool, time_, cols: dict) -> None:
     """summary: trip_metrics, coupling, verdicts, verdict, findings (and verdicts_note when no trip check
     could be made: the reason)."""
-    from ..studies.trip import summarize, traction_limits
+    from ..studies.analysis import traction_limits
+    from ..studies.trip import summarize
     from ..studies.verdicts import explain, record_verdicts, trip_verdicts, worst
 
     vs = []

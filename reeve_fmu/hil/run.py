@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, MULTICAST_MODES, make_bus  # noqa: E402  (re-exported)
+from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, MULTICAST_MODES, make_bus  # noqa: E402
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.scene import scene_parameters  # noqa: F401  (re-exported: the parameters of a run)
 from .verdicts import Verdict, explain, worst
 
 

@@ -23,7 +23,7 @@ RATED_SPEED = 1.6       # m/s car
 ROPING = 2.0
 LANDINGS = (0.0, 39.0)  # m
 
-from .analysis import traction_limits  # noqa: E402,F401  (re-exported)
+from .analysis import traction_limits  # noqa: E402
 
 #: DriveParams field of `components.elevator.size_drive` -> drive FMU parameter
 SIZED = {"sheave_radius": "machine.sheave_radius", "roping": "machine.roping", "J_ff": "control.J_ff",
