@@ -141,13 +141,28 @@ def stage_runtime(dest: Path, requirements) -> dict:
 _STAGED: dict = {}   # distributions -> (TemporaryDirectory, manifest): the plant and drive FMUs share one
 
 
-def _staged(requirements):
+def _zip_runtime(stage: Path, zip_path: Path, prefix: str) -> None:
+    """The staged runtime as zip entries under `prefix`, compressed once: every FMU of the process starts
+    from a copy of this file (compressing the ~360 MB runtime is most of a standalone build)."""
+    with zipfile.ZipFile(zip_path, "w", zipfile.ZIP_DEFLATED) as zout:
+        for p in sorted(stage.rglob("*")):
+            if p.is_file():
+                zi = zipfile.ZipInfo(prefix + p.relative_to(stage).as_posix(), date_time=(2020, 1, 1, 0, 0, 0))
+                zi.compress_type = zipfile.ZIP_DEFLATED
+                zi.external_attr = (0o755 if p.suffix == ".so" or ".so." in p.name else 0o644) << 16
+                with open(p, "rb") as fh:
+                    zout.writestr(zi, fh.read())
+
+
+def _staged(requirements, prefix: str):
     key = tuple(d.metadata["Name"].lower() for d in _distribution_names(requirements))
     if key not in _STAGED:
         tmp = tempfile.TemporaryDirectory(prefix="reeve_runtime_")
-        _STAGED[key] = (tmp, stage_runtime(Path(tmp.name) / RUNTIME_DIR, requirements))
+        manifest = stage_runtime(Path(tmp.name) / RUNTIME_DIR, requirements)
+        _zip_runtime(Path(tmp.name) / RUNTIME_DIR, Path(tmp.name) / "runtime.zip", prefix)
+        _STAGED[key] = (tmp, manifest)
     tmp, manifest = _STAGED[key]
-    return Path(tmp.name) / RUNTIME_DIR, manifest
+    return Path(tmp.name) / "runtime.zip", manifest
 
 
 def add_to_fmu(fmu_path, requirements) -> dict:
@@ -155,19 +170,13 @@ def add_to_fmu(fmu_path, requirements) -> dict:
     resources/reeve_runtime/; returns the manifest."""
     fmu_path = Path(fmu_path)
     prefix = f"resources/{RUNTIME_DIR}/"
-    stage, manifest = _staged(requirements)
+    runtime_zip, manifest = _staged(requirements, prefix)
     with tempfile.TemporaryDirectory(prefix="reeve_runtime_fmu_", dir=fmu_path.parent) as tmp:
         new = Path(tmp) / "new.fmu"
-        with zipfile.ZipFile(fmu_path) as zin, zipfile.ZipFile(new, "w", zipfile.ZIP_DEFLATED) as zout:
+        shutil.copyfile(runtime_zip, new)
+        with zipfile.ZipFile(fmu_path) as zin, zipfile.ZipFile(new, "a") as zout:
             for item in zin.infolist():
                 if not item.filename.startswith(prefix):
                     zout.writestr(item, zin.read(item.filename))
-            for p in sorted(stage.rglob("*")):
-                if p.is_file():
-                    zi = zipfile.ZipInfo(prefix + p.relative_to(stage).as_posix(), date_time=(2020, 1, 1, 0, 0, 0))
-                    zi.compress_type = zipfile.ZIP_DEFLATED
-                    zi.external_attr = (0o755 if p.suffix == ".so" or ".so." in p.name else 0o644) << 16
-                    with open(p, "rb") as fh:
-                        zout.writestr(zi, fh.read())
         shutil.move(str(new), fmu_path)
     return manifest
