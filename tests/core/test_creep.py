@@ -20,12 +20,13 @@ except ModuleNotFoundError:  # Python 3.10
 import numpy as np
 import pytest
 
+from reeve_fmu.core.contact import UE_CREEP
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import parse_scene
 from reeve_fmu.core.solver import Simulator
 from reeve_fmu.core.solver.inputs import kernel_inputs_at
 from reeve_fmu.core.solver.statics import consistent_acceleration, preload_traction
-from reeve_fmu.core.system import UE_CREEP, creep_power
+from reeve_fmu.core.system import creep_power
 from tests.support import ROOT
 from tests.support.checks import check, check_min
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model, State
-from ..system import UE_CREEP, UE_STRIDE, creep_inputs, outputs
+from ..contact import UE_CREEP, UE_STRIDE
+from ..system import creep_inputs, outputs
 
 
 def kernel_inputs(m: Model, st: State) -> np.ndarray:

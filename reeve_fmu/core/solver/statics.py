@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..builder.assemble import creep_table
+from ..contact import UE_CREEP, UE_STRIDE
 from ..kernel import compiled_kernel
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, colour_columns, jac_shape, newton_matrix_sparse, newton_pattern, unpack_sparse
-from ..system import UE_CREEP, UE_STRIDE, assemble, set_prescribed, set_prescribed_creep, workspace
+from ..system import assemble, set_prescribed, set_prescribed_creep, workspace
 from .inputs import kernel_inputs, kernel_inputs_at, outputs_at
 from .newton import SPARSE_MIN_FREE
 from .result import SolverError

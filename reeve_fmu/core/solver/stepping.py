@@ -8,8 +8,9 @@ import numpy as np
 
 from .._jit import gated, njit
 from ..kernel import CREEP, CT_IR, CT_KIND, CT_S
-from ..system import (INFO_CREEP, UE_CREEP, UE_STRIDE, brake_deflection, creep_angle_at, creep_input_set,
-                      creep_inputs, outputs_ws, traction_deflection, traction_slip, workspace, wound_record)
+from ..contact import (INFO_CREEP, UE_CREEP, UE_STRIDE, brake_deflection, creep_angle_at, creep_input_set,
+                       traction_deflection, traction_slip, wound_record)
+from ..system import creep_inputs, outputs_ws, workspace
 from .newton import newton_step, newton_step_sparse
 
 # the creep sheaves' part of a step (the call sites test for creep sheaves at run time)
@@ -21,7 +22,7 @@ _wound_record = gated(CREEP, wound_record)
 @njit(cache=True)
 def _creep_close_all(K, q, ue, info, kr):
     """Close a step for every creep sheave: keep its (kappa, rate) for the next step's inputs (kr)
-    and integrate its angle (info, system.creep_angle). The step's last residual, at its end, left
+    and integrate its angle (info, contact.creep_angle). The step's last residual, at its end, left
     them in ue (system.creep_forces). Not inlined, like system.creep_forces."""
     T = K.crp_tab
     mot = K.mot_crp if K.presc.shape[0] > 0 else -1
