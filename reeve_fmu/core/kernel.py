@@ -45,7 +45,7 @@ Kernel = namedtuple("Kernel", [
     "nl_grp",
     # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
     "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
-    # spatial rigid bodies (bodies.rigid_terms): rotation-vector indices, inertia tensors in body axes
+    # spatial rigid bodies (rigid.rigid_terms): rotation-vector indices, inertia tensors in body axes
     "rb_q", "rb_J",
     # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
     # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs

@@ -14,12 +14,13 @@ import numpy as np
 from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element_1d_at, linear_element_at
-from .bodies import nl_convect, nl_update, rigid_terms, wrap_weight
+from .bodies import nl_convect, nl_update, wrap_weight
 from .contact import (UE_CREEP, UE_STRIDE, brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at,
                       creep_wound, sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
 from .elements.torsion import torsion_energy, torsion_terms
 from .kernel import CREEP, CT_JR2, CT_KIND, CT_S, CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, new_work
 from .profiles import profile_eval
+from .rigid import rigid_terms
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 
