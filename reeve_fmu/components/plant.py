@@ -21,6 +21,8 @@ from ..core.model import State, build_model
 from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
 from ..core.solver import SolverError, Simulator
+from ..core.solver.inputs import kernel_inputs_at
+from ..core.solver.statics import consistent_acceleration
 from ..core.system import assemble
 from .elevator import car_at, check_load, elevator_spec, with_load
 
@@ -152,7 +154,7 @@ class Plant:
         """Motor torque [N m] that balances the driven coordinate in the current state (at rest:
         the torque that holds the load)."""
         m, st = self.model, self.state
-        ue = self.sim._kernel_inputs_at(st)
+        ue = kernel_inputs_at(m, st)
         ue[0] = 0.0
         M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
         assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
@@ -163,7 +165,7 @@ class Plant:
         consistent with it), e.g. the holding torque, so that a held load starts at rest."""
         st = self.state
         st.u[0] = float(torque)
-        self.sim._consistent_acceleration(st)
+        consistent_acceleration(self.model, st)
         self._y = self.sim.outputs(st).copy()
 
     def warm_up(self) -> None:

@@ -18,8 +18,9 @@ nonlinear: p_r = f_r(q). This module evaluates those rows in every residual:
 
 For each nonlinear row the Jacobian row B_r(q) (rows_jacobian) and the convective acceleration
 (dB/dt qdot)_r (rows_accel) are recomputed in closed form: rigid body motions, the tangency conditions
-differentiated once and twice, wrap angles. rows_jacobian_fd / rows_accel_fd / rigid_terms_fd do the
-same by central differences (steps NL_H, NL_EPS, RB_H): the tests' reference.
+differentiated once and twice, wrap angles. rows_jacobian_fd / rows_accel_fd do the same by central
+differences (steps NL_H, NL_EPS): the tests' reference. The rows are registered at build time
+(builder/nonlinear.py); the rotational inertia of spatial bodies is core/rigid.py.
 `nl_update` writes them into the kernel's element maps (el_coef) and into c (so that the unchanged
 gather gives x = f(q) and its velocity B(q) qdot); `nl_convect` subtracts M_e (dB/dt qdot) from an
 element's force vector. Models without nonlinear rows never call either (kernel.nl_on = 0).
@@ -114,7 +115,7 @@ def _rotate(R, b, v0, v1, v2):
 
 
 @njit(cache=True, inline="always")
-def _rot_coefs(p0, p1, p2):
+def rot_coefs(p0, p1, p2):
     """Coefficients of the rotation vector phi (angle th = |phi|): R = I + s1 P + a P^2 (Rodrigues),
     T = I + a P + b P^2 (phi_dot -> world angular velocity), with P = phi^, and ca = a'(th) / th,
     cb = b'(th) / th (for dT/dt). Series below th = 1e-2 (truncation < 1e-12 relative)."""
@@ -347,7 +348,7 @@ def _twist(q, bq, b0, bk, bax, BR, b, j):
     else:                               # rotation vector: omega = T(phi)[:, c]
         c = 0 if bq[b, 4] == j else (1 if bq[b, 5] == j else 2)
         p0, p1, p2 = q[bq[b, 4]], q[bq[b, 5]], q[bq[b, 6]]
-        a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+        a, bb, s1, ca, cb = rot_coefs(p0, p1, p2)
         ph = (p0, p1, p2)
         P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
         th2 = p0 * p0 + p1 * p1 + p2 * p2
@@ -507,7 +508,7 @@ def _body_motion(q, v, bq, b0, bk, bax, b, out):
     i0, i1, i2 = bq[b, 4], bq[b, 5], bq[b, 6]
     p0, p1, p2 = q[i0], q[i1], q[i2]
     d0, d1, d2 = v[i0], v[i1], v[i2]
-    a, bb, s1, ca, cb = _rot_coefs(p0, p1, p2)
+    a, bb, s1, ca, cb = rot_coefs(p0, p1, p2)
     x0, x1, x2 = _cross(p0, p1, p2, d0, d1, d2)               # phi x phi_dot
     y0, y1, y2 = _cross(p0, p1, p2, x0, x1, x2)
     z0, z1, z2 = _cross(d0, d1, d2, x0, x1, x2)
@@ -783,331 +784,3 @@ def nl_convect(K, MEs, QEs, ie):
 
 GEOMETRY_FIELDS = ("nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa", "nl_rk",
                    "nl_rf", "nl_P", "nl_TW", "nl_BR", "nl_ANG", "nl_AX")
-
-
-def body_frame(b):
-    """(kind, axis, reference point at t = 0, coordinate -> slot) of a scene body for rows_eval:
-    planar theta turns about -y through the centre of mass; a revolute joint turns about its axis
-    through its pivot; a prismatic joint (kind 1) slides along its axis."""
-    joint = getattr(b, "joint", None)
-    if joint == "revolute":
-        return 0, np.asarray(b.joint_axis, float), np.asarray(b.pivot, float), {"angle": 3}
-    if joint == "prismatic":
-        return 1, np.asarray(b.joint_axis, float), np.asarray(b.position, float), {"travel": 0}
-    slots = {"x": 0, "y": 1, "z": 2, "theta": 3, "rx": 4, "ry": 5, "rz": 6}
-    return 2 if "rotation" in b.free else 0, np.array([0.0, -1.0, 0.0]), np.asarray(b.position, float), slots
-
-
-def empty_fields() -> dict:
-    """Kernel fields of a model without nonlinear rows (nl_on = 0; nothing is evaluated)."""
-    i2, f2 = np.zeros((0, 4), np.int64), np.zeros((0, 4))
-    return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
-                nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
-                nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
-                nl_rf=np.zeros((0, 8)), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
-                nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
-                nl_colbody=np.zeros(0, np.int64),
-                nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
-                nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
-                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64),
-                nl_grp=np.zeros(1, np.int64))
-
-
-class NonlinearRows:
-    """Build-time registry of the nonlinear rows of a model (model.build_model fills it while it lays out
-    the routes, then `finalize` turns it into kernel fields). Every span of an exact-tangent model is
-    registered; rows become nonlinear when a span touches a moving body."""
-
-    def __init__(self, scene, body_dofs):
-        self.scene = scene
-        self.body_dofs = body_dofs
-        self.frames = {b.name: body_frame(b) for b in scene.bodies}
-        self.bodies = {}        # body name -> index
-        self.points = []        # (body index or -1, offset from the body's reference point)
-        self.spans = []         # (point A, point B, RA, sA, RB, sB, sheave axes A and B in body axes)
-        self.moving = []        # per span: True if a stop is on a body with a free coordinate
-        self.rows = {}          # ("pos" | "slope", node, world comp) | ("s", node) -> row spec
-
-    def _body(self, name):
-        if name is None or name == "ground":
-            return -1
-        if name not in self.bodies:
-            self.bodies[name] = len(self.bodies)
-        return self.bodies[name]
-
-    def point(self, body, world):
-        """A point fixed to body (None: ground) at its t = 0 world position."""
-        ib = self._body(body)
-        ref = self.frames[body][2] if ib >= 0 else np.zeros(3)
-        self.points.append((ib, np.asarray(world, float) - ref))
-        return len(self.points) - 1
-
-    def span(self, stopA, stopB):
-        """stop = (body name or None, world point at t = 0, radius, sense, axis in body axes or None);
-        returns the span index."""
-        (bA, wA, RA, sA, aA), (bB, wB, RB, sB, aB) = stopA, stopB
-        dflt = np.array([0.0, -1.0, 0.0])
-        aA = dflt if aA is None else np.asarray(aA, float)
-        aB = dflt if aB is None else np.asarray(aB, float)
-        moving = any(b is not None and b != "ground" and self.body_dofs.get(b) for b in (bA, bB))
-        self.spans.append((self.point(bA, wA), self.point(bB, wB), RA, sA, RB, sB, np.r_[aA, aB]))
-        self.moving.append(moving)
-        return len(self.spans) - 1
-
-    def tangent_rows(self, node, span, end, comps):
-        if self.moving[span]:
-            for comp in comps:
-                self.rows[("pos", node, comp)] = (ROW_TANGENT, span, end, comp, 0.0, 0.0, 0.0, 0, None)
-
-    def slope_rows(self, node, span, j_stretch, comps):
-        """Cubic elements: the slope of a span's end node at a sheave, stretch * current span direction."""
-        if self.moving[span]:
-            for comp in comps:
-                self.rows[("slope", node, comp)] = (ROW_SLOPE, span, 0, comp, float(j_stretch), 0.0, 0.0, 0.0,
-                                                    j_stretch)
-
-    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0):
-        """s of the node leaving a W1 wrap: sigma + R * current wrap angle (about the sheave's axis,
-        which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector), lw: the
-        wrap's rope whose weight the builder lumped (wrap_weight adds the rest)."""
-        if self.moving[span_in] or self.moving[span_out]:
-            centre = self.spans[span_in][1]
-            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, 0.0, centre, j_sigma,
-                                      tuple(rhoA_g), lw)
-
-    def _cols(self):
-        """q indices of every registered body coordinate and the body tables of rows_eval."""
-        nb = len(self.bodies)
-        bq, b0 = -np.ones((nb, 7), np.int64), np.zeros((nb, 4))
-        bk, bax = np.zeros(nb, np.int64), np.zeros((nb, 3))
-        for name, ib in self.bodies.items():
-            kind, axis, ref, slots = self.frames[name]
-            bk[ib], bax[ib], b0[ib, :3] = kind, axis, ref
-            for ax, j in self.body_dofs[name].items():
-                bq[ib, slots[ax]] = j
-        cols = sorted({int(j) for j in bq.ravel() if j >= 0})
-        return bq, b0, bk, bax, cols
-
-    def finalize(self, nd, row_of, q0, B, c0, el_idx, el_map, el_coef):
-        """Kernel fields; B and c0 rows of the nonlinear rows set from the Jacobian at q0; el_map and
-        el_coef widened so that every nonlinear entry lists its columns. row_of(key) -> p row."""
-        bq, b0, bk, bax, cols = self._cols()
-        keys = list(self.rows)
-        specs = [self.rows[k] for k in keys]
-        nr = len(keys)
-        rk = np.array([[s[0], s[1], s[2], s[3]] for s in specs], np.int64).reshape(nr, 4)
-        rf = np.array([[s[4], s[5], s[6], s[7]] + (list(s[9]) + [s[10]] if len(s) > 9 else [0.0] * 4)
-                       for s in specs], float).reshape(nr, 8)
-        col_k = {j: k for k, j in enumerate(cols)}
-        colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib]) for j in cols], np.int64)
-        body_cols = {ib: [col_k[int(j)] for j in bq[ib] if j >= 0] for ib in range(len(self.bodies))}
-
-        def span_cols(k):
-            out = []
-            for ip in self.spans[k][:2]:
-                out += body_cols.get(self.points[ip][0], [])
-            return out
-
-        deps = []
-        for s in specs:
-            d = span_cols(s[1]) + (span_cols(s[2]) if s[0] == ROW_WRAP else [])
-            d = sorted(set(d))
-            deps.append(d + ([-2] if s[0] in (ROW_WRAP, ROW_SLOPE) else []))
-        W = max([el_map.shape[2]] + [len(d) for d in deps])
-        rw = -np.ones((nr, W), np.int64)
-        for r, d in enumerate(deps):
-            rw[r, :len(d)] = d
-        new_map = np.zeros(el_map.shape[:2] + (W,), np.int64)
-        new_coef = np.zeros(el_coef.shape[:2] + (W,))
-        new_map[:, :, :el_map.shape[2]] = el_map
-        new_coef[:, :, :el_coef.shape[2]] = el_coef
-        prow = {row_of(k): r for r, k in enumerate(keys)}
-        ent = -np.ones(el_idx.shape, np.int64)
-        for ie in range(el_idx.shape[0]):
-            for a in range(el_idx.shape[1]):
-                r = prow.get(int(el_idx[ie, a]))
-                if r is None:
-                    continue
-                ent[ie, a] = r
-                for w in range(W):
-                    k = rw[r, w]
-                    new_map[ie, a, w] = cols[k] if k >= 0 else (specs[r][8] if k == -2 else 0)
-                    new_coef[ie, a, w] = 0.0
-        pb = np.array([p[0] for p in self.points], np.int64)
-        po = np.array([p[1] for p in self.points], float).reshape(-1, 3)
-        sp = np.array([s[:2] for s in self.spans], np.int64).reshape(-1, 2)
-        sg = np.array([s[2:6] for s in self.spans], float).reshape(-1, 4)
-        sa = np.array([s[6] for s in self.spans], float).reshape(-1, 6)
-        nc = len(cols)
-        f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_pb=pb, nl_po=po, nl_sp=sp,
-                 nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf, nl_P=np.zeros((len(pb), 3)), nl_TW=np.zeros((len(sp), 6)),
-                 nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
-                 nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
-                 nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
-                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64),
-                 nl_grp=np.zeros(1, np.int64))
-        if nr:
-            q0 = np.asarray(q0, float)
-            G = tuple(f[k] for k in GEOMETRY_FIELDS)
-            rows_jacobian(q0, G, f["nl_cols"], colbody, f["nl_f0"], f["nl_fp"], f["nl_fm"], f["nl_qs"], f["nl_J"])
-            for key, r in zip(keys, range(nr)):
-                row = row_of(key)
-                B[row, :] = 0.0
-                for k, j in enumerate(cols):
-                    B[row, j] = f["nl_J"][r, k]
-                if specs[r][0] in (ROW_WRAP, ROW_SLOPE):
-                    B[row, specs[r][8]] = extra_coef(rk, f["nl_TW"], r)
-                c0[row] = f["nl_f0"][r] - B[row] @ q0
-        return new_map, new_coef, f
-
-
-RB_H = 1e-6   # rad: central-difference step of the rotational mass matrix M(phi)
-
-
-@njit(cache=True, inline="always")
-def _rot_mass(p0, p1, p2, J, out):
-    """out = T^T R J R^T T: the mass matrix of the rotation vector phi, with R = exp(phi^) (the
-    orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity. Written out
-    with scalars and fixed-size loops (no temporaries: it runs 7 times per residual and body)."""
-    th2 = p0 * p0 + p1 * p1 + p2 * p2
-    th = math.sqrt(th2)
-    if th < 1e-4:   # series of (1 - cos)/th^2, (th - sin)/th^3 and sin/th
-        a = 0.5 - th2 / 24.0
-        b = 1.0 / 6.0 - th2 / 120.0
-        s1 = 1.0 - th2 / 6.0
-    else:
-        a = (1.0 - math.cos(th)) / th2
-        b = (th - math.sin(th)) / (th2 * th)
-        s1 = math.sin(th) / th
-    # P = phi^, P2 = P P = phi phi^T - th2 I
-    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
-    ph = (p0, p1, p2)
-    T = np.empty((3, 3))
-    R = np.empty((3, 3))
-    for i in range(3):
-        for k in range(3):
-            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
-            e = 1.0 if i == k else 0.0
-            T[i, k] = e + a * P[i][k] + b * p2ik
-            R[i, k] = e + s1 * P[i][k] + a * p2ik          # Rodrigues
-    # W = R^T T (body angular velocity map); out = W^T J W
-    W = np.empty((3, 3))
-    for i in range(3):
-        for k in range(3):
-            W[i, k] = R[0, i] * T[0, k] + R[1, i] * T[1, k] + R[2, i] * T[2, k]
-    for i in range(3):
-        for k in range(3):
-            acc = 0.0
-            for r in range(3):
-                for c in range(3):
-                    acc += W[r, i] * J[r, c] * W[c, k]
-            out[i, k] = acc
-
-
-@njit(cache=True)
-def rigid_terms_fd(K, q, v, M, Q):
-    """rigid_terms from the Lagrangian by central differences of M_r (step RB_H; the tests'
-    reference): M[phi, phi] += M_r(phi) and the quadratic-velocity force
-    -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2)."""
-    Mr = np.empty((3, 3))
-    Mp = np.empty((3, 3))
-    Mm = np.empty((3, 3))
-    p = np.empty(3)
-    w = np.empty(3)
-    dMw = np.empty(3)
-    for k in range(K.rb_q.shape[0]):
-        for a in range(3):
-            p[a] = q[K.rb_q[k, a]]
-            w[a] = v[K.rb_q[k, a]]
-            dMw[a] = 0.0
-        J = K.rb_J[k]
-        _rot_mass(p[0], p[1], p[2], J, Mr)
-        for a in range(3):
-            for b in range(3):
-                M[K.rb_q[k, a], K.rb_q[k, b]] += Mr[a, b]
-        if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
-            continue
-        # dM_r/dt w = sum_c (dM_r/dphi_c) w_c w, and d/dphi_c of w^T M_r w / 2
-        for c in range(3):
-            p[c] += RB_H
-            _rot_mass(p[0], p[1], p[2], J, Mp)
-            p[c] -= 2.0 * RB_H
-            _rot_mass(p[0], p[1], p[2], J, Mm)
-            p[c] += RB_H
-            dT = 0.0
-            for a in range(3):
-                for b in range(3):
-                    dM = (Mp[a, b] - Mm[a, b]) / (2.0 * RB_H)
-                    dMw[a] += dM * w[c] * w[b]
-                    dT += 0.5 * w[a] * dM * w[b]
-            Q[K.rb_q[k, c]] += dT
-        for a in range(3):
-            Q[K.rb_q[k, a]] -= dMw[a]
-
-
-@njit(cache=True)
-def rigid_terms(K, q, v, M, Q):
-    """Rotational inertia of the spatial rigid bodies in closed form. With the world angular velocity
-    w = T phi_dot and the world inertia J_w = R J R^T, the Euler equations
-    J_w (T phi_ddot + dT/dt phi_dot) + w x J_w w = torque, projected by T^T (virtual work), give
-    M[phi, phi] += T^T J_w T and Q[phi] -= T^T (J_w dT/dt phi_dot + w x J_w w), where
-    dT/dt phi_dot = (phi . phi_dot) (ca phi x phi_dot + cb phi x (phi x phi_dot)) + b phi_dot x (phi x phi_dot)."""
-    T = np.empty((3, 3))
-    R = np.empty((3, 3))
-    Jw = np.empty((3, 3))
-    g = np.empty(3)
-    for k in range(K.rb_q.shape[0]):
-        i0, i1, i2 = K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2]
-        p0, p1, p2 = q[i0], q[i1], q[i2]
-        a, b, s1, ca, cb = _rot_coefs(p0, p1, p2)
-        ph = (p0, p1, p2)
-        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
-        th2 = p0 * p0 + p1 * p1 + p2 * p2
-        for i in range(3):
-            for m in range(3):
-                p2im = ph[i] * ph[m] - (th2 if i == m else 0.0)
-                e = 1.0 if i == m else 0.0
-                T[i, m] = e + a * P[i][m] + b * p2im
-                R[i, m] = e + s1 * P[i][m] + a * p2im
-        J = K.rb_J[k]
-        for i in range(3):
-            for m in range(3):
-                acc = 0.0
-                for r in range(3):
-                    for c in range(3):
-                        acc += R[i, r] * J[r, c] * R[m, c]
-                Jw[i, m] = acc
-        d0, d1, d2 = v[i0], v[i1], v[i2]
-        w0 = T[0, 0] * d0 + T[0, 1] * d1 + T[0, 2] * d2
-        w1 = T[1, 0] * d0 + T[1, 1] * d1 + T[1, 2] * d2
-        w2 = T[2, 0] * d0 + T[2, 1] * d1 + T[2, 2] * d2
-        x0, x1, x2 = p1 * d2 - p2 * d1, p2 * d0 - p0 * d2, p0 * d1 - p1 * d0       # phi x phi_dot
-        y0, y1, y2 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2, p0 * x1 - p1 * x0       # phi x (phi x phi_dot)
-        z0, z1, z2 = d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0       # phi_dot x (phi x phi_dot)
-        pd = p0 * d0 + p1 * d1 + p2 * d2
-        t0 = pd * (ca * x0 + cb * y0) + b * z0
-        t1 = pd * (ca * x1 + cb * y1) + b * z1
-        t2 = pd * (ca * x2 + cb * y2) + b * z2
-        h0 = Jw[0, 0] * w0 + Jw[0, 1] * w1 + Jw[0, 2] * w2
-        h1 = Jw[1, 0] * w0 + Jw[1, 1] * w1 + Jw[1, 2] * w2
-        h2 = Jw[2, 0] * w0 + Jw[2, 1] * w1 + Jw[2, 2] * w2
-        g[0] = Jw[0, 0] * t0 + Jw[0, 1] * t1 + Jw[0, 2] * t2 + w1 * h2 - w2 * h1
-        g[1] = Jw[1, 0] * t0 + Jw[1, 1] * t1 + Jw[1, 2] * t2 + w2 * h0 - w0 * h2
-        g[2] = Jw[2, 0] * t0 + Jw[2, 1] * t1 + Jw[2, 2] * t2 + w0 * h1 - w1 * h0
-        for m in range(3):
-            Q[K.rb_q[k, m]] -= T[0, m] * g[0] + T[1, m] * g[1] + T[2, m] * g[2]
-            for n in range(3):
-                acc = 0.0
-                for i in range(3):
-                    for r in range(3):
-                        acc += T[i, m] * Jw[i, r] * T[r, n]
-                M[K.rb_q[k, m], K.rb_q[k, n]] += acc
-
-
-def rigid_fields(scene, body_dofs) -> dict:
-    """Kernel fields of the spatial rigid bodies ('rotation' in free): rotation-vector indices and
-    inertia tensors about the centre of mass in body axes."""
-    rb = [b for b in scene.bodies if "rotation" in b.free]
-    return dict(rb_q=np.array([[body_dofs[b.name][c] for c in ("rx", "ry", "rz")] for b in rb],
-                              np.int64).reshape(-1, 3),
-                rb_J=np.array([b.inertia for b in rb], float).reshape(-1, 3, 3))

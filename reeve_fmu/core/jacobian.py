@@ -35,8 +35,8 @@ from .elements.cubic_jac import cubic_stiffness, gravity_jac
 from .elements.linear import SLACK_STRAIN, linear_element_at
 from .elements.linear_jac import linear_inertia
 from .sparse import bordered_factor, residual_sparse
-from .system import (UE_CREEP, _static_end_tension, creep_kappa, creep_terms, creep_wound, element_eval,
-                     q_terms)
+from .contact import UE_CREEP, creep_kappa, creep_terms, creep_wound, static_end_tension
+from .system import element_eval, q_terms
 
 FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
 QL_STEP = 1e-9     # and of the q-level ones (the friction laws saturate within ~1e-5 m)
@@ -220,7 +220,7 @@ def _add(J, ib, jb, val, n1, kl, ku, wb, nb):
 
 @njit(cache=True, inline="always")
 def _elastoplastic_d(z, zmax):
-    """d/dz of system._elastoplastic."""
+    """d/dz of contact._elastoplastic."""
     a = 0.9 * zmax
     az = abs(z)
     if az <= a:
@@ -351,8 +351,8 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         for k in range(K.crp_s.shape[0]):
             if K.crp_kind[k] == 1:
                 kap = creep_kappa(K, u, k)
-        T_in = _static_end_tension(K, W.QE, W.QEs, K.trac_el_in, 1)
-        T_out = _static_end_tension(K, W.QE, W.QEs, K.trac_el_out, 0)
+        T_in = static_end_tension(K, W.QE, W.QEs, K.trac_el_in, 1)
+        T_out = static_end_tension(K, W.QE, W.QEs, K.trac_el_out, 0)
         T_slack = max(min(T_in, T_out), 0.0)
         z = u[4] - kap * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
         kf = T_slack * K.trac_efa / K.trac_zmax * _elastoplastic_d(z, K.trac_zmax)   # -df/dz

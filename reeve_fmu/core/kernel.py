@@ -45,7 +45,7 @@ Kernel = namedtuple("Kernel", [
     "nl_grp",
     # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
     "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
-    # spatial rigid bodies (bodies.rigid_terms): rotation-vector indices, inertia tensors in body axes
+    # spatial rigid bodies (rigid.rigid_terms): rotation-vector indices, inertia tensors in body axes
     "rb_q", "rb_J",
     # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
     # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs
@@ -83,7 +83,7 @@ def compiled_features(K) -> int:
 # Columns of Kernel.crp_tab, one row per creep sheave: its sigma coordinate, arriving (in) and leaving
 # (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, the two elements'
 # tension-only flags, 1 / R, and for linear elements the weight grading of the groove strain (x, y, z)
-# at the in element's end and at the out element's start (system.groove_strains).
+# at the in element's end and at the out element's start (contact.groove_strains).
 CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_TIN, CT_TOUT, CT_IR, CT_WIN, CT_WOUT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12
 CT_SIZE = 15
 

@@ -166,7 +166,7 @@ WOUND_BINS_MAX = 4096
 def _info_with_wound_records(model: Model, q, c) -> np.ndarray:
     """State.info: INFO_SIZE slots, one angle per creep sheave, one record index per creep sheave
     (0: none), then per creep drum its wound-rope record [sigma of bin 0, bin length, bins, mean
-    kappa per bin (0: not started; system.wound_kappa fills it)] over sigma in [0, a bound on the
+    kappa per bin (0: not started; contact.wound_kappa fills it)] over sigma in [0, a bound on the
     rope length]."""
     K = model.K
     nc = K.crp_s.shape[0]

@@ -91,7 +91,7 @@ DENSE_GROUPS_MIN = 16   # free coordinates from which a model with nonlinear row
 
 def dense_groups(K) -> np.ndarray:
     """Column groups for the dense Newton matrix of a model with nonlinear rows (kernel field nl_grp,
-    layout there): the matrix is differenced with the rows held (solver._build_jacobian), so a column
+    layout there): the matrix is differenced with the rows held (solver.newton.build_jacobian), so a column
     reaches the rows of the elements whose maps list it (a nonlinear entry lists all its columns,
     whatever their current coefficient), the constant mass M0 and a rigid body's rotation block; the
     other q-level terms are diagonal. Models with torsion spans, groove friction or creep sheaves

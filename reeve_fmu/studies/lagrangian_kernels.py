@@ -11,7 +11,7 @@ import numpy as np
 from ..core._jit import njit
 from ..core.elements.linear import end_tension, linear_element_at
 from ..core.profiles import profile_eval
-from ..core.solver import lu_factor, lu_solve
+from ..core.solver.lu import lu_factor, lu_solve
 
 KB = 3   # half-bandwidth of the node block: two coordinates per node, nearest-neighbour coupling
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from reeve_fmu.core.model import build_model
+from reeve_fmu.core.rigid import rigid_terms, rigid_terms_fd
 from reeve_fmu.core.scene import SceneError, load_scene, loads_scene
 from reeve_fmu.core.solver import Simulator
 from tests.support.beams import (beam_scene as _beam_scene, beam_tangents as _beam_tangents, nodes as _nodes,
@@ -322,9 +323,8 @@ def test_closed_form_row_jacobian_matches_central_differences_at_random_poses():
 
 
 def test_closed_form_rigid_terms_match_the_lagrangian_by_differences():
-    """bodies.rigid_terms (Euler equations projected by T(phi)^T) against rigid_terms_fd (Lagrange
+    """rigid.rigid_terms (Euler equations projected by T(phi)^T) against rigid_terms_fd (Lagrange
     equations with M_r(phi) differentiated numerically), near phi = 0 (series branch) and beyond."""
-    from reeve_fmu.core import bodies as B
     m = build_model(load_scene("scenes/slewing_crane.toml"))
     rng = np.random.default_rng(2)
     for amp in (1e-3, 0.3, 2.0):
@@ -332,8 +332,8 @@ def test_closed_form_rigid_terms_match_the_lagrangian_by_differences():
         for j in m.K.rb_q.ravel():
             q[j], v[j] = amp * rng.standard_normal(), rng.standard_normal()
         out = [(np.zeros((m.nq, m.nq)), np.zeros(m.nq)) for _ in range(2)]
-        B.rigid_terms(m.KJ, q, v, *out[0])
-        B.rigid_terms_fd(m.KJ, q, v, *out[1])
+        rigid_terms(m.KJ, q, v, *out[0])
+        rigid_terms_fd(m.KJ, q, v, *out[1])
         check('rigid mass matrix: closed form - differences', out[0][0] - out[1][0], 2e-14 * np.max(np.abs(out[1][0])),
               reason="round-off, which differs by pose")
         check('rigid quadratic-velocity terms: closed form - differences', out[0][1] - out[1][1],

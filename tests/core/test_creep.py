@@ -20,10 +20,13 @@ except ModuleNotFoundError:  # Python 3.10
 import numpy as np
 import pytest
 
+from reeve_fmu.core.contact import UE_CREEP
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import parse_scene
 from reeve_fmu.core.solver import Simulator
-from reeve_fmu.core.system import UE_CREEP, creep_power
+from reeve_fmu.core.solver.inputs import kernel_inputs_at
+from reeve_fmu.core.solver.statics import consistent_acceleration, preload_traction
+from reeve_fmu.core.system import creep_power
 from tests.support import ROOT
 from tests.support.checks import check, check_min
 
@@ -71,8 +74,8 @@ def start_steady(m, sim, V, eps_in, eps_out, creep):
     st.v[m.sheave_dof["traction"]] = -V / kap
     if "traction.theta" in m.q_names:
         st.v[m.q_names.index("traction.theta")] = V / R
-        sim._preload_traction(st)    # groove friction carries the running tension difference
-    sim._consistent_acceleration(st)
+        preload_traction(m, st, sim.warnings)    # groove friction carries the running tension difference
+    consistent_acceleration(m, st)
     return st
 
 
@@ -135,7 +138,7 @@ def steady_drum(mode, V, EA):
     kap = 1.0 + eps if mode == "creep" else 1.0
     st.v[m.sheave_dof["drum"]] = -V / kap
     st.v[m.body_dofs["hook"]["z"]] = -V * (1 + eps) / kap
-    sim._consistent_acceleration(st)
+    consistent_acceleration(m, st)
     return m, sim, st, kap
 
 
@@ -175,7 +178,7 @@ def test_arriving_strain_of_a_heavy_rope_is_its_strain_at_the_groove(n):
     m = build(d)
     sim = Simulator(m)
     st = sim.initial_state()
-    kap = sim._kernel_inputs_at(st)[UE_CREEP]
+    kap = kernel_inputs_at(m, st)[UE_CREEP]
     eps = 0.5 * (top_strain(M_CAR, 20 - st.q[m.body_dofs["car"]["z"]])
                  + top_strain(M_CWT, 20 - st.q[m.body_dofs["cwt"]["z"]]))
     check('kappa - 1 - eps at the groove', kap - 1 - eps, 2e-13 * eps, reason=ROUNDOFF)

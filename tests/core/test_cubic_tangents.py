@@ -170,8 +170,8 @@ def test_coloured_newton_matrix_equals_the_column_by_column_one(cubic_crane):
     """The dense Newton matrix of a model with nonlinear rows, differenced with the columns of a
     group (sparse.dense_groups) perturbed together, is the column-by-column one to the bit: a
     column's entries come from rows no other column of its group reaches."""
-    from reeve_fmu.core import solver as S
     from reeve_fmu.core.kernel import compiled_kernel
+    from reeve_fmu.core.solver.newton import build_jacobian
     from reeve_fmu.core.system import workspace
     m, sim, st = cubic_crane
     nf = len(m.K.free)
@@ -183,7 +183,7 @@ def test_coloured_newton_matrix_equals_the_column_by_column_one(cubic_crane):
     for K in (m.K, m.K._replace(nl_grp=np.zeros(1, np.int64))):
         KJ = compiled_kernel(K)
         jac = np.zeros((nf, nf))
-        S._build_jacobian(KJ, workspace(KJ), st.c.copy(), st.q.copy(), v.copy(), qdd.copy(), 0.0, u, jac,
-                          np.zeros(nf, np.int64), np.zeros(nf), np.zeros(nf), 1e-5, 1e-3)
+        build_jacobian(KJ, workspace(KJ), st.c.copy(), st.q.copy(), v.copy(), qdd.copy(), 0.0, u, jac,
+                       np.zeros(nf, np.int64), np.zeros(nf), np.zeros(nf), 1e-5, 1e-3)
         jacs.append(jac)
     assert np.array_equal(jacs[0], jacs[1])

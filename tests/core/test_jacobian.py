@@ -15,6 +15,7 @@ from reeve_fmu.core.kernel import compiled_kernel
 from reeve_fmu.core.model import build_model, new_state
 from reeve_fmu.core.scene import Drive, load_scene
 from reeve_fmu.core.solver import Simulator
+from reeve_fmu.core.solver.inputs import kernel_inputs_at
 from reeve_fmu.core.sparse import build_sparse, jac_shape, unpack_dense
 from reeve_fmu.core.system import assemble, element_eval, workspace
 from tests.support import ROOT
@@ -59,7 +60,7 @@ def _random_state(m, sim, seed=7):
     st.q[:] = st.q + 1e-3 * rng.standard_normal(m.nq)
     st.v[:] = 0.1 * rng.standard_normal(m.nq)
     qdd = rng.standard_normal(m.nq)
-    ue = sim._kernel_inputs_at(st)
+    ue = kernel_inputs_at(m, st)
     ue[1], ue[2], ue[4] = 1.0, 3e-5, 2e-5      # brake engaged, brake and groove spring deflected
     return st, qdd, ue
 

@@ -12,6 +12,7 @@ from benchmarks.scaling import crane, elevator
 from reeve_fmu.core.model import build_model, new_state
 from reeve_fmu.core.scene import Drive, load_scene
 from reeve_fmu.core.solver import Simulator
+from reeve_fmu.core.solver.inputs import kernel_inputs_at
 from reeve_fmu.core.sparse import (_at, bordered_factor, bordered_solve, build_sparse, jac_shape,
                                    newton_matrix_sparse, pattern_leaks, unpack_dense)
 from reeve_fmu.core.system import assemble, workspace
@@ -82,7 +83,7 @@ def test_coloured_matrix_equals_per_coordinate_differences(name, contact):
     v = 0.1 * rng.standard_normal(m.nq)
     qdd = rng.standard_normal(m.nq)
     st.q[:], st.v[:] = q, v
-    ue = Simulator(m)._kernel_inputs_at(st)     # with the creep sheaves' kappa and angle at that state
+    ue = kernel_inputs_at(m, st)     # with the creep sheaves' kappa and angle at that state
     ue[4] = 1e-4
     bq, gv = 2.5e-7, 5e-4          # h = 1 ms, rho_inf = 1
     J = np.zeros(jac_shape(SP))
@@ -155,7 +156,7 @@ SCENES = {      # scene, kernel inputs held (None: the scene's own)
 
 
 def _runs(m, sparse, u, perturb=0.0, newton_tol=1e-12):
-    """0.5 s from the statics, converged to round-off (newton_tol below solver.TOL_ROUNDOFF): outputs
+    """0.5 s from the statics, converged to round-off (newton_tol below solver.genalpha.TOL_ROUNDOFF): outputs
     sampled inside the compiled loop every 10 ms, and evaluated afresh at the converged state every
     50 ms. perturb: relative random change of the free coordinates after the statics (round-off)."""
     sim = Simulator(m, sparse=sparse, newton_tol=newton_tol)
@@ -234,7 +235,7 @@ def test_sparse_difference_is_the_roundoff_floor():
     zero: then a 1e-10 agreement can hold for positions, velocities, speeds, angles and slips
     (asserted in test_sparse_path_equals_dense_path) but not for tensions, torques and accelerations.
 
-    The Newton tolerance does not change the rounding here: below solver.TOL_ROUNDOFF the exit waits
+    The Newton tolerance does not change the rounding here: below solver.genalpha.TOL_ROUNDOFF the exit waits
     for the correction to stop shrinking, so 1e-13 stops at the same iterates as 1e-12."""
     make, u = SCENES["highrise_8el"]
     m = build_model(make())

@@ -61,7 +61,7 @@ def test_lowering_follows_the_quasi_static_yaw():
         i = int(np.argmin(np.abs(res.time - t)))
         q = st0.q.copy()
         q[jd] += res["motor.angle"][i] / m.K.mot_gain      # the drum where the run has it
-        st = sim._statics(new_state(m, q=q), "rope-length")
+        st = sim.statics.solve(new_state(m, q=q), "rope-length")
         psi_qs.append(st.q[m.body_dofs["block"]["rz"]])
         psi_cf.append(math.asin(K_D_AB * _fall_length(st.q[m.body_dofs["block"]["z"]])))
     # the equilibrium against the closed form: the torsion moment is 2 k d S, the rest is the W1 wraps'

@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from ..bodies import rigid_fields
 from ..kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZE, CT_TIN, CT_TOUT,
                       CT_WIN, CT_WOUT, Kernel)
 from ..sparse import dense_groups
 from ..traction import equivalent_friction
+from .bodies import rigid_fields
 from .coordinates import Arrays
 from .elimination import Drive
 from .outputs import Outputs

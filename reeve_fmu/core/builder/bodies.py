@@ -3,13 +3,13 @@ coordinate per free axis, the absolute coordinate of the body's reference point.
 body (sheave centres, tangent points, anchors) are affine in those coordinates. A body that rotates
 (planar theta, spatial rotation vector rx, ry, rz) or sits on a joint to the ground (revolute angle,
 prismatic travel) makes its points nonlinear in q: the scene then has exact tangents and
-core/bodies.NonlinearRows carries those rows."""
+builder/nonlinear.NonlinearRows carries those rows."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..bodies import NonlinearRows
 from ..scene import AXES, SceneError
+from .nonlinear import NonlinearRows
 from .state import Affine, BuildState
 
 ROTATION_VECTOR = ("rx", "ry", "rz")   # coordinates of a spatial rigid body's rotation vector [rad]
@@ -40,7 +40,7 @@ def body_point(bs: BuildState, body, offset) -> Affine:
         if ax == "travel":
             r.add(j, b.joint_axis)
         if ax not in AXES:
-            continue    # rotation: the nonlinear rows (core/bodies.NonlinearRows) carry it
+            continue    # rotation: the nonlinear rows (builder/nonlinear.NonlinearRows) carry it
         k = AXES.index(ax)
         r.r0[k] -= b.position[k]
         e = np.zeros(3)
@@ -59,7 +59,7 @@ def world(bs: BuildState, body, offset) -> np.ndarray:
 def add_body_inertia(bs: BuildState) -> None:
     """Mass, weight and viscous damping of the bodies on their coordinates; rotations: the inertia
     about the centre of mass (theta) or the joint axis (angle); the rotation vector's mass matrix
-    is not constant (core/bodies.rigid_terms)."""
+    is not constant (core/rigid.rigid_terms)."""
     for b in bs.scene.bodies:
         for ax, j in bs.body_dofs[b.name].items():
             if ax in ("theta", "rx", "ry", "rz") and b.angular_damping > 0:
@@ -77,3 +77,12 @@ def add_body_inertia(bs: BuildState) -> None:
             bs.F0[j] = bs.F0.get(j, 0.0) + b.mass * bs.g[AXES.index(ax)]
             if b.damping > 0:
                 bs.springs.append((j, 0.0, b.damping))
+
+
+def rigid_fields(scene, body_dofs) -> dict:
+    """Kernel fields of the spatial rigid bodies ('rotation' in free): rotation-vector indices and
+    inertia tensors about the centre of mass in body axes."""
+    rb = [b for b in scene.bodies if "rotation" in b.free]
+    return dict(rb_q=np.array([[body_dofs[b.name][c] for c in ("rx", "ry", "rz")] for b in rb],
+                              np.int64).reshape(-1, 3),
+                rb_J=np.array([b.inertia for b in rb], float).reshape(-1, 3, 3))

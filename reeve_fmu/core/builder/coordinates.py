@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bodies import empty_fields
+from .nonlinear import empty_fields
 from .state import BuildState
 
 

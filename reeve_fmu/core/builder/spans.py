@@ -87,7 +87,7 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
         J = sh.inertia + (scene.drive.motor_inertia if scene.drive.sheave == sh.name else 0.0)
         if sh.slip:
             # the sheave turns on its own (angle coordinate, rad); rope and groove are coupled
-            # by friction (system.traction_force)
+            # by friction (contact.traction_force)
             jt = bs.new_q(f"{sh.name}.theta", "angle", 0.0)
             bs.M0_terms.append((jt, jt, J))
             bs.M0_terms.append((j, j, rb.rhoA * lump))

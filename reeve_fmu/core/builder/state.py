@@ -55,7 +55,7 @@ class BuildState:
     F0: dict = field(default_factory=dict)          # q index -> force
     springs: list = field(default_factory=list)     # (dof, k, c)
     drums: list = field(default_factory=list)       # (dof, rhoA, sign)
-    # exact tangents: the nonlinear rows (core/bodies.NonlinearRows), None when tangents are frozen
+    # exact tangents: the nonlinear rows (builder/nonlinear.NonlinearRows), None when tangents are frozen
     nlr: object = None
     torsion: list = field(default_factory=list)     # torsion spans (builder/torsion.py)
 

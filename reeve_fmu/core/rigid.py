@@ -1,0 +1,154 @@
+"""Rotational inertia of the spatial rigid bodies ('rotation' in free; compiled): the mass matrix of
+the rotation vector and its quadratic-velocity force, in closed form (rigid_terms) and by central
+differences of the Lagrangian (rigid_terms_fd, the tests' reference)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._jit import njit
+from .bodies import rot_coefs
+
+
+RB_H = 1e-6   # rad: central-difference step of the rotational mass matrix M(phi)
+
+
+@njit(cache=True, inline="always")
+def _rot_mass(p0, p1, p2, J, out):
+    """out = T^T R J R^T T: the mass matrix of the rotation vector phi, with R = exp(phi^) (the
+    orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity. Written out
+    with scalars and fixed-size loops (no temporaries: it runs 7 times per residual and body)."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    th = math.sqrt(th2)
+    if th < 1e-4:   # series of (1 - cos)/th^2, (th - sin)/th^3 and sin/th
+        a = 0.5 - th2 / 24.0
+        b = 1.0 / 6.0 - th2 / 120.0
+        s1 = 1.0 - th2 / 6.0
+    else:
+        a = (1.0 - math.cos(th)) / th2
+        b = (th - math.sin(th)) / (th2 * th)
+        s1 = math.sin(th) / th
+    # P = phi^, P2 = P P = phi phi^T - th2 I
+    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+    ph = (p0, p1, p2)
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
+            e = 1.0 if i == k else 0.0
+            T[i, k] = e + a * P[i][k] + b * p2ik
+            R[i, k] = e + s1 * P[i][k] + a * p2ik          # Rodrigues
+    # W = R^T T (body angular velocity map); out = W^T J W
+    W = np.empty((3, 3))
+    for i in range(3):
+        for k in range(3):
+            W[i, k] = R[0, i] * T[0, k] + R[1, i] * T[1, k] + R[2, i] * T[2, k]
+    for i in range(3):
+        for k in range(3):
+            acc = 0.0
+            for r in range(3):
+                for c in range(3):
+                    acc += W[r, i] * J[r, c] * W[c, k]
+            out[i, k] = acc
+
+
+@njit(cache=True)
+def rigid_terms_fd(K, q, v, M, Q):
+    """rigid_terms from the Lagrangian by central differences of M_r (step RB_H; the tests'
+    reference): M[phi, phi] += M_r(phi) and the quadratic-velocity force
+    -M_r' phi_dot + d/dphi (phi_dot^T M_r phi_dot / 2)."""
+    Mr = np.empty((3, 3))
+    Mp = np.empty((3, 3))
+    Mm = np.empty((3, 3))
+    p = np.empty(3)
+    w = np.empty(3)
+    dMw = np.empty(3)
+    for k in range(K.rb_q.shape[0]):
+        for a in range(3):
+            p[a] = q[K.rb_q[k, a]]
+            w[a] = v[K.rb_q[k, a]]
+            dMw[a] = 0.0
+        J = K.rb_J[k]
+        _rot_mass(p[0], p[1], p[2], J, Mr)
+        for a in range(3):
+            for b in range(3):
+                M[K.rb_q[k, a], K.rb_q[k, b]] += Mr[a, b]
+        if w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0:
+            continue
+        # dM_r/dt w = sum_c (dM_r/dphi_c) w_c w, and d/dphi_c of w^T M_r w / 2
+        for c in range(3):
+            p[c] += RB_H
+            _rot_mass(p[0], p[1], p[2], J, Mp)
+            p[c] -= 2.0 * RB_H
+            _rot_mass(p[0], p[1], p[2], J, Mm)
+            p[c] += RB_H
+            dT = 0.0
+            for a in range(3):
+                for b in range(3):
+                    dM = (Mp[a, b] - Mm[a, b]) / (2.0 * RB_H)
+                    dMw[a] += dM * w[c] * w[b]
+                    dT += 0.5 * w[a] * dM * w[b]
+            Q[K.rb_q[k, c]] += dT
+        for a in range(3):
+            Q[K.rb_q[k, a]] -= dMw[a]
+
+
+@njit(cache=True)
+def rigid_terms(K, q, v, M, Q):
+    """Rotational inertia of the spatial rigid bodies in closed form. With the world angular velocity
+    w = T phi_dot and the world inertia J_w = R J R^T, the Euler equations
+    J_w (T phi_ddot + dT/dt phi_dot) + w x J_w w = torque, projected by T^T (virtual work), give
+    M[phi, phi] += T^T J_w T and Q[phi] -= T^T (J_w dT/dt phi_dot + w x J_w w), where
+    dT/dt phi_dot = (phi . phi_dot) (ca phi x phi_dot + cb phi x (phi x phi_dot)) + b phi_dot x (phi x phi_dot)."""
+    T = np.empty((3, 3))
+    R = np.empty((3, 3))
+    Jw = np.empty((3, 3))
+    g = np.empty(3)
+    for k in range(K.rb_q.shape[0]):
+        i0, i1, i2 = K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2]
+        p0, p1, p2 = q[i0], q[i1], q[i2]
+        a, b, s1, ca, cb = rot_coefs(p0, p1, p2)
+        ph = (p0, p1, p2)
+        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+        th2 = p0 * p0 + p1 * p1 + p2 * p2
+        for i in range(3):
+            for m in range(3):
+                p2im = ph[i] * ph[m] - (th2 if i == m else 0.0)
+                e = 1.0 if i == m else 0.0
+                T[i, m] = e + a * P[i][m] + b * p2im
+                R[i, m] = e + s1 * P[i][m] + a * p2im
+        J = K.rb_J[k]
+        for i in range(3):
+            for m in range(3):
+                acc = 0.0
+                for r in range(3):
+                    for c in range(3):
+                        acc += R[i, r] * J[r, c] * R[m, c]
+                Jw[i, m] = acc
+        d0, d1, d2 = v[i0], v[i1], v[i2]
+        w0 = T[0, 0] * d0 + T[0, 1] * d1 + T[0, 2] * d2
+        w1 = T[1, 0] * d0 + T[1, 1] * d1 + T[1, 2] * d2
+        w2 = T[2, 0] * d0 + T[2, 1] * d1 + T[2, 2] * d2
+        x0, x1, x2 = p1 * d2 - p2 * d1, p2 * d0 - p0 * d2, p0 * d1 - p1 * d0       # phi x phi_dot
+        y0, y1, y2 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2, p0 * x1 - p1 * x0       # phi x (phi x phi_dot)
+        z0, z1, z2 = d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0       # phi_dot x (phi x phi_dot)
+        pd = p0 * d0 + p1 * d1 + p2 * d2
+        t0 = pd * (ca * x0 + cb * y0) + b * z0
+        t1 = pd * (ca * x1 + cb * y1) + b * z1
+        t2 = pd * (ca * x2 + cb * y2) + b * z2
+        h0 = Jw[0, 0] * w0 + Jw[0, 1] * w1 + Jw[0, 2] * w2
+        h1 = Jw[1, 0] * w0 + Jw[1, 1] * w1 + Jw[1, 2] * w2
+        h2 = Jw[2, 0] * w0 + Jw[2, 1] * w1 + Jw[2, 2] * w2
+        g[0] = Jw[0, 0] * t0 + Jw[0, 1] * t1 + Jw[0, 2] * t2 + w1 * h2 - w2 * h1
+        g[1] = Jw[1, 0] * t0 + Jw[1, 1] * t1 + Jw[1, 2] * t2 + w2 * h0 - w0 * h2
+        g[2] = Jw[2, 0] * t0 + Jw[2, 1] * t1 + Jw[2, 2] * t2 + w0 * h1 - w1 * h0
+        for m in range(3):
+            Q[K.rb_q[k, m]] -= T[0, m] * g[0] + T[1, m] * g[1] + T[2, m] * g[2]
+            for n in range(3):
+                acc = 0.0
+                for i in range(3):
+                    for r in range(3):
+                        acc += T[i, m] * Jw[i, r] * T[r, n]
+                M[K.rb_q[k, m], K.rb_q[k, n]] += acc

@@ -1,0 +1,43 @@
+"""Chung-Hulbert generalized-alpha in the Arnold-Bruls form (docs/theory.md §4.7): the method's
+parameters, the Newmark relations that give (q, v, a) from the accelerations, and the Newton exit
+test. One place for both integrators: the ALE engine (newton.py, stepping.py) and the Lagrangian
+baseline (studies/lagrangian_kernels.py)."""
+from __future__ import annotations
+
+from .._jit import njit
+
+REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
+# A Newton tolerance at or below TOL_ROUNDOFF asks for convergence to round-off: the round-off exit
+# (position change <= 1e-14 (1 + |q|)) then also waits until the correction stops shrinking, since
+# at that exit accelerations may still move by ~1e-14 |q| / (h^2 beta), ~1e-6 m/s^2 at h = 1 ms.
+TOL_ROUNDOFF = 1e-10
+
+
+def gen_alpha_params(rho_inf: float):
+    """Chung-Hulbert parameters: alpha_m, alpha_f, beta, gamma."""
+    r = float(rho_inf)
+    am = (2.0 * r - 1.0) / (r + 1.0)
+    af = r / (r + 1.0)
+    gamma = 0.5 - am + af
+    beta = 0.25 * (1.0 - am + af) ** 2
+    return am, af, beta, gamma
+
+
+@njit(cache=True, inline="always")
+def converged(dmax, dprev, amax, qmax, bq, tol, last):
+    """Newton exit test on the last correction dmax (the one before: dprev)."""
+    if dmax <= tol * (1.0 + amax):
+        return True
+    if dmax * bq > 1e-14 * (1.0 + qmax):
+        return False
+    return tol > TOL_ROUNDOFF or dmax > 0.5 * dprev or last
+
+
+@njit(cache=True, inline="always")
+def newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
+    for fi in range(K.free.shape[0]):
+        i = K.free[fi]
+        a1 = ((1.0 - af) * qdd[i] + af * qddo[i] - am * ao[i]) / (1.0 - am)
+        a[i] = a1
+        q[i] = qo[i] + h * vo[i] + h * h * ((0.5 - beta) * ao[i] + beta * a1)
+        v[i] = vo[i] + h * ((1.0 - gamma) * ao[i] + gamma * a1)

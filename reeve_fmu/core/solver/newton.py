@@ -1,0 +1,260 @@
+"""One generalized-alpha step by Newton's method on the free accelerations (docs/theory.md §4.7):
+the residual M qdd - Q of the free rows, the Newton matrix (dense: finite differences, banded:
+element Jacobians or coloured differences, core/jacobian.py and core/sparse.py), modified Newton
+with the matrix kept across steps and full-Newton retries."""
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import gated, njit
+from ..jacobian import jacobian_analytic
+from ..kernel import CREEP, NL_ROWS
+from ..sparse import bordered_solve, jacobian_sparse, residual_sparse
+from ..system import assemble_ws, set_prescribed, set_prescribed_creep
+from .genalpha import REFRESH_AFTER, converged, newmark_update
+from .lu import lu_factor, lu_solve
+
+# From this many free coordinates on the Newton matrix is banded (core/sparse.py); below, the dense
+# path is as fast or faster (benchmarks/dense_cutoff.py, docs/performance.md).
+SPARSE_MIN_FREE = 16
+
+
+@njit(cache=True, inline="always")
+def _residual(K, W, c, q, v, qdd, t, u, r):
+    st = assemble_ws(K, W, c, q, v, t, u)
+    M = W.M
+    Q = W.Q
+    nq = K.nq
+    for fi in range(K.free.shape[0]):
+        i = K.free[fi]
+        s = -Q[i]
+        for j in range(nq):
+            s += M[i, j] * qdd[j]
+        r[fi] = s
+    return st
+
+
+@njit(cache=True)
+def _coloured_columns(K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv):
+    """build_jacobian's differences with the columns of one group (sparse.dense_groups: they reach
+    disjoint rows) perturbed together: the same entries from far fewer residuals."""
+    g = K.nl_grp
+    nf = K.free.shape[0]
+    ng = g[0]
+    o_c = 2 + ng             # free columns by group
+    o_p = o_c + nf           # reach pointers
+    o_r = o_p + nf + 1       # reached rows
+    dxs = np.empty(nf)
+    for i in range(nf):
+        for k in range(nf):
+            jac[i, k] = 0.0
+    for gi in range(ng):
+        for kk in range(g[1 + gi], g[2 + gi]):
+            fj = g[o_c + kk]
+            j = K.free[fj]
+            dx = 1e-10 * (1.0 + abs(q[j])) / bq
+            dxs[fj] = dx
+            qdd[j] += dx
+            q[j] += bq * dx
+            v[j] += gv * dx
+        _residual(K, W, c, q, v, qdd, t1, ue, r)
+        for kk in range(g[1 + gi], g[2 + gi]):
+            fj = g[o_c + kk]
+            j = K.free[fj]
+            dx = dxs[fj]
+            qdd[j] -= dx
+            q[j] -= bq * dx
+            v[j] -= gv * dx
+            for m in range(g[o_p + fj], g[o_p + fj + 1]):
+                fi = g[o_r + m]
+                jac[fi, fj] = (r[fi] - r0[fi]) / dx
+
+
+_coloured = gated(NL_ROWS, _coloured_columns)   # column groups exist only with nonlinear rows
+# the creep sheaves' part of a step (the call sites test for creep sheaves at run time)
+_set_prescribed_creep = gated(CREEP, set_prescribed_creep)
+
+
+@njit(cache=True)
+def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
+    """Finite-difference Newton matrix d r / d qdd_free at the current iterate (q and v follow
+    through the Newmark relations; column groups K.nl_grp: _coloured_columns). Returns -1
+    (vanishing span), 0 (singular) or 1."""
+    nf = K.free.shape[0]
+    st = _residual(K, W, c, q, v, qdd, t1, ue, r0)
+    if st < 0:
+        return st
+    # the nonlinear rows (core/bodies.py) keep B(q), c and dB/dt qdot of the unperturbed iterate:
+    # p = B q + c is then their exact linearisation; what is left out (tension x curvature of the
+    # tangent-point map, ~1e-5 of the mass and axial terms) slows the modified Newton contraction
+    # at most, it does not change the solution
+    K.nl_frz[0] = 1
+    if K.nl_grp[0] > 0:
+        _coloured(K, K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv)
+        K.nl_frz[0] = 0
+        return 1 if lu_factor(jac, piv) else 0
+    for fj in range(nf):
+        j = K.free[fj]
+        dq = 1e-10 * (1.0 + abs(q[j]))   # small: the velocity change must stay inside stiff bands
+        dx = dq / bq
+        qdd[j] += dx
+        q[j] += bq * dx
+        v[j] += gv * dx
+        _residual(K, W, c, q, v, qdd, t1, ue, r)
+        for fi in range(nf):
+            jac[fi, fj] = (r[fi] - r0[fi]) / dx
+        qdd[j] -= dx
+        q[j] -= bq * dx
+        v[j] -= gv * dx
+    K.nl_frz[0] = 0
+    return 1 if lu_factor(jac, piv) else 0
+
+
+@njit(cache=True)
+def newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, r, r0,
+                am, af, beta, gamma, tol, maxit):
+    """One generalized-alpha step from (qo, vo, ao, qddo) to t1 = t0 + h. Modified Newton with the
+    kept matrix first; retries are full Newton from the last iterate (crosses regime changes: brake
+    stick -> slip, slack -> taut), the last one from the predictor. Returns 0 (converged),
+    1 (no convergence), 2 (vanishing span; info[7] = element)."""
+    nf = K.free.shape[0]
+    nq = K.nq
+    bq = h * h * beta * (1.0 - af) / (1.0 - am)
+    gv = h * gamma * (1.0 - af) / (1.0 - am)
+    # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
+    if K.mot_crp >= 0:
+        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
+    for k in range(K.presc.shape[0]):
+        a[K.presc[k]] = qdd[K.presc[k]]
+    for attempt in range(4):
+        if attempt == 0 or attempt == 3:
+            for fi in range(nf):   # predictor: constant acceleration
+                qdd[K.free[fi]] = qddo[K.free[fi]]
+            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[0] != h or attempt > 0:
+            ok = build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
+            info[3] += 1
+            if ok < 0:
+                info[7] = -ok - 1
+                return 2
+            if ok == 0:
+                info[0] = 0.0
+                continue
+            info[0] = h
+        dprev = 1e300
+        for it in range(maxit):
+            if attempt > 0 and it > 0:
+                ok = build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
+                info[3] += 1
+                if ok <= 0:
+                    info[0] = 0.0
+                    break
+            st = _residual(K, W, c, q, v, qdd, t1, ue, r)
+            if st < 0:
+                info[7] = -st - 1
+                return 2
+            lu_solve(jac, piv, r)
+            dmax = 0.0
+            amax = 0.0
+            qmax = 0.0
+            for fi in range(nf):
+                i = K.free[fi]
+                qdd[i] -= r[fi]
+                if abs(r[fi]) > dmax:
+                    dmax = abs(r[fi])
+                if abs(qdd[i]) > amax:
+                    amax = abs(qdd[i])
+                if abs(q[i]) > qmax:
+                    qmax = abs(q[i])
+            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[2] += 1
+            if not (dmax == dmax) or dmax > 1e300:
+                break
+            # converged: relative acceleration change below tol, or the position change it
+            # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
+            if converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
+                if it >= REFRESH_AFTER:
+                    info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
+                return 0
+            dprev = dmax
+    return 1
+
+
+@njit(cache=True)
+def _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic):
+    """The factorised banded Newton matrix: element Jacobians (core/jacobian.py) or coloured
+    differences (core/sparse.py)."""
+    if analytic:
+        return jacobian_analytic(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R0, bq, gv)
+    return jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
+
+
+@njit(cache=True)
+def newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, R,
+                       R0, rb, am, af, beta, gamma, tol, maxit, analytic):
+    """newton_step with the banded Newton matrix (element Jacobians or coloured differences, band
+    LU) and the element-wise residual; same iteration, retries and return codes."""
+    n = SP.n
+    perm = SP.perm
+    bq = h * h * beta * (1.0 - af) / (1.0 - am)
+    gv = h * gamma * (1.0 - af) / (1.0 - am)
+    if K.mot_crp >= 0:
+        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
+    else:
+        set_prescribed(K, q_ref, t1, q, v, qdd)
+    for k in range(K.presc.shape[0]):
+        a[K.presc[k]] = qdd[K.presc[k]]
+    for attempt in range(4):
+        if attempt == 0 or attempt == 3:
+            for fi in range(K.free.shape[0]):   # predictor: constant acceleration
+                qdd[K.free[fi]] = qddo[K.free[fi]]
+            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[0] != h or attempt > 0:
+            ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
+            info[3] += 1
+            if ok < 0:
+                info[7] = -ok - 1
+                return 2
+            if ok == 0:
+                info[0] = 0.0
+                continue
+            info[0] = h
+        dprev = 1e300
+        for it in range(maxit):
+            if attempt > 0 and it > 0:
+                ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
+                info[3] += 1
+                if ok <= 0:
+                    info[0] = 0.0
+                    break
+            st = residual_sparse(K, SP, W, c, q, v, qdd, t1, ue, R)
+            if st < 0:
+                info[7] = -st - 1
+                return 2
+            for b in range(n):
+                rb[b] = R[perm[b]]
+            bordered_solve(jac, piv, n, SP.nb, SP.kl, SP.ku, rb)
+            dmax = 0.0
+            amax = 0.0
+            qmax = 0.0
+            for b in range(n):
+                i = perm[b]
+                qdd[i] -= rb[b]
+                if abs(rb[b]) > dmax:
+                    dmax = abs(rb[b])
+                if abs(qdd[i]) > amax:
+                    amax = abs(qdd[i])
+                if abs(q[i]) > qmax:
+                    qmax = abs(q[i])
+            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[2] += 1
+            if not (dmax == dmax) or dmax > 1e300:
+                break
+            if converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
+                if it >= REFRESH_AFTER:
+                    info[0] = 0.0
+                return 0
+            dprev = dmax
+    return 1
