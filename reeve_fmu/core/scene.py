@@ -107,6 +107,7 @@ class Rope:
     element: str = "linear"          # linear | cubic (ALE-ANCF with bending; planar/spatial models)
     EI: float = 0.0                  # N m^2 per rope, bending stiffness (cubic elements)
     torsion: "Torsion | None" = None # axial-torsion coupling (spatial model), None: no twist
+    breaking_force: float | None = None  # N per rope, minimum breaking force (the snap-load verdict's limit)
 
 
 @dataclass(frozen=True)
@@ -208,7 +209,8 @@ SCHEMA_KEYS = {
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
     "ropes": {"name", "EA", "rhoA", "count", "damping", "tension_only", "length", "elements_per_span",
-              "wrap_model", "wrap_elements", "route", "element", "EI", "torsion"},
+              "wrap_model", "wrap_elements", "route", "element", "EI", "torsion",
+              "breaking_force"},
     "torsion": {"law", "diameter", "k0", "k1", "GJ0", "rotary_inertia"},
     "route": {"sheave", "wrap", "anchor", "at", "hitch_stiffness", "hitch_damping"},
     "drive": {"kind", "sheave", "roping", "profile", "distance", "v_max", "a_max", "jerk", "t_start",
@@ -593,7 +595,8 @@ def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_nam
                           wrap_elements=r.integer(rp, path, "wrap_elements", 2),
                           element=r.string(rp, path, "element", "linear", ("linear", "cubic")),
                           EI=r.number(rp, path, "EI", 0.0, nonneg=True),
-                          torsion=_parse_torsion(r, rp, path, model)))
+                          torsion=_parse_torsion(r, rp, path, model),
+                          breaking_force=r.number(rp, path, "breaking_force", None, positive=True)))
         if ropes[-1].wrap_model == "W2" and ropes[-1].element != "cubic":
             r.fail(f"{path}.wrap_model", "'W2' (cubic elements on the sheave wraps) needs element = 'cubic' "
                                          "(planar or spatial model); linear ropes use 'W0' or 'W1'")

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
-from .elements.linear import end_tension, linear_element_1d_at, linear_element_at
+from .elements.linear import end_tension, linear_element_1d_at, linear_element_at, reported_tension
 from .bodies import nl_convect, nl_update, wrap_weight
 from .contact import (UE_CREEP, UE_STRIDE, brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at,
                       creep_wound, sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
@@ -434,9 +434,9 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
                     x += K.el_coef[i, a, w] * qdd[K.el_map[i, a, w]]
                 ae[a] = x
             T = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
-            # a slack tension-only span carries (almost) nothing: its weight/inertia share would
-            # otherwise show as a negative "tension"
-            y[k] = T if (K.el_tonly[i] == 0 or T > 0.0) else 0.0
+            # a slack span carries nothing: its weight/inertia share would otherwise show as a
+            # negative "tension"
+            y[k] = reported_tension(nd, K.el_EA[i], K.el_tonly[i] != 0, QE, i, T)
     for k in range(n):
         kind = K.out_kind[k]
         if kind == 4:

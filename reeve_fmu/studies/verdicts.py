@@ -81,17 +81,65 @@ def generic_verdicts(t, c, info: dict | None = None) -> list:
     out = []
     tens = _tension_columns(c)
     if tens:
-        mins = {n: float(np.min(c[n])) for n in tens}
-        name = min(mins, key=mins.get)
-        low = mins[name]
-        out.append(Verdict("slack rope (minimum rope force)", FAIL if low <= 0.0 else PASS, low, 0.0, "N",
-                           "rope model: a rope force <= 0 is a slack rope", f"at {name}"))
+        out.append(_slack_verdict(t, c, tens))
     for n in (n for n in c if n.endswith(".force") and not n.startswith("motor")):
         f = float(np.max(np.abs(c[n])))
         out.append(Verdict(f"buffer contact ({n})", FAIL if f > 0.0 else PASS, f, 0.0, "N",
                            "EN 81-20: buffers are not reached in normal operation"))
     if info and "coupling_stable" in info:
         out.append(_coupling_verdict(info))
+    return out
+
+
+def _spans(t, mask) -> list:
+    """(start, end) times of the runs of True in mask."""
+    t = np.asarray(t, float)
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _slack_verdict(t, c, tens) -> Verdict:
+    """A rope force below zero is a rope the model pushed (a bilateral rope in compression: FAIL); a
+    force of zero is a slack rope (outputs report a slack span as 0): WARN with the times it was slack.
+    A released or dropped load that lets a rope go slack is not a failure of the rope by itself; the
+    snap load when it comes taut again is (snap_verdicts, against the rope's breaking force)."""
+    mins = {n: float(np.min(c[n])) for n in tens}
+    name = min(mins, key=mins.get)
+    low = mins[name]
+    src = "rope model: a rope cannot push; a slack rope reports 0 N"
+    if low < 0.0:
+        k = int(np.argmin(c[name]))
+        return Verdict("slack rope (minimum rope force)", FAIL, low, 0.0, "N", src,
+                       f"compressed at {name}, t = {float(np.asarray(t)[k]):.3f} s: the rope model pushed "
+                       "(a bilateral rope; tension_only = true lets it go slack)")
+    if low > 0.0:
+        return Verdict("slack rope (minimum rope force)", PASS, low, 0.0, "N", src, f"at {name}")
+    parts = []
+    for n in tens:
+        sp = _spans(t, np.asarray(c[n], float) <= 0.0)
+        if sp:
+            parts.append(f"{n} " + ", ".join(f"{a:.3f}-{b:.3f} s" for a, b in sp[:3]) + (" ..." if len(sp) > 3 else ""))
+    return Verdict("slack rope (minimum rope force)", WARN, low, 0.0, "N", src, "slack: " + "; ".join(parts[:4]))
+
+
+def snap_verdicts(scene, t, c) -> list:
+    """Per rope with a breaking_force that went slack in the record: the largest force after it first
+    went slack (the snap load when it comes taut) against its breaking force (count ropes): FAIL above."""
+    out = []
+    for rope in scene.ropes:
+        if rope.breaking_force is None:
+            continue
+        own = {rope.name} | {st.sheave for st in rope.route if st.sheave is not None}
+        cols = [n for n in _tension_columns(c) if n.rpartition(".")[0] in own]
+        slack = [np.flatnonzero(np.asarray(c[n], float) <= 0.0) for n in cols]
+        first = min((int(k[0]) for k in slack if len(k)), default=None)
+        if first is None:
+            continue
+        peak = max(float(np.max(np.asarray(c[n], float)[first:])) for n in cols)
+        lim = rope.breaking_force * rope.count
+        out.append(Verdict(f"snap load after slack ({rope.name})", FAIL if peak > lim else PASS, peak, lim, "N",
+                           "the rope's breaking force (ropes.breaking_force x count)",
+                           f"largest rope force after t = {float(np.asarray(t)[first]):.3f} s"))
     return out
 
 
@@ -491,7 +539,12 @@ def _explain_one(v: Verdict, vs: list, summary: dict) -> str:
         return (f"Speed: the car reached {v.value:.1f} % of the rated speed ({v.note}); the overspeed governor "
                 f"trips at {v.limit:g} %.")
     if c.startswith("slack rope"):
-        return f"Ropes: a rope force fell to {v.value:.4g} N ({v.note}): a slack rope."
+        if v.value < 0.0:
+            return f"Ropes: a rope force fell to {v.value:.4g} N ({v.note})."
+        return f"Ropes: a rope went slack ({v.note}); a slack rope carries no load."
+    if c.startswith("snap load"):
+        return (f"Ropes: {c}: {v.value:.4g} N after the rope went slack, above its breaking force "
+                f"{v.limit:.4g} N ({v.note}).")
     if c.startswith("buffer contact"):
         return f"Buffers: a buffer force of {v.value:.4g} N: a buffer was reached, which normal operation never does."
     if c == "co-simulation coupling":
@@ -527,7 +580,7 @@ def scene_verdicts(scene, t, c) -> list:
     adds the static EN 81-50 traction cases and the car speed against the [drive] rated speed."""
     from types import SimpleNamespace
 
-    out, static = generic_verdicts(t, c), []
+    out, static = generic_verdicts(t, c) + snap_verdicts(scene, t, c), []
     for sh in scene.sheaves:
         name = f"{sh.name}.traction_ratio"
         if sh.kind != "traction" or name not in c or scene.drive.sheave != sh.name:

@@ -89,14 +89,17 @@ class NonlinearRows:
                 self.rows[("slope", node, comp)] = (ROW_SLOPE, span, 0, comp, float(j_stretch), 0.0, 0.0, 0.0,
                                                     j_stretch)
 
-    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0):
-        """s of the node leaving a W1 wrap: sigma + R * current wrap angle (about the sheave's axis,
-        which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector), lw: the
-        wrap's rope whose weight the builder lumped (wrap_weight adds the rest)."""
+    def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0,
+                 offset=0.0):
+        """s of the node leaving a W1 wrap: sigma + offset + R * current wrap angle (about the sheave's
+        axis, which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector),
+        lw: the wrap's rope whose weight the builder lumped (wrap_weight adds the rest). A W0 wrap is
+        the same row with offset = -R * (its angle at t = 0): no rope on it in the scene's pose, the
+        change of its arc since."""
         if self.moving[span_in] or self.moving[span_out]:
             centre = self.spans[span_in][1]
-            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, 0.0, centre, j_sigma,
-                                      tuple(rhoA_g), lw)
+            self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, float(offset), centre,
+                                      j_sigma, tuple(rhoA_g), lw)
 
     def _cols(self):
         """q indices of every registered body coordinate and the body tables of rows_eval."""

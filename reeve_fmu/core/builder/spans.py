@@ -120,9 +120,12 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
             bs.nlr.tangent_rows(node, rb.nl_spans[k], end, bs.comps_nd)
             if "stretch" in bs.nodes[node]:   # cubic: slope = stretch * current span direction
                 bs.nlr.slope_rows(node, rb.nl_spans[k], bs.nodes[node]["stretch"], bs.comps_nd)
-        if 0 < k and rb.rope.wrap_model == "W1" and stops[k].sheave is not None:
+        if 0 < k and stops[k].sheave is not None:
+            # W1: the wrap holds R x its current angle of rope; W0 the change of R x angle since t = 0
+            # (zero rope in the scene's pose): without it a W0 pulley hangs its rope from the axle
+            off = -rb.geo[k][1] * rb.wraps[k][3] if rb.rope.wrap_model == "W0" else 0.0
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
-                            rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0])
+                            rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0], offset=off)
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
         rope_wraps.append((k, _add_wrap_elements(bs, span_nodes[k - 1][1], ends[0], rb.geo[k], rb.wraps[k],
                                                  bs.sheaves[stops[k].sheave], rb.sig[k],
@@ -142,10 +145,11 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
 
 
 def _wrap_weight(bs: BuildState, rb: _Rope):
-    """rhoA g of a W1 wrap's rope for bodies.wrap_weight: crane ropes (a torsion table) of linear
-    elements. Elsewhere the wraps keep the weight lumped at the build-time wrap length for now (with it
-    the linear slewing crane's payload leaves the cubic one's path by 3.2 mm in 3 s; not yet checked)."""
-    on = rb.rope.element == "linear" and rb.rope.torsion is not None
+    """rhoA g of a W0/W1 wrap's rope for bodies.wrap_weight (ropes of linear elements): the weight of
+    the rope a wrap gains or loses as its angle changes, at the sheave's centre (without it a
+    slewing crane's payload hung 3.1 mm off its tangent point). Cubic ropes keep the weight lumped
+    at the build-time wrap length."""
+    on = rb.rope.element == "linear"
     return rb.rhoA * np.asarray(bs.g, float) if on else np.zeros(3)
 
 

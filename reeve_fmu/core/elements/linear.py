@@ -248,6 +248,25 @@ def end_tension(nd, rhoA, QE, VE, ae, MEs, QEs, ie, end):
     return T
 
 
+@njit(cache=True, inline="always")
+def reported_tension(nd, EA, tonly, QE, ie, T):
+    """The rope force an output reports at an element end, T its end_tension. A stretched span
+    (|r2 - r1| > l) reports T, or 0 where T is not positive (the span's weight and inertia share at
+    the lower end of a nearly slack span: no rope force). A span that is not stretched is slack: 0
+    for a tension-only rope; a bilateral rope pushed into compression reports its axial force
+    EA eps < 0, which the model did apply (the verdicts FAIL it)."""
+    i1 = 2 * nd
+    l = QE[ie, i1 + 1] - QE[ie, i1]
+    dist2 = 0.0
+    for k in range(nd):
+        dk = QE[ie, nd + k] - QE[ie, k]
+        dist2 += dk * dk
+    eps = math.sqrt(dist2) / l - 1.0 if l > 0.0 else 0.0
+    if eps > 0.0:
+        return T if T > 0.0 else 0.0
+    return 0.0 if tonly else EA * eps
+
+
 def element_arrays(nd: int):
     """Work arrays for one element."""
     ne = 2 * nd + 2

@@ -1,0 +1,97 @@
+"""A load dropped onto a slack rope against the energy balance of a mass on a massless spring, and the
+rope verdicts of the drop: a slack rope reports 0 N (not the span's weight share as a negative force),
+the slack verdict WARNs with the slack times, the snap load is judged against the rope's breaking force,
+and a bilateral rope that pushes is a FAIL."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+from reeve_fmu.core.model import build_model
+from reeve_fmu.core.scene import parse_scene
+from reeve_fmu.core.solver import Simulator
+from reeve_fmu.studies.verdicts import scene_verdicts
+from tests.support.checks import check
+
+G, MASS, EA, L, DROP = 9.81, 500.0, 2.9e6, 50.0, 1.0
+
+# 500 kg held 1 m above the reach of a 50 m rope (nearly massless: 0.05 kg), released at rest
+DROP_SCENE = f'''
+[scene]
+name = "drop"
+model = "axial-1d"
+t_end = 1.5
+[solver]
+step = 1e-4
+rho_inf = 1.0
+[initial]
+statics = "none"
+[[bodies]]
+name = "mass"
+mass = {MASS}
+position = [0.0, 0.0, {DROP}]
+free = ["z"]
+[[ropes]]
+name = "rope"
+EA = {EA}
+rhoA = 0.001
+length = {L}
+tension_only = true
+breaking_force = 60e3
+route = [
+  {{ anchor = "ground", at = [0.0, 0.0, {L}] }},
+  {{ anchor = "mass", at = [0.0, 0.0, 0.0] }},
+]
+'''
+
+
+@pytest.fixture(scope="module")
+def drop():
+    sc = parse_scene(tomllib.loads(DROP_SCENE), "drop.toml")
+    res = Simulator(build_model(sc)).run(1.5, 1e-3)
+    return sc, res, {n: np.asarray(res[n]) for n in res.names}
+
+
+def test_drop_peak_force_is_the_energy_balance(drop):
+    """Free fall h, then the rope (k = EA/L) stops the mass: m g (h + x) = k x^2 / 2, peak k x =
+    m g + sqrt((m g)^2 + 2 k m g h); the rope is slack (0 N, never negative) until t = sqrt(2 h / g)."""
+    sc, res, c = drop
+    mg, k = MASS * G, EA / L
+    peak = mg + math.sqrt(mg * mg + 2.0 * k * mg * DROP)
+    F = c["rope.tension_start"]
+    # measured -6.9e-5 (the rope's 0.05 kg against 500 kg, the 1 ms output sampling of the peak)
+    check("drop: peak rope force / energy balance - 1", F.max() / peak - 1.0, 2e-4)
+    assert F.min() == 0.0 and c["rope.tension_end"].min() == 0.0
+    caught = res.time[np.flatnonzero(F > 0.0)[0]]
+    # measured 4.8e-4 s: the first output sample after the catch (outputs every 1 ms)
+    check("drop: time the rope comes taut - sqrt(2 h / g) [s]", caught - math.sqrt(2.0 * DROP / G), 1e-3,
+          reason="the output step (1 ms) is the resolution")
+
+
+def test_drop_verdicts(drop):
+    sc, res, c = drop
+    vs = {v.check: v for v in scene_verdicts(sc, res.time, c)}
+    slack = vs["slack rope (minimum rope force)"]
+    assert slack.status == "WARN" and "rope.tension_start 0.000-0.451 s" in slack.note, slack.line()
+    snap = vs["snap load after slack (rope)"]
+    assert snap.status == "PASS" and snap.value == c["rope.tension_start"].max()
+    weak = replace(sc, ropes=(replace(sc.ropes[0], breaking_force=25e3),))      # below the 29.3 kN peak
+    assert [v.status for v in scene_verdicts(weak, res.time, c) if v.check.startswith("snap")] == ["FAIL"]
+
+
+def test_a_bilateral_rope_pushes_and_fails():
+    """The same drop with a bilateral rope: the 2 % short rope pushes the mass down (EA eps = -58 kN at
+    the start); the outputs show that force and the slack verdict FAILs it."""
+    sc = parse_scene(tomllib.loads(DROP_SCENE.replace("tension_only = true", "tension_only = false")), "drop.toml")
+    res = Simulator(build_model(sc)).run(0.05, 1e-3)
+    c = {n: np.asarray(res[n]) for n in res.names}
+    check("bilateral: start force / EA eps - 1", c["rope.tension_start"][0] / (EA * (-DROP / L)) - 1.0, 1e-12,
+          reason="exact here (the strain of the scene's positions); round-off in general")
+    v = next(v for v in scene_verdicts(sc, res.time, c) if v.check.startswith("slack"))
+    assert v.status == "FAIL" and "the rope model pushed" in v.note
