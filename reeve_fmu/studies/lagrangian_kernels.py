@@ -656,6 +656,9 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     maxit = int(params[5])
     jac_every = int(params[6])
     n = q.shape[0]
+    # static = False typed bool, not Literal[False]: residual and jacobian then share the
+    # specialization eval_state and newton_system compile (a literal would compile both again)
+    static = n < 0
     nb = LK.nb
     m = LK.m
     nn = LK.node_dof.shape[0]
@@ -702,7 +705,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     since = 0
     # stretch of every element (the feed factor kappa of the first residual needs it)
     _step_start(LK, q, v, t, X, V, A, xo, co, tho)
-    residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, False, xo, co, tho, z, zn)
+    residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, static, xo, co, tho, z, zn)
     for step in range(nsteps):
         q1[:] = q
         v1[:] = v
@@ -735,11 +738,11 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                     have_jac = False
                 status = 1
                 for it in range(maxit):
-                    residual(LK, q, v, qdd, ts, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, False,
+                    residual(LK, q, v, qdd, ts, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, static,
                              xo, co, tho, zo, zn)
                     info[3] += 1
                     if not have_jac or it >= 3:
-                        jacobian(LK, q, v, ts, 1.0, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, False,
+                        jacobian(LK, q, v, ts, 1.0, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, static,
                                  xo, co, tho, zo)
                         info[2] += 1
                         if not bb_factor(J, C, D, E, Xs, S, piv):
@@ -771,7 +774,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                     qdd[:] = qddo
                     break
                 # stick deflections at the converged state
-                residual(LK, q, v, qdd, ts, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, False,
+                residual(LK, q, v, qdd, ts, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, static,
                          xo, co, tho, zo, zn)
                 info[3] += 1
                 z[:] = zn
