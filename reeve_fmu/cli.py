@@ -305,7 +305,7 @@ EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_EVENT = 1, 2, 3   # documented in README.md,
 
 def _cosim_stopped(exc) -> bool:
     """A co-simulation that ended at a failed step after writing its results (demo)."""
-    from .fmu.cosim import CosimError
+    from .fmu.master import CosimError
     return isinstance(exc, CosimError) and exc.time is not None
 
 

@@ -9,7 +9,6 @@ carries the verdicts, what each WARN/FAIL means, the key figures and the trip pl
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -251,26 +250,6 @@ def add_trip_figures(summary: dict, cfg, time_, cols: dict):
     if "traction.tension_in" in cols:
         summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
     summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
-
-
-def add_reference_comparison(summary: dict, cfg, cols: dict, m: int):
-    """The record against in-process runs of the same plant and drive: with the bench's one-cycle
-    delay and CAN quantization ("reference"), and with the demo's Gauss-Seidel coupling."""
-    from .runners import reference_run
-
-    names = ("car.position", "car.velocity", "motor.speed")
-    for key, scheme in (("reference", "hil"), ("vs_demo_scheme", "gauss-seidel")):
-        t0 = time.perf_counter()
-        ref = reference_run(m, cfg.dt, drive_values=cfg.drive_values, plant_values=cfg.plant_values,
-                            scheme=scheme, names=names)
-        d = {f"max_abs_diff_{n.replace('.', '_')}": float(np.max(np.abs(cols[n][:m + 1] - ref[n])))
-             for n in names}
-        d["scheme"] = ("in-process Plant + ElectricDrive, same step, one-cycle transport delay (Jacobi), same "
-                       "CAN quantization" if scheme == "hil" else
-                       "in-process Plant + ElectricDrive, same step, Gauss-Seidel (the demo's coupling), "
-                       "no CAN quantization")
-        d["wall_s"] = time.perf_counter() - t0
-        summary[key] = d
 
 
 def write_results(out: Path, cfg, summary: dict, time_, cols: dict, st):

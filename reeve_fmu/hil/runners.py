@@ -16,12 +16,15 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 import uuid
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+
 import numpy as np
 
+from ..fmu.master import DriveUnit, PlantUnit, run
 from .buses import DEFAULT_UDP_PORT, MULTICAST_GROUP, MULTICAST_MODES, bench_route, ensure_multicast, make_bus
 
 
@@ -93,47 +96,49 @@ def _make_plant(cfg: HilConfig, log):
 # reference runs (in-process, no bus)
 # ---------------------------------------------------------------------------------------------------
 def reference_run(n_steps: int, dt: float = 1e-3, *, drive_values=None, plant_values=None,
-                  scheme: str = "hil", names=("car.position", "car.velocity", "motor.speed")) -> dict:
-    """Plant + ElectricDrive in this process, no FMI, no bus.
+                  scheme: str = "hil", names=("car.position", "car.velocity", "motor.speed")):
+    """Plant + ElectricDrive in this process, no FMI, no bus: fmu.master.run over the elevator's
+    connections (fmu.cosim.CONNECTIONS), communication points k * dt.
 
     scheme "hil":  the bench's semantics: the torque held over [t_k, t_k+1) was computed by the controller
                    from the sample at t_k-1 (Jacobi coupling) and went through the CAN encoding (angle and
                    speed in 2^20 increments per revolution, torque in 0.55 N m);
     scheme "gauss-seidel": the demo's coupling (drive first with the sample at t_k, its torque held over
                    [t_k, t_k+1)), full float precision.
-    Returns {"time": ..., name: ...} sampled at every t_k (k = 0..n_steps)."""
+    Returns a TimeSeries of `names` sampled at every t_k (k = 0..n_steps)."""
+    from ..fmu.cosim import CONNECTIONS
     from .controller import max_torque_permille
     from .plants import make_default_plant
-    from .protocol import NM_PER_PERMILLE, RAD_PER_INC
+    from .protocol import NM_PER_PERMILLE
 
     plant = make_default_plant(params=plant_values)
     drive = _drive_model(drive_values)
-    tmax = max_torque_permille(drive) * NM_PER_PERMILLE      # the controller's clamp (0x6072)
-    on = list(plant.output_names)
-    iw, ia = on.index("motor.speed"), on.index("motor.angle")
-    idx = [on.index(n) for n in names]
-    out = np.empty((n_steps + 1, len(names)))
-    od = plant.outputs()
-    y = np.array([od[n] for n in on])
-    out[0] = y[idx]
-    tau, brake = 0.0, 0.0
-    jacobi = scheme == "hil"
-    for k in range(n_steps):
-        w, th = y[iw], y[ia]
-        if jacobi:
-            w = round(w / RAD_PER_INC) * RAD_PER_INC
-            th = round(th / RAD_PER_INC) * RAD_PER_INC
-            y = plant.step(dt, tau, brake)
-            tq, br = drive.step(k * dt, dt, w, th)
-            tq = min(max(tq, -tmax), tmax)
-            tau, brake = round(tq / NM_PER_PERMILLE) * NM_PER_PERMILLE, (1.0 if br > 0.5 else 0.0)
-        else:
-            tau, brake = drive.step(k * dt, dt, w, th)
-            y = plant.step(dt, tau, brake)
-        out[k + 1] = y[idx]
-    res = {"time": np.arange(n_steps + 1) * dt}
-    res.update({n: out[:, i] for i, n in enumerate(names)})
-    return res
+    if scheme == "hil":
+        tmax = max_torque_permille(drive) * NM_PER_PERMILLE      # the controller's clamp (0x6072)
+        units = [_CanDriveUnit("drive", drive, tmax), PlantUnit("plant", plant)]
+    else:
+        units = [DriveUnit("drive", drive), PlantUnit("plant", plant)]
+    recorded = {"plant": list(names)}
+    r = run(units, CONNECTIONS, n=n_steps, step=dt, grid="multiply", record=recorded,
+            scheme="jacobi" if scheme == "hil" else "gauss-seidel")
+    return r.series(recorded)
+
+
+class _CanDriveUnit(DriveUnit):
+    """The drive as the bench sees it over CAN: speed and angle in 2^20 increments per revolution, the
+    torque command clamped to 0x6072 and in 0.55 N m, the brake command 0 or 1."""
+
+    def __init__(self, name, drive, tmax):
+        from .protocol import NM_PER_PERMILLE, RAD_PER_INC
+
+        super().__init__(name, drive)
+        self.tmax, self.nm, self.rad = tmax, NM_PER_PERMILLE, RAD_PER_INC
+
+    def advance(self, t, h, u):
+        rad, nm = self.rad, self.nm
+        tq, br = self.drive.step(t, h, round(u[0] / rad) * rad, round(u[1] / rad) * rad)
+        tq = min(max(tq, -self.tmax), self.tmax)
+        return round(tq / nm) * nm, (1.0 if br > 0.5 else 0.0)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -224,7 +229,7 @@ class _ProcessController:
 def run_hil(cfg: HilConfig, log=print) -> dict:
     """Run the bench with the configured controller; write results (if cfg.out) and return the summary."""
     from .bridge import FaultSpec
-    from .review import add_reference_comparison, add_trip_figures, add_verdicts, json_default, summarize, write_results
+    from .review import add_trip_figures, add_verdicts, json_default, summarize, write_results
 
     log = log or (lambda *a, **k: None)
     _check_config(cfg)
@@ -240,10 +245,28 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
         add_trip_figures(summary, cfg, res.time, cols)
         add_verdicts(summary, cfg, plant, faults.any, res.time, cols)   # trip, coupling and bench checks
     if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
-        add_reference_comparison(summary, cfg, cols, st.steps)
+        _add_reference_comparison(summary, cfg, cols, st.steps)
     if cfg.out:
         write_results(Path(cfg.out), cfg, summary, res.time, cols, st)
     return json.loads(json.dumps(summary, default=json_default))
+
+
+def _add_reference_comparison(summary: dict, cfg: HilConfig, cols: dict, m: int):
+    """The record against in-process runs of the same plant and drive: with the bench's one-cycle
+    delay and CAN quantization ("reference"), and with the demo's Gauss-Seidel coupling."""
+    names = ("car.position", "car.velocity", "motor.speed")
+    for key, scheme in (("reference", "hil"), ("vs_demo_scheme", "gauss-seidel")):
+        t0 = time.perf_counter()
+        ref = reference_run(m, cfg.dt, drive_values=cfg.drive_values, plant_values=cfg.plant_values,
+                            scheme=scheme, names=names)
+        d = {f"max_abs_diff_{n.replace('.', '_')}": float(np.max(np.abs(cols[n][:m + 1] - ref[n])))
+             for n in names}
+        d["scheme"] = ("in-process Plant + ElectricDrive, same step, one-cycle transport delay (Jacobi), same "
+                       "CAN quantization" if scheme == "hil" else
+                       "in-process Plant + ElectricDrive, same step, Gauss-Seidel (the demo's coupling), "
+                       "no CAN quantization")
+        d["wall_s"] = time.perf_counter() - t0
+        summary[key] = d
 
 
 def _check_config(cfg: HilConfig):
