@@ -104,28 +104,35 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
     return specs
 
 
+def checked_scene(scene_path):
+    """The scene an FMU is built from; a physically impossible scene fails the build, not the FMU's
+    initialization."""
+    from ..core.plausibility import check_or_raise
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene_path)
+    check_or_raise(scene)
+    return scene
+
+
+def fmu_config(fmt: str, name: str, scene, resource: str, **fields) -> dict:
+    """The JSON configuration a plant FMU carries: format, model name, the scene's resource file, the
+    scene's name and description, then `fields`."""
+    return {"format": fmt, "name": name, "scene": resource, "scene_name": scene.name,
+            "scene_description": getattr(scene, "description", "") or "", **fields}
+
+
 def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..components.drive import trip_end_time
     from ..components.plant import empty_car_scene, plant_defaults, plant_scene, scene_load
     from ..core.model import build_model
-    from ..core.plausibility import check_or_raise
-    from ..core.scene import load_scene
 
-    scene = load_scene(scene_path)
-    check_or_raise(scene)    # a physically impossible scene fails the build, not the FMU's initialization
+    scene = checked_scene(scene_path)
     model = build_model(plant_scene(empty_car_scene(scene)))
-    return {
-        "format": "reeve_fmu.plant_fmu/1",
-        "name": name,
-        "scene": PLANT_SCENE,
-        "scene_name": scene.name,
-        "scene_description": getattr(scene, "description", "") or "",
-        "scene_payload": scene_load(scene),
-        "parameters": plant_defaults(scene),
-        "stop_time": max(float(scene.t_end), trip_end_time()),
-        "outputs": plant_output_specs(model.output_names, [s.name for s in scene.sheaves]),
-    }
+    return fmu_config("reeve_fmu.plant_fmu/1", name, scene, PLANT_SCENE, scene_payload=scene_load(scene),
+                      parameters=plant_defaults(scene), stop_time=max(float(scene.t_end), trip_end_time()),
+                      outputs=plant_output_specs(model.output_names, [s.name for s in scene.sheaves]))
 
 
 # ------------------------------------------------------------------------------------------------

@@ -94,23 +94,13 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
 def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
     from ..components.craneplant import CranePlant
-    from ..core.plausibility import check_or_raise
-    from ..core.scene import load_scene
+    from .cosim import checked_scene, fmu_config
 
-    scene = load_scene(scene_path)
-    check_or_raise(scene)
+    scene = checked_scene(scene_path)
     cp = CranePlant(scene, "torque")
-    return {
-        "format": "reeve_fmu.crane_fmu/1",
-        "name": name,
-        "scene": CRANE_SCENE,
-        "scene_name": scene.name,
-        "scene_description": getattr(scene, "description", "") or "",
-        "parts": cp.parts,
-        "holding_torque": cp.holding_torque(),
-        "stop_time": float(scene.t_end),
-        "outputs": crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts),
-    }
+    return fmu_config("reeve_fmu.crane_fmu/1", name, scene, CRANE_SCENE, parts=cp.parts, holding_torque=cp.holding_torque(),
+                      stop_time=float(scene.t_end),
+                      outputs=crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts))
 
 
 def _entry(kind: str) -> Path:

@@ -398,6 +398,8 @@ def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, 
     """The communication steps: the master's whole per-step cost (docs/cosim.md, Performance); what the
     loop touches is bound to local names first."""
     n, step, record_every = run_.n, run_.step, run_.record_every
+    # Gauss-Seidel: one unit after the other sets, steps and gets; Jacobi: all set, all step, all get
+    groups = [[x] for x in plan] if gs else [plan]
     j, h, stop, t_first = 1, step, False, 0.0
     t_loop0 = time.perf_counter()
     k = 0
@@ -408,31 +410,17 @@ def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, 
                 h = tk(k + 1) - t
             if probe is not None:
                 probe.before()
-            if gs:
-                for u, gather in plan:
+            for group in groups:
+                for u, gather in group:
                     if gather is not None:
                         gather()
                     s = u.set()
                     if s > 1:
                         _check(s, f"{u.name} setReal", units, t)
-                    s = u.step(t, h, 1)
+                for s, (u, _) in zip([u.step(t, h, 1) for u, _ in group], group):
                     if s > 1:
                         _check(s, f"{u.name} doStep", units, t)
-                    s = u.get()
-                    if s > 1:
-                        _check(s, f"{u.name} getReal", units, t)
-            else:
-                for u, gather in plan:
-                    if gather is not None:
-                        gather()
-                    s = u.set()
-                    if s > 1:
-                        _check(s, f"{u.name} setReal", units, t)
-                status = [u.step(t, h, 1) for u, _ in plan]
-                for (u, _), s in zip(plan, status):
-                    if s > 1:
-                        _check(s, f"{u.name} doStep", units, t)
-                for u, _ in plan:
+                for u, _ in group:
                     s = u.get()
                     if s > 1:
                         _check(s, f"{u.name} getReal", units, t)

@@ -486,6 +486,20 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
             return None
         return f"{spec.name} ({spec.causality.name}) can only be set before initialization ends"
 
+    def _settable(self, kind: str, vr, x) -> Optional[_Spec]:
+        """The declaration of a `kind` variable that may be set now, or None after reporting why the
+        value `x` is ignored."""
+        spec = self._set[kind].get(vr)
+        if spec is None:
+            self._call_error(f"set{kind}: {self._name_of(vr)} is not a settable {kind} variable; "
+                             f"value {x!r} ignored")
+            return None
+        why = self._may_set(spec)
+        if why is not None:
+            self._call_error(f"set{kind} rejected: {why}; value {x!r} ignored")
+            return None
+        return spec
+
     def set_real(self, vrs, values):
         try:
             self._pull()   # earlier values the loader wrote must not overwrite these
@@ -510,19 +524,11 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
 
     def _set_real_checked(self, vrs, values):
         try:
-            table = self._set["Real"]
             bad = self._bad_inputs
             for vr, x in zip(vrs, values):
-                spec = table.get(vr)
+                spec = self._settable("Real", vr, x)
                 if spec is None:
-                    self._call_error(f"setReal: {self._name_of(vr)} is not a settable Real variable; "
-                                     f"value {x!r} ignored")
                     continue
-                if spec.causality != Fmi2Causality.input or self._mode != "step":
-                    why = self._may_set(spec)
-                    if why is not None:
-                        self._call_error(f"setReal rejected: {why}; value {x!r} ignored")
-                        continue
                 x = float(x)
                 if x - x != 0.0 or (spec.min is not None and x < spec.min) or \
                         (spec.max is not None and x > spec.max):
@@ -539,16 +545,9 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
 
     def _set_plain(self, kind, conv, vrs, values):
         try:
-            table = self._set[kind]
             for vr, x in zip(vrs, values):
-                spec = table.get(vr)
+                spec = self._settable(kind, vr, x)
                 if spec is None:
-                    self._call_error(f"set{kind}: {self._name_of(vr)} is not a settable {kind} "
-                                     f"variable; value {x!r} ignored")
-                    continue
-                why = self._may_set(spec)
-                if why is not None:
-                    self._call_error(f"set{kind} rejected: {why}; value {x!r} ignored")
                     continue
                 x = conv(x)
                 if (spec.min is not None and x < spec.min) or (spec.max is not None and x > spec.max):
