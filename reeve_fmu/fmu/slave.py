@@ -447,7 +447,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
 
     def get_real(self, vrs):
         # fast path: Reals kept in self.values (no user getter) that hold floats: one comprehension,
-        # no getter call per variable (the plant's 25 outputs: ~3x faster); anything else (a user
+        # no getter call per variable (the plant reads 25 outputs per step); anything else (a user
         # getter, a bad value reference, a non-float value) takes the checked path
         try:
             self._pull()

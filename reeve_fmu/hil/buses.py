@@ -1,8 +1,9 @@
-"""Bus construction, the udp_multicast probe and `--multicast route`. `FastVirtualBus` is python-can's `virtual` interface with a cheaper send().
+"""Bus construction, the udp_multicast probe and `--multicast route`.
 
-python-can's VirtualBus.send() deep-copies every frame for every receiver: 25 of the 37 us that one
-send + recv costs on the test machine (measured). A 1 kHz lock-step loop moves 4-5 frames per cycle,
-so that copy alone would eat half of the 500 us budget of the 2000 steps/s target. FastVirtualBus copies
+`FastVirtualBus` is python-can's `virtual` interface with a cheaper send(). python-can's
+VirtualBus.send() deep-copies every frame for every receiver, most of what one send + recv costs; a
+1 kHz lock-step loop moves 4-5 frames per cycle, so that copy alone would eat much of the cycle budget
+of the 2000 steps/s target (docs/performance.md, "HIL"). FastVirtualBus copies
 the frame by constructing a new `can.Message` (fields are scalars and a bytearray) and is otherwise
 the same class: it joins the same process-wide channel registry, so plain `can.Bus(interface="virtual")`
 instances (e.g. a canopen Network) on the same channel exchange frames with it.
@@ -55,7 +56,7 @@ class FastVirtualBus(VirtualBus):
 
     def send_batch(self, msgs, reuse: bool = False) -> None:
         """Send frames back to back with one wake-up per receiver (a receiving thread is woken once per
-        cycle instead of once per frame: each wake-up costs a GIL hand-over, measured ~80 us under load).
+        cycle instead of once per frame: each wake-up costs a GIL hand-over, long under load).
         reuse=True: the caller gives up the Message objects, the last receiver gets them without a copy."""
         try:
             chan = self.channel
