@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.results import TimeSeries
 from .buses import send_batch
 from .drive402 import DriveNode
 from .plants import PlantError
@@ -679,10 +680,12 @@ class Bridge:
             st_inj = {"lost": inj.lost, "delayed": inj.delayed, "corrupted": inj.corrupted}
         else:
             st_inj = {"lost": 0, "delayed": 0, "corrupted": 0}
-        tt = np.arange(k_done + 1) * dt
-        return BridgeResult(time=tt, outputs=Y[:k_done + 1] if rec else None,
-                            hil=H[:k_done + 1] if rec else None, output_names=list(self.output_names),
-                            stats=st, injected=st_inj)
+        record = None
+        if rec:
+            cols = {n: Y[:k_done + 1, i] for i, n in enumerate(self.output_names)}
+            cols.update({n: H[:k_done + 1, i] for i, n in enumerate(HIL_COLUMNS)})
+            record = TimeSeries(np.arange(k_done + 1) * dt, cols)
+        return BridgeResult(record=record, stats=st, injected=st_inj)
 
     # -- waiting ---------------------------------------------------------------------------------------------
     def _wait_lockstep(self, k: int) -> None:
@@ -777,19 +780,11 @@ HIL_COLUMNS = ("hil.torque", "hil.brake_command", "hil.state", "hil.statusword",
 
 @dataclass
 class BridgeResult:
-    time: np.ndarray
-    outputs: np.ndarray | None
-    hil: np.ndarray | None
-    output_names: list
+    """A bench run: `record`, a TimeSeries of the plant outputs and HIL_COLUMNS at every SYNC (None
+    without recording), the statistics and the injected faults."""
+    record: TimeSeries | None
     stats: BridgeStats
     injected: dict
 
     def column(self, name: str) -> np.ndarray:
-        if name in HIL_COLUMNS:
-            return self.hil[:, HIL_COLUMNS.index(name)]
-        return self.outputs[:, self.output_names.index(name)]
-
-    def columns(self) -> dict:
-        cols = {n: self.outputs[:, i] for i, n in enumerate(self.output_names)}
-        cols.update({n: self.hil[:, i] for i, n in enumerate(HIL_COLUMNS)})
-        return cols
+        return self.record[name]

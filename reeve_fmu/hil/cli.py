@@ -183,11 +183,7 @@ def _bench_main(argv) -> int:
     finally:
         bus.shutdown()
         plant.close()
-    from ..core.results import write_csv
-
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", res.time, res.columns())
+    res.record.to_csv(Path(a.out) / "results.csv")
     st = res.stats
     print(json.dumps({"steps": st.steps, "deadline_misses": st.deadline_misses, "watchdog_trips": st.watchdog_trips,
                       "frames_rejected": st.frames_rejected, "brake_engaged_at": st.brake_engaged_at}))

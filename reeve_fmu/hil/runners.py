@@ -239,15 +239,16 @@ def run_hil(cfg: HilConfig, log=print) -> dict:
     with bench_route(cfg.channel or MULTICAST_GROUP, log) if route else contextlib.nullcontext():
         res, plant, ctl_stats = _run_bench(cfg, faults, n, log)
     st = res.stats
-    cols = res.columns() if res.outputs is not None else {}
+    cols = res.record.columns if res.record is not None else {}
+    time_ = res.record.time if res.record is not None else None
     summary = summarize(cfg, faults, res, plant, cols, ctl_stats)
     if cols:
-        add_trip_figures(summary, cfg, res.time, cols)
-        add_verdicts(summary, cfg, plant, faults.any, res.time, cols)   # trip, coupling and bench checks
+        add_trip_figures(summary, cfg, time_, cols)
+        add_verdicts(summary, cfg, plant, faults.any, time_, cols)   # trip, coupling and bench checks
     if cfg.compare and cfg.controller == "builtin" and not faults.any and cols and st.steps > 0:
         _add_reference_comparison(summary, cfg, cols, st.steps)
     if cfg.out:
-        write_results(Path(cfg.out), cfg, summary, res.time, cols, st)
+        write_results(Path(cfg.out), cfg, summary, time_, cols, st)
     return json.loads(json.dumps(summary, default=json_default))
 
 
