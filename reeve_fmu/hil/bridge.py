@@ -554,8 +554,6 @@ class Bridge:
         iw, ia, it, ix, iv, ib = self._iw, self._ia, self._it, self._ix, self._iv, self._ib
         Message = self._can.Message
         send_frames = functools.partial(send_batch, self.bus, reuse=True)
-        recv = self.bus.recv
-        inj = self.inj
         d = self.drive
         dn = self.dn
         perf = self.clock
@@ -676,16 +674,19 @@ class Bridge:
         st.step_time = step_time[:k_done]
         if jitter is not None:
             st.sync_jitter = jitter[:k_done]
-        if inj is not None:
-            st_inj = {"lost": inj.lost, "delayed": inj.delayed, "corrupted": inj.corrupted}
-        else:
-            st_inj = {"lost": 0, "delayed": 0, "corrupted": 0}
+        return self._result(Y, H, k_done)
+
+    def _result(self, Y, H, k_done: int) -> "BridgeResult":
+        """The run's record (None without recording: Y is None), statistics and injected faults."""
+        inj = self.inj
+        injected = {"lost": inj.lost, "delayed": inj.delayed, "corrupted": inj.corrupted} if inj is not None \
+            else {"lost": 0, "delayed": 0, "corrupted": 0}
         record = None
-        if rec:
+        if Y is not None:
             cols = {n: Y[:k_done + 1, i] for i, n in enumerate(self.output_names)}
             cols.update({n: H[:k_done + 1, i] for i, n in enumerate(HIL_COLUMNS)})
-            record = TimeSeries(np.arange(k_done + 1) * dt, cols)
-        return BridgeResult(record=record, stats=st, injected=st_inj)
+            record = TimeSeries(np.arange(k_done + 1) * self.cfg.dt, cols)
+        return BridgeResult(record=record, stats=self.stats, injected=injected)
 
     # -- waiting ---------------------------------------------------------------------------------------------
     def _wait_lockstep(self, k: int) -> None:
