@@ -469,17 +469,9 @@ class _LagrangianBuilder:
         ns = len(sh_names)
         sh_dof = -np.ones((ns, 2), np.int64)
         sh_off = np.zeros((ns, 2))
-        sh_R = np.zeros(ns)
-        sh_mu = np.zeros(ns)
-        sh_kn = np.zeros(ns)
-        sh_cn = np.zeros(ns)
-        sh_w = np.zeros(ns)
-        sh_kt = np.zeros(ns)
+        sh_R, sh_mu, sh_kn, sh_cn, sh_w, sh_kt, sh_J = (np.zeros(ns) for _ in range(7))
         sh_th = -np.ones(ns, np.int64)
-        sh_presc = np.zeros(ns, np.int64)
-        sh_lo = np.zeros(ns, np.int64)
-        sh_hi = np.zeros(ns, np.int64)
-        sh_J = np.zeros(ns)
+        sh_presc, sh_lo, sh_hi = (np.zeros(ns, np.int64) for _ in range(3))
         rope_of_sheave = {st.sheave: ir for ir, rope in enumerate(scene.ropes) for st in rope.route
                           if st.sheave is not None}
         for k, name in enumerate(sh_names):
