@@ -351,16 +351,24 @@ class Bridge:
         setattr(self.stats, "rejected_" + kind, getattr(self.stats, "rejected_" + kind) + 1)
         self._rejected_in_cycle = True
 
-    def _on_rpdo1(self, data) -> None:
+    def _rpdo(self, codec, data, answer: bool):
+        """The raw signals of an RPDO, or None: ignored outside OPERATIONAL, rejected when malformed
+        (`answer`: the frame is the controller's answer to this cycle, broken or not)."""
         if self.dn.nmt_state != NMT_STATE_OPERATIONAL or self._k < 0:
             self.stats.frames_ignored += 1           # PDOs are only processed in OPERATIONAL
-            return
-        codec = self.proto.TorqueCmd
+            return None
         try:
-            raw = codec.decode_raw(data)
+            return codec.decode_raw(data)
         except CodecError:
             self._reject("malformed")
-            self._closed = True                       # the controller's (broken) answer to this cycle
+            if answer:
+                self._closed = True
+            return None
+
+    def _on_rpdo1(self, data) -> None:
+        codec = self.proto.TorqueCmd
+        raw = self._rpdo(codec, data, True)
+        if raw is None:
             return
         if self.dn.params["counter_check"] and self._counter is not None and raw[4] != self._counter:
             self._reject("stale")                     # an answer to an older SYNC: keep waiting
@@ -374,14 +382,9 @@ class Bridge:
         self._closed = True
 
     def _on_rpdo2(self, data) -> None:
-        if self.dn.nmt_state != NMT_STATE_OPERATIONAL or self._k < 0:
-            self.stats.frames_ignored += 1
-            return
         codec = self.proto.VelocityCmd
-        try:
-            raw = codec.decode_raw(data)
-        except CodecError:
-            self._reject("malformed")
+        raw = self._rpdo(codec, data, False)
+        if raw is None:
             return
         if codec.in_range(raw) is not None:
             self._reject("out_of_range")
