@@ -14,8 +14,9 @@ Reports (docs/performance.md, "Co-simulation"):
 2. the exchange-only setting (only motor.speed/angle and motor.torque/brake.command cross per step);
 3. per-step breakdown of a Gauss-Seidel step, each FMI call timed separately (perf_counter_ns):
    drive setReal/doStep/getReal, plant setReal/doStep/getReal, p50/p99 of the plant doStep;
-4. the same calls made directly on the Python slave objects (no FMI, no ctypes) and the bare model
-   (Plant.step, ElectricDrive.step): the difference is pythonfmu's C++/GIL/ctypes layer.
+4. the same calls made directly on the Python slave objects (no FMI, no ctypes) and the bare models
+   (Plant and ElectricDrive stepped by the same master, fmu.master.run): the difference is pythonfmu's
+   C++/GIL/ctypes layer.
 Runs in one process (FMUs loaded by fmpy in this interpreter, as the demo does).
 """
 from __future__ import annotations
@@ -34,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 from reeve_fmu.components.drive import make_drive  # noqa: E402
 from reeve_fmu.components.plant import holding_torques, make_plant  # noqa: E402
 from reeve_fmu.fmu import cosim  # noqa: E402
+from reeve_fmu.fmu.master import time_grid  # noqa: E402
 
 
 def _pct(a):
@@ -42,8 +44,9 @@ def _pct(a):
             "p99_us": float(np.percentile(a, 99)), "max_us": float(a.max())}
 
 
-def breakdown(plant_fmu, drive_fmu, drive_values, n, step=1e-3, t_end=None):
-    """Instrumented Gauss-Seidel loop with the same buffers as cosimulate: every call timed."""
+def breakdown(plant_fmu, drive_fmu, drive_values, n, step=1e-3):
+    """cosimulate's Gauss-Seidel loop (fmu.master.run, the same buffers) with every FMI call timed."""
+    from reeve_fmu.fmu.master import FmuUnit, run
     from reeve_fmu.fmu.runner import SlaveHandle
 
     plant = SlaveHandle.open(plant_fmu, "plant")
@@ -52,42 +55,20 @@ def breakdown(plant_fmu, drive_fmu, drive_values, n, step=1e-3, t_end=None):
         plant.setup(0.0)
         drive.setup(0.0, start_values=drive_values)
         outs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
-        P = cosim._FastReal(plant, list(cosim.PLANT_EXCHANGE) + [o for o in outs if o not in cosim.PLANT_EXCHANGE])
-        D = cosim._FastReal(drive, list(cosim.DRIVE_EXCHANGE) + list(cosim.DRIVE_RECORD))
-        DI = cosim._FastReal(drive, cosim.PLANT_EXCHANGE, buf=P.buf)
-        PI = cosim._FastReal(plant, cosim.DRIVE_EXCHANGE, buf=D.buf)
-        fp, fd = plant.fmu, drive.fmu
-        cp, cd = fp.component, fd.component
-        getp, getd, setp, setd = fp.dll.fmi2GetReal, fd.dll.fmi2GetReal, fp.dll.fmi2SetReal, fd.dll.fmi2SetReal
-        stepp, stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
-        getp(cp, P.vr, P.n, P.buf)
-        T = np.zeros((n, 6), dtype=np.int64)
-        perf = time.perf_counter_ns
-        tk = cosim._time_grid(step)
-        for k in range(n):
-            t = tk(k)
-            a = perf()
-            setd(cd, DI.vr, DI.n, P.buf)
-            b = perf()
-            stepd(cd, t, step, 1)
-            c = perf()
-            getd(cd, D.vr, D.n, D.buf)
-            d = perf()
-            setp(cp, PI.vr, PI.n, D.buf)
-            e = perf()
-            s = stepp(cp, t, step, 1)
-            f = perf()
-            getp(cp, P.vr, P.n, P.buf)
-            g = perf()
-            if s > 1:
-                raise RuntimeError(plant.log_text())
-            T[k] = (b - a, c - b, d - c, e - d, f - e, g - f)
-        cols = ("drive setReal(2)", "drive doStep", f"drive getReal({D.n})", "plant setReal(2)",
-                "plant doStep", f"plant getReal({P.n})")
-        return {name: _pct(T[:, i]) for i, name in enumerate(cols)}, int(T.sum(axis=1).mean())
+        rec = {"plant": list(cosim.PLANT_EXCHANGE) + [o for o in outs if o not in cosim.PLANT_EXCHANGE],
+               "drive": list(cosim.DRIVE_EXCHANGE) + list(cosim.DRIVE_RECORD)}
+        r = run([FmuUnit("drive", drive), FmuUnit("plant", plant)], cosim.CONNECTIONS, n=n, step=step, record=rec,
+                timing=True)
+        if r.failure is not None:
+            raise r.failure
     finally:
         drive.close()
         plant.close()
+    T = r.step_ns
+    parts = {"drive setReal(2)": T["drive"]["set"], "drive doStep": T["drive"]["step"],
+             f"drive getReal({len(rec['drive'])})": T["drive"]["get"], "plant setReal(2)": T["plant"]["set"],
+             "plant doStep": T["plant"]["step"], f"plant getReal({len(rec['plant'])})": T["plant"]["get"]}
+    return {name: _pct(a) for name, a in parts.items()}, int(np.sum(list(parts.values()), axis=0).mean())
 
 
 def direct_calls(plant_fmu, drive_fmu, drive_values, n, step=1e-3):
@@ -122,7 +103,7 @@ def direct_calls(plant_fmu, drive_fmu, drive_values, n, step=1e-3):
     yp = p.get_real(pout)
     T = np.zeros((n, 6), dtype=np.int64)
     perf = time.perf_counter_ns
-    tk = cosim._time_grid(step)
+    tk = time_grid(step)
     for k in range(n):
         t = tk(k)
         a = perf()
@@ -145,24 +126,16 @@ def direct_calls(plant_fmu, drive_fmu, drive_values, n, step=1e-3):
 
 
 def bare_models(drive_values, n, step=1e-3, plant_fmu=None):
-    """Plant.step and ElectricDrive.step coupled in this process (the monolithic loop)."""
+    """Plant and ElectricDrive coupled in this process by the same master (the monolithic loop), each
+    unit's step timed: the step of the models and their unit adapters, no FMI."""
+    from reeve_fmu.fmu.master import DriveUnit, PlantUnit, run
+
     scene, payload = cosim.plant_fmu_model(plant_fmu)
-    plant = make_plant(scene, payload)
-    drive = make_drive(drive_values)
-    iw, ia = plant.output_names.index("motor.speed"), plant.output_names.index("motor.angle")
-    y = np.array([plant.output(name) for name in plant.output_names])
-    T = np.zeros((n, 2), dtype=np.int64)
-    perf = time.perf_counter_ns
-    tk = cosim._time_grid(step)
-    for k in range(n):
-        t = tk(k)
-        a = perf()
-        tau, br = drive.step(t, step, float(y[iw]), float(y[ia]))
-        b = perf()
-        y = plant.step(step, tau, br)
-        c = perf()
-        T[k] = (b - a, c - b)
-    return {"ElectricDrive.step": _pct(T[:, 0]), "Plant.step": _pct(T[:, 1])}, int(T.sum(axis=1).mean())
+    r = run([DriveUnit("drive", make_drive(drive_values)), PlantUnit("plant", make_plant(scene, payload))],
+            cosim.CONNECTIONS, n=n, step=step, timing=True)
+    T = r.step_ns
+    parts = {"ElectricDrive.step": T["drive"]["step"], "Plant.step": T["plant"]["step"]}
+    return {name: _pct(a) for name, a in parts.items()}, int(np.sum(list(parts.values()), axis=0).mean())
 
 
 def accuracy(plant_fmu, drive_fmu, dv, png=None, steps=(1e-3, 2e-3, 5e-3, 1e-2), ref_step=1e-4):

@@ -3,7 +3,7 @@
 
     python benchmarks/hil_lockstep.py [--t-end 10] [--repeat 3] [--out bench/hil.json] [--quick]
 
-Every configuration runs `reeve_fmu.hil.run.run_hil` in a fresh interpreter (the plant FMU is loaded there,
+Every configuration runs `reeve_fmu.hil.runners.run_hil` in a fresh interpreter (the plant FMU is loaded there,
 docs/cosim.md, 'pythonfmu and fmpy' item 4), with the demo's scenario (R1 2:1, rated load, the built-in ElectricDrive controller) over the
 first --t-end seconds of the trip (pre-torque, brake lift, acceleration, full speed). Lock-step rows give
 the wall-clock rate (steps/s over the whole run, bench + controller + bus); real-time rows give the bench's
@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 from reeve_fmu.fmu.runner import run_in_subprocess  # noqa: E402
 
 JOB = """
-from reeve_fmu.hil.run import HilConfig, run_hil
+from reeve_fmu.hil.runners import HilConfig, run_hil
 s = run_hil(HilConfig(**ARGS[0]), log=None)
 keys = ("steps", "wall_s", "steps_per_s", "step_time_p50_us", "step_time_p99_us", "step_time_max_us",
         "sync_jitter_p50_us", "sync_jitter_p99_us", "sync_jitter_max_us", "deadline_misses", "frames_rejected",
@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="lock-step virtual + real-time virtual only, once")
     a = ap.parse_args(argv)
     from reeve_fmu.hil.plants import default_plant_fmu
-    from reeve_fmu.hil.run import ensure_multicast
+    from reeve_fmu.hil.buses import ensure_multicast
 
     fmu = str(default_plant_fmu(log=print))
     mc_ok, mc_why = ensure_multicast()

@@ -15,36 +15,11 @@ angles rad, loads kg. Overrides use the keys of `--set` (reeve_fmu.studies.overr
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-
-@dataclass
-class Result:
-    """Sampled signals: `time` [s] and `columns` {output name: numpy array in SI units}; `summary`
-    (metrics and verdicts, for trips) and `info` (run information)."""
-    time: np.ndarray
-    columns: dict
-    summary: dict = field(default_factory=dict)
-    info: dict = field(default_factory=dict)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        if name == "time":
-            return self.time
-        return self.columns[name]
-
-    def names(self) -> list:
-        return list(self.columns)
-
-    def to_pandas(self):
-        """A pandas DataFrame indexed by time [s] (needs pandas)."""
-        try:
-            import pandas as pd
-        except ImportError:
-            raise ImportError("to_pandas needs pandas: pip install pandas") from None
-        return pd.DataFrame(self.columns, index=pd.Index(self.time, name="time"))
+from .core.results import TimeSeries
 
 
 def _overrides(overrides, kw) -> dict:
@@ -54,7 +29,7 @@ def _overrides(overrides, kw) -> dict:
 
 
 def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step: float | None = None,
-             method: str | None = None, overrides: dict | None = None, **kw) -> Result:
+             method: str | None = None, overrides: dict | None = None, **kw) -> TimeSeries:
     """Simulate a scene file as written (its own [drive]) with overrides applied.
 
     scene      path of a scene TOML file
@@ -90,14 +65,13 @@ def simulate(scene, *, t_end: float | None = None, dt: float | None = None, step
 
     convention = hoist_convention(sc, cols)
     vs = [v.as_dict() for v in scene_verdicts(sc, time_, cols)]
-    return Result(time_, {k: np.asarray(v) for k, v in cols.items()},
-                  {"verdict": worst(vs), "verdicts": vs, "findings": explain(vs),
-                   "motor_sign_convention": convention, "parameters": {"scene": scene_parameters(sc)}},
-                  {"scene": sc.name})
+    return TimeSeries(time_, {k: np.asarray(v) for k, v in cols.items()}, info={"scene": sc.name},
+                      summary={"verdict": worst(vs), "verdicts": vs, "findings": explain(vs),
+                               "motor_sign_convention": convention, "parameters": {"scene": scene_parameters(sc)}})
 
 
 def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: float = 3.0,
-               step: float = 1e-3, sis: bool = False, overrides: dict | None = None, **kw) -> Result:
+               step: float = 1e-3, sis: bool = False, overrides: dict | None = None, **kw) -> TimeSeries:
     """An elevator trip: the scene's plant coupled with the electric drive sized from the scene, in
     process (the same models as the FMUs, bit-identical to their co-simulation at the same step).
 
@@ -110,7 +84,7 @@ def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: f
     sis        shaft information system (car-position feedback) for the approach
     overrides  {--set key: value}; also keyword arguments with "__" for "."
 
-    Returns a Result whose summary holds the trip metrics and the verdicts (studies.verdicts)."""
+    Returns a TimeSeries whose summary holds the trip metrics and the verdicts (studies.verdicts)."""
     from .studies.trip import run_case, run_parameters, summarize_case, trip_case
 
     case = trip_case(scene, load=load, sequence=landings, dwell=dwell, sets=_overrides(overrides, kw), sis=sis)
@@ -124,4 +98,5 @@ def cosimulate(scene=None, *, load: float | None = None, landings=None, dwell: f
                      "dwell_s": case.dwell, "drive_level": int(case.drive_values.get("drive.level", 1)),
                      "drive": {k: v for k, v in case.drive_values.items()}}
     s["parameters"] = run_parameters(case)
-    return Result(np.asarray(res.time), {k: np.asarray(v) for k, v in res.columns.items()}, s, dict(res.info))
+    return TimeSeries(np.asarray(res.time), {k: np.asarray(v) for k, v in res.columns.items()}, info=dict(res.info),
+                      summary=s)

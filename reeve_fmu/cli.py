@@ -292,7 +292,7 @@ def main(argv=None) -> int:
           _cfg_sweep)
     _lazy(sub, "bench", "studies.bench", "cli_bench", "speed-against-error benchmark", _cfg_bench)
     _lazy(sub, "crane", "studies.crane", "cli_crane", "hoist sweep of a crane (statics of the dynamic model): hook-block rotation", _cfg_crane)
-    _lazy(sub, "hil", "hil.run", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
+    _lazy(sub, "hil", "hil.cli", "cli_hil", "motor controller in the loop over CAN (CiA 402)", _cfg_hil)
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("REEVE_FMU_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
@@ -305,7 +305,7 @@ EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_EVENT = 1, 2, 3   # documented in README.md,
 
 def _cosim_stopped(exc) -> bool:
     """A co-simulation that ended at a failed step after writing its results (demo)."""
-    from .fmu.cosim import CosimError
+    from .fmu.master import CosimError
     return isinstance(exc, CosimError) and exc.time is not None
 
 

@@ -138,6 +138,7 @@ def _write_stopped(out: Path, case, exc, output_dt) -> None:
 def cli_demo(args) -> int:
     from .components.drive import SIS_PARAMETERS, trip_end_time
     from .fmu import cosim
+    from .fmu.master import CosimError
     from .studies import report
     from .studies.analysis import traction_limits
     from .studies.trip import run_case, run_parameters, summarize_case
@@ -186,7 +187,7 @@ def cli_demo(args) -> int:
     try:
         res = cosim.cosimulate(plant_fmu, drive_fmu, step=step, t_end=t_end, plant_values=case.plant_values,
                                drive_values=drive_values, progress=progress)
-    except cosim.CosimError as exc:
+    except CosimError as exc:
         if exc.result is not None:     # keep what was computed up to the failed step, then exit 3
             _write_stopped(out, case, exc, output_dt)
         raise

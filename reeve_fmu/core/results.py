@@ -1,9 +1,45 @@
-"""Writing results: CSV with the documented output names, and overview plots."""
+"""Results: the one time-series type, CSV with the documented output names, and overview plots."""
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+
+@dataclass
+class TimeSeries:
+    """Sampled signals: `time` [s] and `columns` {output name: numpy array in SI units}; `info` (how the
+    run went: master, steps, walls, monitor report) and `summary` (metrics and verdicts, for trips).
+    `ts["car.position"]`, `ts["time"]`; `to_csv(path)` writes the CSV every front end writes."""
+    time: np.ndarray
+    columns: dict
+    info: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name == "time":
+            return self.time
+        return self.columns[name]
+
+    def names(self) -> list:
+        return list(self.columns)
+
+    def as_dict(self) -> dict:
+        d = {"time": self.time}
+        d.update(self.columns)
+        return d
+
+    def to_csv(self, path) -> Path:
+        return write_csv(path, self.time, self.columns)
+
+    def to_pandas(self):
+        """A pandas DataFrame indexed by time [s] (needs pandas)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("to_pandas needs pandas: pip install pandas") from None
+        return pd.DataFrame(self.columns, index=pd.Index(self.time, name="time"))
 
 
 def write_csv(path, time, columns: dict):

@@ -1,7 +1,10 @@
 """The FMI layer: FMU machinery, FMU build and the co-simulation masters (the physics lives in core and
 components).
 
-* `reeve_fmu.fmu.slave`   -- `ReeveSlave`, the pythonfmu base class of every reeve_fmu FMU entry
+* `reeve_fmu.fmu.slave`   -- `ReeveSlave`, the pythonfmu base class of every reeve_fmu FMU entry: the guarded
+  FMI state machine (calls, checks, errors, the loader's fast path)
+* `reeve_fmu.fmu.description` -- variable declarations, units and types, modelDescription.xml
+* `reeve_fmu.fmu.state`   -- FMU state get/set and (de)serialisation
 * `reeve_fmu.fmu.build`   -- `build_fmu`, `fmu_is_stale`, `read_stamp`, `current_package_hash`
 * `reeve_fmu.fmu.runner`  -- `run_in_subprocess`, `SlaveHandle` (fmpy FMU2Slave wrapper)
 * `reeve_fmu.fmu._bootstrap` -- stdlib-only shim that runs inside FMUs (stable numba cache dir)

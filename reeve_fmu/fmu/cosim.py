@@ -32,11 +32,12 @@ import math
 import os
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Optional, Sequence
 
-import numpy as np
+from ..core.results import TimeSeries
+from . import master
+from .master import SCHEMES, CosimError, FmuUnit, time_grid
 
 PLANT_NAME = "ReevingPlant"
 DRIVE_NAME = "ElectricDrive"
@@ -103,28 +104,35 @@ def plant_output_specs(output_names: Sequence[str], sheave_names: Iterable[str])
     return specs
 
 
+def checked_scene(scene_path):
+    """The scene an FMU is built from; a physically impossible scene fails the build, not the FMU's
+    initialization."""
+    from ..core.plausibility import check_or_raise
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene_path)
+    check_or_raise(scene)
+    return scene
+
+
+def fmu_config(fmt: str, name: str, scene, resource: str, **fields) -> dict:
+    """The JSON configuration a plant FMU carries: format, model name, the scene's resource file, the
+    scene's name and description, then `fields`."""
+    return {"format": fmt, "name": name, "scene": resource, "scene_name": scene.name,
+            "scene_description": getattr(scene, "description", "") or "", **fields}
+
+
 def plant_config(scene_path, name: str = PLANT_NAME) -> dict:
     """The JSON configuration the plant FMU carries (resources/reeve_plant.json)."""
     from ..components.drive import trip_end_time
     from ..components.plant import empty_car_scene, plant_defaults, plant_scene, scene_load
     from ..core.model import build_model
-    from ..core.plausibility import check_or_raise
-    from ..core.scene import load_scene
 
-    scene = load_scene(scene_path)
-    check_or_raise(scene)    # a physically impossible scene fails the build, not the FMU's initialization
+    scene = checked_scene(scene_path)
     model = build_model(plant_scene(empty_car_scene(scene)))
-    return {
-        "format": "reeve_fmu.plant_fmu/1",
-        "name": name,
-        "scene": PLANT_SCENE,
-        "scene_name": scene.name,
-        "scene_description": getattr(scene, "description", "") or "",
-        "scene_payload": scene_load(scene),
-        "parameters": plant_defaults(scene),
-        "stop_time": max(float(scene.t_end), trip_end_time()),
-        "outputs": plant_output_specs(model.output_names, [s.name for s in scene.sheaves]),
-    }
+    return fmu_config("reeve_fmu.plant_fmu/1", name, scene, PLANT_SCENE, scene_payload=scene_load(scene),
+                      parameters=plant_defaults(scene), stop_time=max(float(scene.t_end), trip_end_time()),
+                      outputs=plant_output_specs(model.output_names, [s.name for s in scene.sheaves]))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -262,32 +270,10 @@ PLANT_EXCHANGE = ("motor.speed", "motor.angle")        # plant -> drive
 DRIVE_EXCHANGE = ("motor.torque", "brake.command")     # drive -> plant
 
 
-class CosimResult:
-    """Sampled signals of a co-simulation: `time` and named columns (numpy arrays)."""
-
-    def __init__(self, time_: np.ndarray, columns: dict, info: Optional[dict] = None):
-        self.time = time_
-        self.columns = columns
-        self.info = dict(info or {})
-
-    def __getitem__(self, name):
-        return self.columns[name]
-
-    def names(self) -> list:
-        return list(self.columns)
-
-    def as_dict(self) -> dict:
-        d = {"time": self.time}
-        d.update(self.columns)
-        return d
-
-
-class CosimError(RuntimeError):
-    """A co-simulation step failed; the message carries the FMU log. Raised by `cosimulate` after the
-    FMUs are closed, with `result` (the CosimResult up to the last good communication point) and `time`
-    (the failed step's start) set; both are None for a failure before the first step."""
-    result = None
-    time = None
+#: the elevator's connections (source, target): the plant's measurement to the drive, the drive's torque
+#: and brake command to the plant
+CONNECTIONS = tuple((f"plant.{v}", f"drive.{v}") for v in PLANT_EXCHANGE) + \
+    tuple((f"drive.{v}", f"plant.{v}") for v in DRIVE_EXCHANGE)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -502,47 +488,38 @@ def monitor_line(info: Mapping) -> str:
     return f"WARNING: {info['instability']['message']} [{n} episode{'s' if n > 1 else ''}; {figs}]"
 
 
+class _MonitorProbe:
+    """The CouplingMonitor around every communication step of the master (fmu.master.run's probe)."""
+
+    def __init__(self, mon: CouplingMonitor, drive, plant, scheme: str, step: float, on_instability: str):
+        self.mon, self.drive, self.plant = mon, drive, plant
+        self.scheme, self.gs, self.on_instability = scheme, scheme == "gauss-seidel", on_instability
+        self.tk = time_grid(step)
+
+    def start(self):
+        self.iw, self.ia = self.plant.index("motor.speed"), self.plant.index("motor.angle")
+
+    def before(self):
+        y = self.plant.out
+        self.w0, self.th0, self.tau0 = y[self.iw], y[self.ia], self.drive.out[0]
+
+    def after(self, k: int) -> bool:
+        d = self.drive.out
+        ep = self.mon.update(self.tk(k + 1), d[0] if self.gs else self.tau0, d[0], d[1], self.w0, self.th0,
+                             self.plant.out[self.ia])
+        return ep is not None and _on_detection(self.mon, ep, self.scheme, self.on_instability)
+
+
 # ------------------------------------------------------------------------------------------------
 # fmpy master
 # ------------------------------------------------------------------------------------------------
-def _time_grid(step: float):
-    """Communication points t_k as the masters compute them: for a step that is a whole number of
-    nanoseconds, t_k = (k * step_ns) / 1e9, the correctly rounded k*step (what libcosim passes: it counts
-    time in integer nanoseconds); otherwise k * step."""
-    step_ns = round(step * 1e9)
-    if step_ns >= 1 and abs(step_ns - step * 1e9) <= 1e-6 * step * 1e9:
-        ns = float(step_ns)
-        return lambda k: (k * ns) / 1e9
-    return lambda k: k * step
-
-
-class _FastReal:
-    """A preallocated value-reference array + value buffer for one setReal/getReal call per step."""
-
-    def __init__(self, handle, names: Sequence[str], buf=None):
-        from fmpy.fmi2 import fmi2Real, fmi2ValueReference
-
-        self.names = tuple(names)
-        self.n = len(self.names)
-        self.vr = (fmi2ValueReference * self.n)(*[handle.vr(n) for n in self.names])
-        self.buf = buf if buf is not None else (fmi2Real * self.n)()
-        self.view = np.ctypeslib.as_array(self.buf)
-
-
-def _check(status, what, handles, t):
-    if status > 1:
-        logs = "\n".join(f"--- {h.instance_name} log ---\n{h.log_text()}" for h in handles if h.messages)
-        name = ("ok", "warning", "discard", "error", "fatal", "pending")[status] if status < 6 else status
-        raise CosimError(f"{what} at t = {t:.6f} s returned fmi2 status {status} ({name})\n{logs}")
-
-
 def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[float] = None,
                plant_values: Optional[Mapping[str, float]] = None,
                drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
                record: Optional[Sequence[str]] = None, record_every: int = 1,
                progress: Optional[Callable[[float], None]] = None, progress_every: float = 0.25,
                timing: bool = False, echo_log: bool = False, ns_step_differences: bool = False,
-               monitor: bool = True, on_instability: str = "warn") -> CosimResult:
+               monitor: bool = True, on_instability: str = "warn") -> TimeSeries:
     """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (see the module docstring).
 
     step          communication step (s); any value > 0
@@ -563,20 +540,17 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     on_instability  "warn": log a warning and continue (the result is flagged); "stop": also end the
                   run at the detection (result truncated there); "raise": raise CosimInstability
 
-    Per step the master makes exactly one setReal, doStep and getReal call per FMU through fmpy's
-    ctypes functions with preallocated value-reference and value arrays; the plant's getReal writes
-    motor.speed/angle straight into the buffer the drive's setReal reads, and vice versa.
-
-    Steps: check the arguments; open and initialize both FMUs (`_open_pair`); set up the exchange
-    buffers (`_Exchange`); run the communication steps (`_master_loop`); close the FMUs; assemble the
-    result (`_cosim_result`).
+    The master is fmu.master.run over CONNECTIONS: per step exactly one setReal, doStep and getReal call
+    per FMU through fmpy's ctypes functions with preallocated value-reference and value arrays; the
+    plant's getReal writes motor.speed/angle straight into the buffer the drive's setReal reads, and vice
+    versa.
     """
     from ..components.drive import trip_end_time
     from .runner import SlaveHandle
 
     if not (step > 0.0 and math.isfinite(step)):
         raise ValueError(f"communication step must be a finite number > 0, got {step!r}")
-    if scheme not in ("gauss-seidel", "jacobi"):
+    if scheme not in SCHEMES:
         raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
     if on_instability not in ON_INSTABILITY:
         raise ValueError(f"on_instability must be one of {ON_INSTABILITY}, got {on_instability!r}")
@@ -585,19 +559,26 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     n = int(math.floor(t_end / step + 1e-9))
     if n < 1:
         raise ValueError(f"t_end = {t_end} s is shorter than one step ({step} s)")
-    record_every = max(1, int(record_every))
     handles = []
     t_wall0 = time.perf_counter()
     try:
         plant, drive = _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles, t_end, plant_values,
                                   drive_values, echo_log)
-        x = _Exchange(plant, drive, record, handles)
-        mon = None
+        plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
+        rec = [r for r in (record if record is not None else plant_outputs) if r not in PLANT_EXCHANGE]
+        missing = [r for r in rec if r not in plant.variables]
+        if missing:
+            raise ValueError(f"plant FMU has no variables {missing}")
+        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
+        recorded = {"plant": list(PLANT_EXCHANGE) + rec, "drive": list(DRIVE_EXCHANGE) + drive_rec}
+        P, D = FmuUnit("plant", plant), FmuUnit("drive", drive)
+        probe = None
         if monitor:
             scale = drive.get("torque.max") if "torque.max" in drive.variables else None
-            mon = CouplingMonitor(step, scale)
-        run = _master_loop(x, handles, mon, n, step, scheme, record_every, progress, progress_every, timing,
-                           ns_step_differences, on_instability)
+            probe = _MonitorProbe(CouplingMonitor(step, scale), D, P, scheme, step, on_instability)
+        run = master.run([D, P], CONNECTIONS, n=n, step=step, scheme=scheme, record=recorded,
+                         record_every=record_every, probe=probe, progress=progress, progress_every=progress_every,
+                         timing=timing, ns_step_differences=ns_step_differences)
         warnings = [str(m) for h in handles for m in h.messages if m.status >= 1]
     finally:
         for h in reversed(handles):
@@ -605,12 +586,30 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                 h.close()
             except Exception:  # pragma: no cover - teardown must not hide the real error
                 pass
-    total_wall = time.perf_counter() - t_wall0
-    res = _cosim_result(x, run, mon, scheme, step, record_every, total_wall, warnings)
+    info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": plant_outputs,
+            **_run_info(run, step, probe), "total_wall_s": time.perf_counter() - t_wall0,
+            "first_step_wall_s": run.t_first,
+            "rtf_after_first_step": ((run.n - 1) * step / (run.loop_wall - run.t_first)
+                                     if run.n > 1 and run.loop_wall > run.t_first else math.inf),
+            "fmu_warnings": warnings}
+    if run.step_ns is not None:
+        info["plant_doStep_ns"] = run.step_ns["plant"]["step"]
+        info["drive_doStep_ns"] = run.step_ns["drive"]["step"]
+    res = run.series(recorded, info)
     if run.failure is not None:
         run.failure.result, run.failure.time = res, run.n * step
         raise run.failure
     return res
+
+
+def _run_info(run: master.MasterRun, step: float, probe: Optional[_MonitorProbe]) -> dict:
+    """Steps, end time, loop wall, real-time factor and the coupling monitor's report of a run."""
+    info = {"t_end_s": run.n * step, "steps": run.n, "loop_wall_s": run.loop_wall,
+            "rtf": (run.n * step) / run.loop_wall if run.loop_wall > 0 else math.inf,
+            "stopped_by_monitor": run.stop}
+    if probe is not None:
+        info.update(probe.mon.report(probe.scheme))
+    return info
 
 
 def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_values, drive_values, echo_log):
@@ -629,189 +628,6 @@ def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_va
     return plant, drive
 
 
-class _Exchange:
-    """The value buffers of the two FMUs and their fmi2 functions. P holds the plant's exchange
-    outputs (PLANT_EXCHANGE) then the recorded outputs, D the drive's (DRIVE_EXCHANGE, then
-    DRIVE_RECORD); the drive's setReal (DI) reads the head of P's buffer and the plant's (PI) the head
-    of D's. Reads the initial outputs."""
-
-    def __init__(self, plant, drive, record, handles):
-        self.plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
-        rec = [r for r in (record if record is not None else self.plant_outputs) if r not in PLANT_EXCHANGE]
-        missing = [r for r in rec if r not in plant.variables]
-        if missing:
-            raise ValueError(f"plant FMU has no variables {missing}")
-        self.P = P = _FastReal(plant, list(PLANT_EXCHANGE) + rec)
-        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
-        self.D = D = _FastReal(drive, list(DRIVE_EXCHANGE) + drive_rec)
-        # the exchange: drive.setReal reads the head of the plant's output buffer and vice versa
-        self.DI = _FastReal(drive, PLANT_EXCHANGE, buf=P.buf)
-        self.PI = _FastReal(plant, DRIVE_EXCHANGE, buf=D.buf)
-        fp, fd = plant.fmu, drive.fmu
-        self.cp, self.cd = fp.component, fd.component
-        self.getp, self.getd = fp.dll.fmi2GetReal, fd.dll.fmi2GetReal
-        self.setp, self.setd = fp.dll.fmi2SetReal, fd.dll.fmi2SetReal
-        self.stepp, self.stepd = fp.dll.fmi2DoStep, fd.dll.fmi2DoStep
-        _check(self.getp(self.cp, P.vr, P.n, P.buf), "plant getReal", handles, 0.0)
-        _check(self.getd(self.cd, D.vr, D.n, D.buf), "drive getReal", handles, 0.0)
-
-
-@dataclass
-class _LoopRun:
-    Prec: np.ndarray        # recorded plant values, rows 0..j-1
-    Drec: np.ndarray        # recorded drive values
-    j: int                  # recorded rows
-    n: int                  # steps made (fewer than asked if the monitor stopped the run)
-    stop: bool              # stopped by the coupling monitor
-    t_first: float          # wall time of the first step (loads/compiles the FMUs' kernels)
-    loop_wall: float
-    tns_p: Optional[np.ndarray]
-    tns_d: Optional[np.ndarray]
-    failure: Optional["CosimError"] = None   # the error that ended the run early, if any
-
-
-def _master_loop(x: _Exchange, handles, mon, n, step, scheme, record_every, progress, progress_every, timing,
-                 ns_step_differences, on_instability) -> _LoopRun:
-    """The communication steps. Everything the loop touches is bound to a local name first and the
-    two schemes and the timing variant are written out: this loop is the master's whole per-step
-    cost (docs/cosim.md, Performance), a few microseconds."""
-    P, D = x.P, x.D
-    cp, cd = x.cp, x.cd
-    getp, getd, setp, setd, stepp, stepd = x.getp, x.getd, x.setp, x.setd, x.stepp, x.stepd
-    upd = mon.update if mon is not None else None
-    # recording
-    nrec = n // record_every + 1
-    Prec = np.empty((nrec, P.n))
-    Drec = np.empty((nrec, D.n))
-    Prec[0] = P.view
-    Drec[0] = D.view
-    tns_p = np.zeros(n, dtype=np.int64) if timing else None
-    tns_d = np.zeros(n, dtype=np.int64) if timing else None
-    every = max(1, int(round(progress_every / step))) if progress is not None else n + 1
-    Pv, Dv = P.view, D.view
-    PIvr, PIn, DIvr, DIn = x.PI.vr, x.PI.n, x.DI.vr, x.DI.n
-    Pvr, Pn, Pbuf, Dvr, Dn, Dbuf = P.vr, P.n, P.buf, D.vr, D.n, D.buf
-    gs = scheme == "gauss-seidel"
-    perf = time.perf_counter_ns
-    tk = _time_grid(step)
-    j = 1
-    t_first = 0.0
-    t_loop0 = time.perf_counter()
-    h = step
-    stop = False
-    failure = None
-    try:
-        for k in range(n):
-            t = tk(k)
-            if ns_step_differences:
-                h = tk(k + 1) - t
-            if mon is not None:
-                w0, th0, tau0 = Pv[0], Pv[1], Dv[0]
-            if gs:
-                s = setd(cd, DIvr, DIn, Pbuf)
-                if s > 1:
-                    _check(s, "drive setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepd(cd, t, h, 1)
-                    tns_d[k] = perf() - a
-                else:
-                    s = stepd(cd, t, h, 1)
-                if s > 1:
-                    _check(s, "drive doStep", handles, t)
-                s = getd(cd, Dvr, Dn, Dbuf)
-                if s > 1:
-                    _check(s, "drive getReal", handles, t)
-                s = setp(cp, PIvr, PIn, Dbuf)
-                if s > 1:
-                    _check(s, "plant setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepp(cp, t, h, 1)
-                    tns_p[k] = perf() - a
-                else:
-                    s = stepp(cp, t, h, 1)
-                if s > 1:
-                    _check(s, "plant doStep", handles, t)
-                s = getp(cp, Pvr, Pn, Pbuf)
-                if s > 1:
-                    _check(s, "plant getReal", handles, t)
-            else:
-                s = setd(cd, DIvr, DIn, Pbuf)
-                if s > 1:
-                    _check(s, "drive setReal", handles, t)
-                s = setp(cp, PIvr, PIn, Dbuf)
-                if s > 1:
-                    _check(s, "plant setReal", handles, t)
-                if timing:
-                    a = perf()
-                    s = stepd(cd, t, h, 1)
-                    b = perf()
-                    s2 = stepp(cp, t, h, 1)
-                    tns_p[k] = perf() - b
-                    tns_d[k] = b - a
-                else:
-                    s = stepd(cd, t, h, 1)
-                    s2 = stepp(cp, t, h, 1)
-                if s > 1:
-                    _check(s, "drive doStep", handles, t)
-                if s2 > 1:
-                    _check(s2, "plant doStep", handles, t)
-                s = getd(cd, Dvr, Dn, Dbuf)
-                if s > 1:
-                    _check(s, "drive getReal", handles, t)
-                s = getp(cp, Pvr, Pn, Pbuf)
-                if s > 1:
-                    _check(s, "plant getReal", handles, t)
-            if mon is not None:
-                ep = upd(tk(k + 1), Dv[0] if gs else tau0, Dv[0], Dv[1], w0, th0, Pv[1])
-                if ep is not None:
-                    stop = _on_detection(mon, ep, scheme, on_instability)
-            if (k + 1) % record_every == 0 or stop:
-                Prec[j] = Pv
-                Drec[j] = Dv
-                j += 1
-            if (k + 1) % every == 0:
-                progress((k + 1) * step)
-            if k == 0:                      # the first step loads/compiles the FMUs' kernels (JIT)
-                t_first = time.perf_counter() - t_loop0
-            if stop:
-                n = k + 1
-                break
-    except CosimError as exc:   # a failed step ends the run; what was recorded before it is kept
-        failure, n = exc, k
-    loop_wall = time.perf_counter() - t_loop0
-    if progress is not None:
-        progress(n * step)
-    return _LoopRun(Prec, Drec, j, n, stop, t_first, loop_wall, tns_p, tns_d, failure)
-
-
-def _cosim_result(x: _Exchange, run: _LoopRun, mon, scheme, step, record_every, total_wall, warnings):
-    """Columns by variable name, the time axis and the run's info (walls, real-time factors, monitor
-    report, doStep timings)."""
-    j, n, stop, loop_wall, t_first = run.j, run.n, run.stop, run.loop_wall, run.t_first
-    cols = {}
-    for i, name in enumerate(x.P.names):
-        cols[name] = run.Prec[:j, i]
-    for i, name in enumerate(x.D.names):
-        cols[name] = run.Drec[:j, i]
-    tt = np.arange(j) * (step * record_every)
-    if stop and (n % record_every):
-        tt[-1] = n * step
-    info = {"master": "fmpy", "scheme": scheme, "step_s": step, "plant_outputs": x.plant_outputs, "t_end_s": n * step, "steps": n,
-            "loop_wall_s": loop_wall, "total_wall_s": total_wall, "first_step_wall_s": t_first,
-            "rtf": (n * step) / loop_wall if loop_wall > 0 else math.inf,
-            "rtf_after_first_step": ((n - 1) * step / (loop_wall - t_first)
-                                     if n > 1 and loop_wall > t_first else math.inf),
-            "fmu_warnings": warnings, "stopped_by_monitor": stop}
-    if mon is not None:
-        info.update(mon.report(scheme))
-    if run.tns_p is not None:
-        info["plant_doStep_ns"] = run.tns_p
-        info["drive_doStep_ns"] = run.tns_d
-    return CosimResult(tt, cols, info)
-
-
 # ------------------------------------------------------------------------------------------------
 # monolithic reference (no FMI)
 # ------------------------------------------------------------------------------------------------
@@ -819,7 +635,7 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
                scene=None, plant_fmu=None, plant_values: Optional[Mapping[str, float]] = None,
                drive_values: Optional[Mapping[str, float]] = None, scheme: str = "gauss-seidel",
                progress: Optional[Callable[[float], None]] = None, monitor: bool = True,
-               on_instability: str = "warn") -> CosimResult:
+               on_instability: str = "warn") -> TimeSeries:
     """The same Plant and ElectricDrive as the FMUs, coupled in this process every `step` seconds
     (Gauss-Seidel: the drive steps first with the measurement at t, the plant then holds the drive's
     torque over [t, t + step]); samples every `record_step` (a multiple of `step`).
@@ -828,11 +644,13 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     co-simulation computes (tests compare them bit for bit); with a much finer step it is the
     reference of the co-simulation error (docs/cosim.md). The plant comes from `scene` (default: the
     shipped elevator_2to1 scene) or, if given, from the scene the plant FMU `plant_fmu` carries.
-    `monitor`/`on_instability`: the CouplingMonitor at the coupling step, as in `cosimulate`."""
+    `monitor`/`on_instability`: the CouplingMonitor at the coupling step, as in `cosimulate`.
+    The master is fmu.master.run over CONNECTIONS (plus car.position to the drive's shaft information
+    system when it has one), with the models as PlantUnit and DriveUnit."""
     from ..components.drive import make_drive
     from ..components.plant import make_plant
 
-    if scheme not in ("gauss-seidel", "jacobi"):
+    if scheme not in SCHEMES:
         raise ValueError(f"scheme must be 'gauss-seidel' or 'jacobi', got {scheme!r}")
     if on_instability not in ON_INSTABILITY:
         raise ValueError(f"on_instability must be one of {ON_INSTABILITY}, got {on_instability!r}")
@@ -848,66 +666,18 @@ def monolithic(*, step: float = 1e-4, t_end: Optional[float] = None, record_step
     m = int(round(record_step / step))
     if m < 1 or abs(m * step - record_step) > 1e-9 * record_step:
         raise ValueError(f"record_step {record_step} must be a multiple of step {step}")
-    names = [s for s in plant.output_names if s != "motor.torque"]
-    idx = [plant.output_names.index(s) for s in names]
-    iw = plant.output_names.index("motor.speed")
-    ia = plant.output_names.index("motor.angle")
+    P, D = master.PlantUnit("plant", plant), master.DriveUnit("drive", drive)
     # the shaft information system reads the car position (in process only)
-    ic = plant.output_names.index("car.position") if drive.params.sis else None
-    nrec = n // m + 1
-    Y = np.empty((nrec, len(names)))
-    D = np.empty((nrec, 2 + len(DRIVE_RECORD)))
-
-    def drive_row(tau, br):
-        return (tau, br, drive.position_ref, drive.velocity_ref, drive.acceleration_ref,
-                drive.speed_ref, drive.torque_ref) + drive.currents
-
-    y = plant._y
-    Y[0] = y[idx]
-    D[0] = drive_row(0.0, 0.0)
-    tau = br = 0.0
-    j = 1
-    every = max(1, int(round(0.25 / step)))
-    tk = _time_grid(step)
-    mon = CouplingMonitor(step, drive.params.T_max) if monitor else None
-    stop = False
-    t0 = time.perf_counter()
-    for k in range(n):
-        t = tk(k)
-        w, th = y[iw], y[ia]
-        tau0 = tau
-        xc = y[ic] if ic is not None else math.nan
-        if scheme == "gauss-seidel":
-            tau, br = drive.step(t, step, w, th, xc)
-            y = plant.step(step, tau, br)
-        else:
-            y = plant.step(step, tau, br)
-            tau, br = drive.step(t, step, w, th, xc)
-        if mon is not None:
-            ep = mon.update(tk(k + 1), tau if scheme == "gauss-seidel" else tau0, tau, br, w, th, y[ia])
-            if ep is not None:
-                stop = _on_detection(mon, ep, scheme, on_instability)
-        if stop:
-            n = k + 1
-            if (k + 1) % m:
-                break
-        if (k + 1) % m == 0:
-            Y[j] = y[idx]
-            D[j] = drive_row(tau, br)
-            j += 1
-        if progress is not None and (k + 1) % every == 0:
-            progress((k + 1) * step)
-        if stop:
-            break
-    wall = time.perf_counter() - t0
-    cols = {name: Y[:j, i] for i, name in enumerate(names)}
-    for i, name in enumerate(DRIVE_EXCHANGE + DRIVE_RECORD):
-        cols[name] = D[:j, i]
-    info = {"master": "monolithic", "scheme": scheme, "step_s": step, "t_end_s": n * step, "steps": n,
-            "loop_wall_s": wall, "rtf": n * step / wall if wall > 0 else math.inf, "stopped_by_monitor": stop}
-    if mon is not None:
-        info.update(mon.report(scheme))
-    return CosimResult(np.arange(j) * (m * step), cols, info)
+    sis = (("plant.car.position", "drive.car.position"),) if drive.params.sis else ()
+    recorded = {"plant": [s for s in plant.output_names if s != "motor.torque"],
+                "drive": list(DRIVE_EXCHANGE + DRIVE_RECORD)}
+    probe = _MonitorProbe(CouplingMonitor(step, drive.params.T_max), D, P, scheme, step, on_instability) \
+        if monitor else None
+    run = master.run([D, P], CONNECTIONS + sis, n=n, step=step, scheme=scheme, record=recorded, record_every=m,
+                     probe=probe, progress=progress)
+    run.drop_partial()      # the reference samples whole record steps only
+    return run.series(recorded, {"master": "monolithic", "scheme": scheme, "step_s": step,
+                                 **_run_info(run, step, probe)})
 
 
 # ------------------------------------------------------------------------------------------------

@@ -20,6 +20,8 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from ..core.results import TimeSeries
+
 CRANE_NAME = "CranePlant"
 CRANE_DRIVE_NAME = "CraneDrive"
 CRANE_REFERENCE_SCENE = "slewing_crane.toml"   # the scene CRANE_NAME stands for
@@ -92,23 +94,13 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
 def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
     from ..components.craneplant import CranePlant
-    from ..core.plausibility import check_or_raise
-    from ..core.scene import load_scene
+    from .cosim import checked_scene, fmu_config
 
-    scene = load_scene(scene_path)
-    check_or_raise(scene)
+    scene = checked_scene(scene_path)
     cp = CranePlant(scene, "torque")
-    return {
-        "format": "reeve_fmu.crane_fmu/1",
-        "name": name,
-        "scene": CRANE_SCENE,
-        "scene_name": scene.name,
-        "scene_description": getattr(scene, "description", "") or "",
-        "parts": cp.parts,
-        "holding_torque": cp.holding_torque(),
-        "stop_time": float(scene.t_end),
-        "outputs": crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts),
-    }
+    return fmu_config("reeve_fmu.crane_fmu/1", name, scene, CRANE_SCENE, parts=cp.parts, holding_torque=cp.holding_torque(),
+                      stop_time=float(scene.t_end),
+                      outputs=crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts))
 
 
 def _entry(kind: str) -> Path:
@@ -163,24 +155,16 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 
-class CraneCosim:
-    """Sampled signals of a crane co-simulation: `time` and named columns."""
-
-    def __init__(self, time_, columns):
-        self.time, self.columns = time_, columns
-
-    def __getitem__(self, name):
-        return self.columns[name]
-
-
 def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float = 30.0, slew_input: str = "speed",
                      drive_values: Optional[Mapping[str, float]] = None,
                      record: Sequence[str] = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw",
                                               "payload.position.z", "jib.angle", "jib.angular_velocity",
-                                              "jib.joint_torque", "motor.speed", "tip.tension_out")) -> CraneCosim:
-    """Co-simulate CranePlant.fmu with CraneDrive.fmu (Gauss-Seidel, communication step `step`):
-    the drive reads motor.speed and the jib's angular velocity, the plant takes motor.torque and
-    slew.torque or slew.speed (slew_input). Raises RuntimeError with both FMUs' logs if a step fails."""
+                                              "jib.joint_torque", "motor.speed", "tip.tension_out")) -> TimeSeries:
+    """Co-simulate CranePlant.fmu with CraneDrive.fmu (Gauss-Seidel, communication step `step`, points
+    k * step): the drive reads motor.speed and the jib's angular velocity, the plant takes motor.torque and
+    slew.torque or slew.speed (slew_input). The result holds the drive's two commands and `record` after
+    every step (from t = step on). Raises CosimError with both FMUs' logs if a step fails."""
+    from .master import FmuUnit, run
     from .runner import SlaveHandle
 
     if slew_input not in SLEW_MODES:
@@ -196,26 +180,14 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
         drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
         slew_w = next(nm for nm in plant.variables if nm.endswith(".angular_velocity"))
         cmd = "slew.speed" if slew_input == "speed" else "slew.torque"
-        rows = []
-        for k in range(n):
-            t = k * step
-            w, ws = plant.get_many(["motor.speed", slew_w])
-            drive.set_many({"motor.speed": w, "slew.angular_velocity": ws})
-            _status(drive.do_step(t, step), "crane drive", handles, t)
-            tq, sc = drive.get_many(["motor.torque", cmd])
-            plant.set_many({"motor.torque": tq, cmd: sc})
-            _status(plant.do_step(t, step), "crane plant", handles, t)
-            rows.append([t + step, tq, sc] + plant.get_many(list(record)))
+        connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{slew_w}", "drive.slew.angular_velocity"),
+                       ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{cmd}"))
+        recorded = {"drive": ["motor.torque", cmd], "plant": list(record)}
+        r = run([FmuUnit("drive", drive), FmuUnit("plant", plant)], connections, n=n, step=step, grid="multiply",
+                record=recorded)
     finally:
         for h in reversed(handles):
             h.close()
-    a = np.array(rows).reshape(-1, 3 + len(record))
-    cols = {"motor.torque": a[:, 1], cmd: a[:, 2]}
-    cols.update({name: a[:, 3 + i] for i, name in enumerate(record)})
-    return CraneCosim(a[:, 0], cols)
-
-
-def _status(status, what, handles, t):
-    if status > 1:
-        logs = "\n".join(f"--- {h.instance_name} ---\n{h.log_text()}" for h in handles)
-        raise RuntimeError(f"{what} doStep at t = {t:.4f} s returned status {status}\n{logs}")
+    if r.failure is not None:
+        raise r.failure
+    return TimeSeries(np.arange(n) * step + step, {k: v[1:] for k, v in r.columns(recorded).items()})

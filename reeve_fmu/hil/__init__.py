@@ -5,5 +5,8 @@ drive402   the drive's state machine, CST/CSV, object dictionary behind a canope
 plants     the plant FMU through fmpy, or the same Plant in process
 bridge     the bench loop: SYNC producer, lock-step or real time, watchdog, fault injection
 controller the built-in controller: the demo's ElectricDrive as a CANopen master
-run        `reeve-fmu hil` (orchestration, summary) and `python -m reeve_fmu.hil controller|bench`
+buses      bus construction, the udp_multicast probe, --multicast route
+runners    `reeve-fmu hil` runs: configuration, bench + controller, in-process reference runs
+review     the run's summary, verdicts, written results and report
+cli        `reeve-fmu hil` and `python -m reeve_fmu.hil controller|bench`
 """

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.results import TimeSeries
 from .buses import send_batch
 from .drive402 import DriveNode
 from .plants import PlantError
@@ -350,16 +351,24 @@ class Bridge:
         setattr(self.stats, "rejected_" + kind, getattr(self.stats, "rejected_" + kind) + 1)
         self._rejected_in_cycle = True
 
-    def _on_rpdo1(self, data) -> None:
+    def _rpdo(self, codec, data, answer: bool):
+        """The raw signals of an RPDO, or None: ignored outside OPERATIONAL, rejected when malformed
+        (`answer`: the frame is the controller's answer to this cycle, broken or not)."""
         if self.dn.nmt_state != NMT_STATE_OPERATIONAL or self._k < 0:
             self.stats.frames_ignored += 1           # PDOs are only processed in OPERATIONAL
-            return
-        codec = self.proto.TorqueCmd
+            return None
         try:
-            raw = codec.decode_raw(data)
+            return codec.decode_raw(data)
         except CodecError:
             self._reject("malformed")
-            self._closed = True                       # the controller's (broken) answer to this cycle
+            if answer:
+                self._closed = True
+            return None
+
+    def _on_rpdo1(self, data) -> None:
+        codec = self.proto.TorqueCmd
+        raw = self._rpdo(codec, data, True)
+        if raw is None:
             return
         if self.dn.params["counter_check"] and self._counter is not None and raw[4] != self._counter:
             self._reject("stale")                     # an answer to an older SYNC: keep waiting
@@ -373,14 +382,9 @@ class Bridge:
         self._closed = True
 
     def _on_rpdo2(self, data) -> None:
-        if self.dn.nmt_state != NMT_STATE_OPERATIONAL or self._k < 0:
-            self.stats.frames_ignored += 1
-            return
         codec = self.proto.VelocityCmd
-        try:
-            raw = codec.decode_raw(data)
-        except CodecError:
-            self._reject("malformed")
+        raw = self._rpdo(codec, data, False)
+        if raw is None:
             return
         if codec.in_range(raw) is not None:
             self._reject("out_of_range")
@@ -553,8 +557,6 @@ class Bridge:
         iw, ia, it, ix, iv, ib = self._iw, self._ia, self._it, self._ix, self._iv, self._ib
         Message = self._can.Message
         send_frames = functools.partial(send_batch, self.bus, reuse=True)
-        recv = self.bus.recv
-        inj = self.inj
         d = self.drive
         dn = self.dn
         perf = self.clock
@@ -675,14 +677,19 @@ class Bridge:
         st.step_time = step_time[:k_done]
         if jitter is not None:
             st.sync_jitter = jitter[:k_done]
-        if inj is not None:
-            st_inj = {"lost": inj.lost, "delayed": inj.delayed, "corrupted": inj.corrupted}
-        else:
-            st_inj = {"lost": 0, "delayed": 0, "corrupted": 0}
-        tt = np.arange(k_done + 1) * dt
-        return BridgeResult(time=tt, outputs=Y[:k_done + 1] if rec else None,
-                            hil=H[:k_done + 1] if rec else None, output_names=list(self.output_names),
-                            stats=st, injected=st_inj)
+        return self._result(Y, H, k_done)
+
+    def _result(self, Y, H, k_done: int) -> "BridgeResult":
+        """The run's record (None without recording: Y is None), statistics and injected faults."""
+        inj = self.inj
+        injected = {"lost": inj.lost, "delayed": inj.delayed, "corrupted": inj.corrupted} if inj is not None \
+            else {"lost": 0, "delayed": 0, "corrupted": 0}
+        record = None
+        if Y is not None:
+            cols = {n: Y[:k_done + 1, i] for i, n in enumerate(self.output_names)}
+            cols.update({n: H[:k_done + 1, i] for i, n in enumerate(HIL_COLUMNS)})
+            record = TimeSeries(np.arange(k_done + 1) * self.cfg.dt, cols)
+        return BridgeResult(record=record, stats=self.stats, injected=injected)
 
     # -- waiting ---------------------------------------------------------------------------------------------
     def _wait_lockstep(self, k: int) -> None:
@@ -777,19 +784,11 @@ HIL_COLUMNS = ("hil.torque", "hil.brake_command", "hil.state", "hil.statusword",
 
 @dataclass
 class BridgeResult:
-    time: np.ndarray
-    outputs: np.ndarray | None
-    hil: np.ndarray | None
-    output_names: list
+    """A bench run: `record`, a TimeSeries of the plant outputs and HIL_COLUMNS at every SYNC (None
+    without recording), the statistics and the injected faults."""
+    record: TimeSeries | None
     stats: BridgeStats
     injected: dict
 
     def column(self, name: str) -> np.ndarray:
-        if name in HIL_COLUMNS:
-            return self.hil[:, HIL_COLUMNS.index(name)]
-        return self.outputs[:, self.output_names.index(name)]
-
-    def columns(self) -> dict:
-        cols = {n: self.outputs[:, i] for i, n in enumerate(self.output_names)}
-        cols.update({n: self.hil[:, i] for i, n in enumerate(HIL_COLUMNS)})
-        return cols
+        return self.record[name]

@@ -1,16 +1,23 @@
-"""Bus construction. `FastVirtualBus` is python-can's `virtual` interface with a cheaper send().
+"""Bus construction, the udp_multicast probe and `--multicast route`.
 
-python-can's VirtualBus.send() deep-copies every frame for every receiver: 25 of the 37 us that one
-send + recv costs on the test machine (measured). A 1 kHz lock-step loop moves 4-5 frames per cycle,
-so that copy alone would eat half of the 500 us budget of the 2000 steps/s target. FastVirtualBus copies
+`FastVirtualBus` is python-can's `virtual` interface with a cheaper send(). python-can's
+VirtualBus.send() deep-copies every frame for every receiver, most of what one send + recv costs; a
+1 kHz lock-step loop moves 4-5 frames per cycle, so that copy alone would eat much of the cycle budget
+of the 2000 steps/s target (docs/performance.md, "HIL"). FastVirtualBus copies
 the frame by constructing a new `can.Message` (fields are scalars and a bytearray) and is otherwise
 the same class: it joins the same process-wide channel registry, so plain `can.Bus(interface="virtual")`
 instances (e.g. a canopen Network) on the same channel exchange frames with it.
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import queue
+import random
+import shutil
 import socket
+import subprocess
+import threading
 import time
 
 import can
@@ -49,7 +56,7 @@ class FastVirtualBus(VirtualBus):
 
     def send_batch(self, msgs, reuse: bool = False) -> None:
         """Send frames back to back with one wake-up per receiver (a receiving thread is woken once per
-        cycle instead of once per frame: each wake-up costs a GIL hand-over, measured ~80 us under load).
+        cycle instead of once per frame: each wake-up costs a GIL hand-over, long under load).
         reuse=True: the caller gives up the Message objects, the last receiver gets them without a copy."""
         try:
             chan = self.channel
@@ -160,3 +167,100 @@ def make_bus(kind: str, channel=None, port: int | None = None, multicast: str = 
                            port=int(port or DEFAULT_UDP_PORT), hop_limit=1, **kw)
         return HostOnlyUdpMulticastBus(channel=channel or MULTICAST_GROUP, port=int(port or DEFAULT_UDP_PORT), **kw)
     return can.Bus(interface=kind, channel=channel, **kw)
+
+
+def multicast_probe(port: int | None = None, timeout: float = 1.0, multicast: str = "host") -> tuple[bool, str]:
+    """Can two udp_multicast buses on this host exchange a frame? (ok, reason)."""
+    import can
+
+    port = port or random.randint(44000, 44999)
+    a = b = None
+    try:
+        a = make_bus("udp_multicast", port=port, multicast=multicast)
+        b = make_bus("udp_multicast", port=port, multicast=multicast)
+        a.send(can.Message(arbitration_id=0x7FF, data=b"probe", is_extended_id=False))
+        deadline = time.perf_counter() + timeout
+        while time.perf_counter() < deadline:
+            m = b.recv(max(0.0, deadline - time.perf_counter()))
+            if m is not None and m.arbitration_id == 0x7FF:
+                return True, "ok"
+        return False, f"udp_multicast: a frame sent to {MULTICAST_GROUP} was not received within {timeout:g} s"
+    except Exception as exc:  # CanInitializationError, OSError
+        return False, f"udp_multicast: {type(exc).__name__}: {exc}"
+    finally:
+        for bus in (a, b):
+            if bus is not None:
+                try:
+                    bus.shutdown()
+                except Exception:
+                    pass
+
+
+def ensure_multicast(multicast: str = "host") -> tuple[bool, str]:
+    """Is udp_multicast usable on this host? Probes with two buses; changes nothing (the host-only buses
+    keep the frames on the loopback interface by their socket options). Returns (ok, reason)."""
+    return multicast_probe(multicast=multicast)
+
+
+def _ip(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([shutil.which("ip") or "ip", *args], capture_output=True, text=True, encoding="utf-8",
+                          errors="replace", timeout=10)
+
+
+class _Signals:
+    """SIGTERM and SIGHUP raise SystemExit while the bench runs, so that `finally` blocks undo what was set up
+    (Ctrl-C already raises KeyboardInterrupt); the previous handlers come back at exit."""
+
+    SIGNALS = ("SIGTERM", "SIGHUP")
+
+    def __enter__(self):
+        import signal
+
+        self.old = {}
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                sig = getattr(signal, name, None)
+                if sig is not None:
+                    self.old[sig] = signal.signal(sig, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise SystemExit(128 + signum)
+
+    def __exit__(self, *exc):
+        import signal
+
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+        return False
+
+
+@contextlib.contextmanager
+def bench_route(group: str = MULTICAST_GROUP, log=print):
+    """--multicast route: while the bench runs, route the bench's own group (a /32, never a range) to lo,
+    with lo's multicast flag on if it was off; said on the console and undone at exit, also after a fault,
+    Ctrl-C, SIGTERM or SIGHUP. Root only; only what was not already so is changed and undone."""
+    if not (hasattr(os, "geteuid") and os.geteuid() == 0) or shutil.which("ip") is None:
+        raise ValueError("--multicast route changes the routing table: it needs root and the `ip` command "
+                         "(the default --multicast host needs neither)")
+    undo = []
+    with _Signals():
+        try:
+            if "MULTICAST" not in _ip("link", "show", "lo").stdout.split(">")[0]:
+                r = _ip("link", "set", "lo", "multicast", "on")
+                if r.returncode != 0:
+                    raise OSError(f"ip link set lo multicast on: {r.stderr.strip()}")
+                undo.append(("link", "set", "lo", "multicast", "off"))
+                log("network: ip link set lo multicast on (undone at exit)")
+            if "dev lo" not in _ip("route", "show", "exact", f"{group}/32").stdout:
+                r = _ip("route", "add", f"{group}/32", "dev", "lo")
+                if r.returncode != 0:
+                    raise OSError(f"ip route add {group}/32 dev lo: {r.stderr.strip()}")
+                undo.append(("route", "del", f"{group}/32", "dev", "lo"))
+                log(f"network: ip route add {group}/32 dev lo (undone at exit)")
+            yield
+        finally:
+            for args in reversed(undo):
+                r = _ip(*args)
+                log(f"network: ip {' '.join(args)}" + ("" if r.returncode == 0 else f" FAILED: {r.stderr.strip()}"))

@@ -153,18 +153,11 @@ class FmuPlant:
 
 def make_default_plant(scene=None, params: dict | None = None):
     """The in-process twin of the plant FMU: reeve_fmu.components.plant.make_plant (car.load = rated load) of the
-    2:1 elevator scene, or Plant(scene) when the co-simulation module is not available. `params` are plant
-    FMU parameter names ({"car.load": ..., "rope.EA": ...})."""
+    2:1 elevator scene. `params` are plant FMU parameter names ({"car.load": ..., "rope.EA": ...})."""
+    from ..components.plant import make_plant
     from ..core.scene import default_scene
 
     scene = scene if scene is not None else default_scene("elevator_2to1.toml")
-    try:
-        from ..components.plant import make_plant
-    except ImportError:  # pragma: no cover - older checkouts
-        from ..components.plant import Plant
-        if params:
-            raise
-        return Plant(scene)
     return make_plant(scene, params=params or None)
 
 

@@ -1,4 +1,4 @@
-"""Verdicts and the one-page report of a `reeve-fmu hil` run.
+"""The review of a `reeve-fmu hil` run: its summary, verdicts, written results and one-page report.
 
 The record is checked like a demo trip (studies.verdicts) with the drive parameters and the load the
 bench actually ran; the co-simulation coupling check is the coupling monitor of the masters
@@ -8,6 +8,7 @@ carries the verdicts, what each WARN/FAIL means, the key figures and the trip pl
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -172,3 +173,106 @@ def write_report(out: Path, cfg, summary: dict, time_, cols: dict) -> Path:
     findings = list(summary.get("findings") or []) + ([note] if note else [])
     return report.write_report(out, title, scenario, _key_figures(summary), summary.get("verdicts") or [], pngs,
                                command="reeve-fmu hil", findings=findings)
+
+
+def _pct(a, q):
+    return float(np.percentile(a, q)) if len(a) else None
+
+
+def summarize(cfg, faults, res, plant, cols: dict, ctl_stats) -> dict:
+    """The run's summary: mode and timing, fault handling, frame counts, step-time percentiles."""
+    from .protocol import ERR_HEARTBEAT, ERR_PLANT, ERR_RPDO_TIMEOUT, ERR_SYNC, STATE_NAMES
+
+    st = res.stats
+    names_err = {ERR_RPDO_TIMEOUT: "command watchdog (RPDO timeout)", ERR_HEARTBEAT: "controller heartbeat lost",
+                 ERR_PLANT: "plant error", ERR_SYNC: "SYNC from the controller lost"}
+    summary = {
+        "bus": cfg.bus,
+        "controller": cfg.controller,
+        "mode": "real-time" if cfg.realtime else "lock-step",
+        "rt_priority": st.rt_priority,
+        "plant": plant.describe(),
+        "step_s": cfg.dt,
+        "steps": st.steps,
+        "simulated_s": st.steps * cfg.dt,
+        "wall_s": st.wall,
+        "steps_per_s": st.steps / st.wall if st.wall > 0 else None,
+        "real_time_factor": st.steps * cfg.dt / st.wall if st.wall > 0 else None,
+        "start_wait_s": st.started_wall,
+        "transport_delay": "one SYNC period: the torque held over [t_k, t_k+1) was computed from the sample "
+                           "at t_k-1 (RPDO received in cycle k-1, applied at SYNC k; Jacobi coupling)",
+        "inject": faults.as_dict(),
+        "watchdog_trips": st.watchdog_trips,
+        "brake_engaged_at": st.brake_engaged_at,
+        "frames_rejected": st.frames_rejected,
+        "deadline_misses": st.deadline_misses,
+        "frames_rejected_detail": {"malformed": st.rejected_malformed, "out_of_range": st.rejected_out_of_range,
+                                   "stale": st.rejected_stale},
+        "frames_injected": res.injected,
+        "fault": None if st.fault_at is None else {"code": f"0x{st.fault_code:04X}",
+                                                   "reason": names_err.get(st.fault_code, "fault"),
+                                                   "at": st.fault_at},
+        "brake_closed_at": st.brake_closed_at,
+        "machine_stopped_at": st.machine_stopped_at,
+        "stop_distance_m": st.stop_distance,
+        "car_speed_at_fault_m_s": st.car_speed_at_fault,
+        "car_excursion_after_fault_m": st.car_excursion,
+        "heartbeat_faults": st.heartbeat_faults,
+        "heartbeat_gaps": st.heartbeat_gaps,
+        "commands_valid": st.commands_valid,
+        "commands_missing": st.commands_missing,
+        "lockstep_timeouts": st.lockstep_timeouts,
+        "frames_received": st.frames_rx,
+        "sdo_requests": st.sdo_requests,
+        "plant_error": st.plant_error,
+        "final_state": STATE_NAMES[int(cols["hil.state"][-1])] if cols else None,
+        "step_time_p50_us": _pct(st.step_time, 50) * 1e6 if len(st.step_time) else None,
+        "step_time_p99_us": _pct(st.step_time, 99) * 1e6 if len(st.step_time) else None,
+        "step_time_max_us": float(np.max(st.step_time)) * 1e6 if len(st.step_time) else None,
+        "cycle_time_mean_us": st.wall / st.steps * 1e6 if st.steps else None,
+    }
+    if cfg.realtime and len(st.sync_jitter):
+        summary.update({"sync_jitter_p50_us": _pct(st.sync_jitter, 50) * 1e6,
+                        "sync_jitter_p99_us": _pct(st.sync_jitter, 99) * 1e6,
+                        "sync_jitter_max_us": float(np.max(st.sync_jitter)) * 1e6})
+    if ctl_stats is not None:
+        summary["controller_stats"] = ctl_stats
+    return summary
+
+
+def add_trip_figures(summary: dict, cfg, time_, cols: dict):
+    """Car travel and speed, peak tension and torque of the record."""
+    x = cols.get("car.position")
+    v = cols.get("car.velocity")
+    if x is not None:
+        summary.update({"car_travel_max_m": float(np.max(x) - x[0]), "car_position_final_m": float(x[-1]),
+                        "car_speed_max_m_s": float(np.max(np.abs(v))) if v is not None else None})
+    if "traction.tension_in" in cols:
+        summary["traction_tension_in_max_N"] = float(np.max(cols["traction.tension_in"]))
+    summary["motor_torque_peak_Nm"] = float(np.max(np.abs(cols["hil.torque"])))
+
+
+def write_results(out: Path, cfg, summary: dict, time_, cols: dict, st):
+    """results.csv (the record), timing.csv (per-cycle latency), summary.json and (with a record)
+    report.md with the trip plots."""
+    from ..core.results import write_csv
+
+    out.mkdir(parents=True, exist_ok=True)
+    if cols:
+        write_csv(out / "results.csv", time_, cols)
+    if len(st.step_time):
+        # per-cycle latency log: work time SYNC -> plant stepped, and (real time) SYNC lateness
+        tcols = {"step_time_us": st.step_time * 1e6}
+        if cfg.realtime and len(st.sync_jitter):
+            tcols["sync_late_us"] = st.sync_jitter * 1e6
+        write_csv(out / "timing.csv", np.arange(len(st.step_time)) * cfg.dt, tcols)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=json_default) + "\n",
+                                       encoding="utf-8")
+    if cols:
+        write_report(out, cfg, summary, time_, cols)
+
+
+def json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    raise TypeError(f"not JSON serialisable: {o!r}")

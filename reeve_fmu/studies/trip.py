@@ -201,7 +201,7 @@ def run_parameters(case: TripCase, drive_values: dict | None = None) -> dict:
 
 def run_case(case: TripCase, *, step: float = 1e-3, sis: bool | None = None, progress=None):
     """Run the case in process (Plant + ElectricDrive coupled every `step`, Gauss-Seidel, samples every
-    step): a fmu.cosim.CosimResult."""
+    step): a core.results.TimeSeries."""
     from ..fmu import cosim
 
     dv = dict(case.drive_values)

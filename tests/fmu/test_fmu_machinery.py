@@ -175,7 +175,8 @@ def test_state_json_roundtrip_is_exact():
 
     import numpy as np
 
-    from reeve_fmu.fmu.slave import ReeveSlave, canonical_state
+    from reeve_fmu.fmu.slave import ReeveSlave
+    from reeve_fmu.fmu.state import canonical_state
 
     rnd = random.Random(7)
     floats = [struct.unpack("<d", struct.pack("<Q", rnd.getrandbits(64)))[0] for _ in range(2000)]

@@ -66,7 +66,7 @@ def test_the_package_exports_what_api_md_lists():
 
     listed = re.findall(r"^\| `(\w+)` \|", (ROOT / "docs" / "api.md").read_text(encoding="utf-8"), re.M)
     exceptions = [n for n in listed if n.endswith(("Error", "Instability"))]
-    assert set(exceptions) | {"simulate", "cosimulate", "Result"} <= set(dir(reeve_fmu))
+    assert set(exceptions) | {"simulate", "cosimulate", "TimeSeries"} <= set(dir(reeve_fmu))
     for name in exceptions:
         assert issubclass(getattr(reeve_fmu, name), Exception), name
     assert issubclass(reeve_fmu.PlausibilityError, reeve_fmu.SceneError)

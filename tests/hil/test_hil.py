@@ -31,7 +31,8 @@ from reeve_fmu.hil.bridge import Bridge, BridgeConfig, FaultSpec, HilError
 from reeve_fmu.hil.buses import make_bus
 from reeve_fmu.hil.drive402 import Drive402
 from reeve_fmu.fmu.runner import run_in_subprocess
-from reeve_fmu.hil.run import HilConfig, ensure_multicast, run_hil
+from reeve_fmu.hil.buses import ensure_multicast
+from reeve_fmu.hil.runners import HilConfig, run_hil
 from tests.support import ROOT
 from tests.support.checks import check, check_min, check_png
 
@@ -247,7 +248,7 @@ def test_udp_multicast_cross_process_lockstep():
 # fault injection and safety
 # ------------------------------------------------------------------------------------------------
 def test_frame_loss_holds_the_setpoint_then_trips_the_watchdog(tmp_path):
-    from reeve_fmu.hil.run import reference_run
+    from reeve_fmu.hil.runners import reference_run
     from reeve_fmu.core.results import read_csv
 
     light = _run(tmp_path, inject=["loss=0.02", "seed=3"])
@@ -714,7 +715,7 @@ def test_hil_summary_report_and_console_carry_the_verdicts(tmp_path, capsys):
     (the bench is a 1 ms Jacobi coupling): stable through the stop and the brake drop, where the speed
     loop used to chatter on the brake's stick spring (peak 8.2 % of torque.max, FAIL) before the drive
     held its torque while the brake closes."""
-    from reeve_fmu.hil.run import _print_summary
+    from reeve_fmu.hil.cli import _print_summary
 
     r = _run(tmp_path, t_end=5.5)
     vs = {v["check"]: v for v in r["verdicts"]}
@@ -751,7 +752,7 @@ def test_hil_drive_is_sized_from_the_scene_and_its_torque_limit_reaches_the_benc
     pre-torque of 1050 N m with torque.max 1100 N m reaches the plant (a clamp at the default 1000 N m
     would hold it at 1000.45 N m) and no command is rejected."""
     from reeve_fmu.hil.controller import make_electric_drive, max_torque_permille
-    from reeve_fmu.hil.run import _with_defaults
+    from reeve_fmu.hil.runners import _with_defaults
     from reeve_fmu.studies.trip import sized_drive, trip_case
 
     cfg, _ = _with_defaults(HilConfig())
@@ -790,7 +791,7 @@ def test_hil_bench_entry_point_serves_a_controller(tmp_path, capsys):
     lock-step) waits for the controller's NMT start, serves 500 SYNC cycles and writes results.csv."""
     import threading
     from reeve_fmu.hil.controller import BuiltinController, ControllerConfig
-    from reeve_fmu.hil.run import main as hil_main
+    from reeve_fmu.hil.cli import main as hil_main
     from reeve_fmu.core.results import read_csv
 
     ch = "hil_bench_" + uuid.uuid4().hex[:6]

@@ -78,7 +78,8 @@ def nic_tx():
             return n
         n += addr[2] == socket.PACKET_OUTGOING and frame[12:14] == b"\x08\x00"
 
-from reeve_fmu.hil.run import HilConfig, bench_route, run_hil
+from reeve_fmu.hil.buses import bench_route
+from reeve_fmu.hil.runners import HilConfig, run_hil
 
 def settled():
     """The snapshot once the kernel's own IPv6 autoconfiguration of the new links is done."""
@@ -97,7 +98,7 @@ cfg = HilConfig(bus="udp_multicast", plant="in-process", t_end=0.3, out=None, co
 s = run_hil(cfg, log=None)
 out["host"] = {{"after": snapshot(), "tx": nic_tx(), "steps": s["steps"],
                "controller": s["controller_stats"]["stopped"]}}
-from reeve_fmu.hil.run import multicast_probe
+from reeve_fmu.hil.buses import multicast_probe
 multicast_probe(multicast="lan")          # the control: python-can's own sockets use the default route
 out["lan_tx"] = nic_tx()
 lines = []

@@ -9,6 +9,8 @@ from scipy.optimize import brentq
 
 from reeve_fmu.studies import bench
 from reeve_fmu.studies import lagrangian as lag
+from reeve_fmu.studies.lagrangian_build import build_lagrangian
+from reeve_fmu.studies.lagrangian_kernels import dense_matrices
 from reeve_fmu.core.scene import load_scene
 from tests.support import ROOT
 from tests.support.checks import check_png
@@ -27,7 +29,7 @@ def _hanging(statics=None):
 def test_hanging_static_elongation_exact():
     """docs/theory.md §7 item 1: linear elements with consistent gravity give the exact elongation."""
     sc = _hanging()
-    m = lag.build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
+    m = build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
     sim = lag.LagrangianSimulator(m)
     st = sim.initial_state()
     y = dict(zip(m.output_names, sim.outputs(st)))
@@ -45,11 +47,11 @@ def test_hanging_first_axial_frequency_beta_tan_beta():
     the baseline at the static state; the planar mesh also has transverse string modes, the axial
     one is picked by its motion)."""
     sc = _hanging()
-    m = lag.build_lagrangian(sc, element_length=2.5, coarse_length=2.5)
+    m = build_lagrangian(sc, element_length=2.5, coarse_length=2.5)
     sim = lag.LagrangianSimulator(m)
     st = sim.initial_state()
     n = m.n_dof
-    M, K, _ = lag.dense_matrices(m.LK, st.q, st.v, 0.0, st.z, np.zeros(n, bool), False)
+    M, K, _ = dense_matrices(m.LK, st.q, st.v, 0.0, st.z, np.zeros(n, bool), False)
     w2, vec = eigh(K, M)
     zrow = np.array([nm.endswith(".z") for nm in m.q_names])
     axial = [i for i in range(n) if np.sum(vec[zrow, i] ** 2) > 0.99 * np.sum(vec[:, i] ** 2)]
@@ -77,7 +79,7 @@ def test_modal_series_reference_meets_its_initial_condition():
 def test_lagrangian_release_follows_the_modal_series():
     sc = _hanging("none").with_overrides(ropes=tuple(
         r.__class__(**{**r.__dict__, "damping": 0.0}) for r in _hanging().ropes))
-    m = lag.build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
+    m = build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
     sim = lag.LagrangianSimulator(m, step=2.5e-4, rho_inf=1.0, newton_tol=1e-8)
     res = sim.run(0.6, 1e-3)
     z, _ = bench.hanging_release_exact(sc, res.time)
@@ -114,5 +116,5 @@ def test_bench_records_schema(tmp_path):
 def test_bad_scene_for_the_baseline_names_the_problem():
     sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml").with_overrides(model="spatial")
     with pytest.raises(Exception, match="planar"):
-        lag.build_lagrangian(sc)
+        build_lagrangian(sc)
 

@@ -507,7 +507,8 @@ def cosim_stopped_run(plant_fmu, drive_fmu, drive_values):
     import numpy as np
 
     _fmu_package(plant_fmu)
-    from reeve_fmu.fmu.cosim import CosimError, cosimulate
+    from reeve_fmu.fmu.cosim import cosimulate
+    from reeve_fmu.fmu.master import CosimError
 
     try:
         cosimulate(plant_fmu, drive_fmu, step=DT, t_end=60.0, drive_values=drive_values)

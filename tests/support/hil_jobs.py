@@ -8,7 +8,7 @@ def hil_run(config: dict, columns=("car.position",)) -> dict:
     """run_hil with the given HilConfig fields; returns the summary and the requested result columns."""
     import numpy as np
 
-    from reeve_fmu.hil.run import HilConfig, run_hil
+    from reeve_fmu.hil.runners import HilConfig, run_hil
     from reeve_fmu.core.results import read_csv
 
     summary = run_hil(HilConfig(**config), log=None)
