@@ -145,12 +145,11 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
 
 
 def _wrap_weight(bs: BuildState, rb: _Rope):
-    """rhoA g of a W0/W1 wrap's rope for bodies.wrap_weight (ropes of linear elements): the weight of
-    the rope a wrap gains or loses as its angle changes, at the sheave's centre (without it a
-    slewing crane's payload hung 3.1 mm off its tangent point). Cubic ropes keep the weight lumped
-    at the build-time wrap length."""
-    on = rb.rope.element == "linear"
-    return rb.rhoA * np.asarray(bs.g, float) if on else np.zeros(3)
+    """rhoA g of a W0/W1 wrap's rope for bodies.wrap_weight: the weight of the rope a wrap gains or
+    loses as its angle changes, at the sheave's centre (without it a slewing crane's payload hung
+    3.1 mm off its tangent point, and the cubic rope's payload left the linear one's path by 3 mm in
+    a 3 s slew)."""
+    return rb.rhoA * np.asarray(bs.g, float)
 
 
 def register_spans(nlr, scene, rope, stops, geo):
