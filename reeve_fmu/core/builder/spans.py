@@ -96,6 +96,8 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
             bs.M0_terms.append((j, j, J / sh.radius ** 2 + rb.rhoA * lump))
         if sh.kind == "drum":
             bs.drums.append((j, rb.rhoA, 1.0 if k == 0 else -1.0))
+        if sh.kind != "idler" and sh.body is not None and J > 0.0:
+            _spin_coupling(bs, sh, j, rb.geo[k][3], J)
         if lump > 0 and sh.body is not None:
             chord = T_out - T_in
             for ax, jb in bs.body_dofs[sh.body].items():
@@ -107,6 +109,21 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
                 bs.M0_terms.append((j, jb, -rb.rhoA * chord[kk]))
                 bs.F0[jb] = bs.F0.get(jb, 0.0) + rb.rhoA * lump * bs.g[kk]
         bs.wrap_len_total.append((rb.ir, lw))
+
+
+def _spin_coupling(bs: BuildState, sh, j, sense, J) -> None:
+    """A drum or traction sheave on a turning body: its spin relative to the body is
+    -sense sigma_dot / R (the rim carries the rope along the route), its absolute spin about its axis
+    a adds omega_body . a, so 1/2 J (omega_body . a - sense sigma_dot / R)^2 couples sigma with the
+    body's turn (revolute angle, planar theta) by -sense J (k . a) / R, k the turn's axis (a and k turn
+    together: constant). The sheave's own J (omega . a)^2 is part of the body's inertia."""
+    b = bs.bodies[sh.body]
+    dofs = bs.body_dofs[sh.body]
+    jr, k = (dofs.get("angle"), b.joint_axis) if b.joint == "revolute" else (dofs.get("theta"), (0.0, -1.0, 0.0))
+    c = -sense * J * float(np.dot(k, sh.axis)) / sh.radius
+    if jr is not None and c != 0.0:
+        bs.M0_terms.append((j, jr, c))
+        bs.M0_terms.append((jr, j, c))
 
 
 def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
