@@ -43,6 +43,7 @@ class Body:
     joint_axis: tuple = (0.0, 0.0, 1.0)
     pivot: tuple = (0.0, 0.0, 0.0)   # m, a point on a revolute joint's axis
     motion: "Motion | None" = None   # how the joint coordinate moves
+    joint_range: tuple | None = None  # (min, max) of the joint coordinate (rail, luffing limits)
 
 
 MOTION_KINDS = ("free", "profile", "torque", "speed-input", "torque-input")
@@ -204,7 +205,7 @@ SCHEMA_KEYS = {
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
     "bodies": {"name", "mass", "position", "free", "damping", "angular_damping", "inertia", "joint", "motion"},
-    "joint": {"kind", "axis", "pivot"},
+    "joint": {"kind", "axis", "pivot", "range"},
     "motion": {"kind", "distance", "v_max", "a_max", "jerk", "t_start", "torque", "damping"},
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
@@ -361,7 +362,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     names: dict[str, str] = {}      # every named item: bodies, sheaves, ropes and buffers share one namespace
     bodies = _parse_bodies(r, data, names, model)
     tangents = _parse_tangents(r, sc, model, bodies)
-    sheaves = _parse_sheaves(r, data, names, model, {b.name for b in bodies})
+    sheaves = _parse_sheaves(r, data, names, model, {b.name: b for b in bodies})
     used_sheaves: dict[str, str] = {}
     ropes = _parse_ropes(r, data, names, model, statics, {b.name for b in bodies}, {s.name: s for s in sheaves},
                          used_sheaves)
@@ -487,10 +488,28 @@ def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
         r.fail(f"{mp}.torque", "missing: motion.kind = 'torque' needs a [[t, tau], ...] table")
     if "damping" in b:
         r.fail(f"{path}.damping", "the damping of a joint is motion.damping")
+    rng = _joint_range(r, jt, f"{path}.joint", kind, motion)
     return Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
                 position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
                 free=("angle",) if kind == "revolute" else ("travel",), inertia=inertia, joint=kind,
-                joint_axis=axis, pivot=pivot, motion=motion)
+                joint_axis=axis, pivot=pivot, motion=motion, joint_range=rng)
+
+
+def _joint_range(r: _Reader, jt, path, kind, motion):
+    """joint.range = [min, max] of the joint coordinate (0 in the scene's pose; m for a trolley's
+    rail, rad for a revolute joint); a profile must end inside it."""
+    if "range" not in jt:
+        return None
+    v = jt["range"]
+    if (not isinstance(v, list) or len(v) != 2 or any(isinstance(x, bool) or not isinstance(x, (int, float))
+                                                      for x in v) or not v[0] <= 0.0 <= v[1]):
+        r.fail(f"{path}.range", f"must be [min, max] with min <= 0 <= max (the scene's pose is 0), got {v!r}")
+    unit = "m" if kind == "prismatic" else "rad"
+    if motion.kind == "profile" and not v[0] <= motion.distance <= v[1]:
+        what = "the trolley would run off its rail" if kind == "prismatic" else "beyond the joint's range"
+        r.fail(f"{path[:-len('.joint')]}.motion.distance",
+               f"{motion.distance:g} {unit}: {what} joint.range = [{v[0]:g}, {v[1]:g}] {unit}")
+    return (float(v[0]), float(v[1]))
 
 
 def _parse_tangents(r: _Reader, sc, model, bodies) -> str:
@@ -505,7 +524,7 @@ def _parse_tangents(r: _Reader, sc, model, bodies) -> str:
     return tangents
 
 
-def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
+def _parse_sheaves(r: _Reader, data, names, model, bodies) -> list:
     """Sheaves, drums and traction sheaves; a slipping sheave's groove must give a friction; the
     coplanar models need axes along y."""
     sheaves = []
@@ -516,11 +535,11 @@ def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
         body = r.string(s, path, "body", None)
         if body == "ground":
             body = None
-        if body is not None and body not in body_names:
-            r.fail(f"{path}.body", f"unknown body {body!r}; bodies: {', '.join(sorted(body_names)) or 'none'}")
+        if body is not None and body not in bodies:
+            r.fail(f"{path}.body", f"unknown body {body!r}; bodies: {', '.join(sorted(bodies)) or 'none'}")
         kind = r.string(s, path, "kind", "idler", ("idler", "traction", "drum"))
-        if kind == "drum" and body is not None:
-            r.fail(f"{path}.body", "a drum must be fixed to the ground")
+        if kind != "idler" and body is not None:
+            _check_winch_body(r, f"{path}.body", kind, bodies[body])
         slip = r.boolean(s, path, "slip", False)
         if slip and (kind != "traction" or body is not None):
             r.fail(f"{path}.slip", "only a traction sheave fixed to the ground can slip")
@@ -548,6 +567,19 @@ def _parse_sheaves(r: _Reader, data, names, model, body_names) -> list:
                 r.fail(f"sheaves[{i}].axis", f"model {model!r} needs sheave axes along y, got {list(s.axis)}")
     _check_overlaps(r, sheaves)
     return sheaves
+
+
+def _check_winch_body(r: _Reader, key, kind, b) -> None:
+    """A drum or traction sheave on a body turns relative to it (its rope coordinate is the wound or
+    driven rope relative to the body; the drive torque acts between sheave and body): the body must
+    move (a joint or free translations, planar theta). A spatial rigid body's spin coupling is not
+    modelled."""
+    if b.joint is None and not b.free:
+        r.fail(key, f"a {kind} on body {b.name!r}, which has no joint and no free coordinate: put it on "
+                    f"the ground (omit 'body') or give the body a joint or free axes")
+    if "rotation" in b.free:
+        r.fail(key, f"a {kind} on body {b.name!r}, a spatial rigid body ('rotation' in free), is not "
+                    f"available: mount it on a body with a joint or free translations")
 
 
 def _check_overlaps(r: _Reader, sheaves):

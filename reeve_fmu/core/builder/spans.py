@@ -96,6 +96,8 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
             bs.M0_terms.append((j, j, J / sh.radius ** 2 + rb.rhoA * lump))
         if sh.kind == "drum":
             bs.drums.append((j, rb.rhoA, 1.0 if k == 0 else -1.0))
+        if sh.kind != "idler" and sh.body is not None and J > 0.0:
+            _spin_coupling(bs, sh, j, rb.geo[k][3], J)
         if lump > 0 and sh.body is not None:
             chord = T_out - T_in
             for ax, jb in bs.body_dofs[sh.body].items():
@@ -109,6 +111,21 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
         bs.wrap_len_total.append((rb.ir, lw))
 
 
+def _spin_coupling(bs: BuildState, sh, j, sense, J) -> None:
+    """A drum or traction sheave on a turning body: its spin relative to the body is
+    -sense sigma_dot / R (the rim carries the rope along the route), its absolute spin about its axis
+    a adds omega_body . a, so 1/2 J (omega_body . a - sense sigma_dot / R)^2 couples sigma with the
+    body's turn (revolute angle, planar theta) by -sense J (k . a) / R, k the turn's axis (a and k turn
+    together: constant). The sheave's own J (omega . a)^2 is part of the body's inertia."""
+    b = bs.bodies[sh.body]
+    dofs = bs.body_dofs[sh.body]
+    jr, k = (dofs.get("angle"), b.joint_axis) if b.joint == "revolute" else (dofs.get("theta"), (0.0, -1.0, 0.0))
+    c = -sense * J * float(np.dot(k, sh.axis)) / sh.radius
+    if jr is not None and c != 0.0:
+        bs.M0_terms.append((j, jr, c))
+        bs.M0_terms.append((jr, j, c))
+
+
 def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     """Nodes and elements of span k; returns (first node, last node, first element, last element)."""
     TA, TB = rb.spans[k]
@@ -120,6 +137,8 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
             bs.nlr.tangent_rows(node, rb.nl_spans[k], end, bs.comps_nd)
             if "stretch" in bs.nodes[node]:   # cubic: slope = stretch * current span direction
                 bs.nlr.slope_rows(node, rb.nl_spans[k], bs.nodes[node]["stretch"], bs.comps_nd)
+        if k == 0 and stops[0].sheave is not None:
+            _drum_row(bs, rb, ends[0])
         if 0 < k and stops[k].sheave is not None:
             # W1: the wrap holds R x its current angle of rope; W0 the change of R x angle since t = 0
             # (zero rope in the scene's pose): without it a W0 pulley hangs its rope from the axle
@@ -142,6 +161,24 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
     if stops[k + 1].sheave is not None:
         bs.tension_taps.setdefault(stops[k + 1].sheave, {})["in"] = (len(bs.elements) - 1, 1)
     return (chain[0], chain[-1], first_el, len(bs.elements) - 1)
+
+
+def _drum_row(bs: BuildState, rb: _Rope, node) -> None:
+    """Exact tangents, a drum at the route start: the rope wound on it ends at the current tangent
+    point, so s there is sigma + R x (the tangent point's angle on the drum since t = 0, in the wrap
+    sense): sigma is the drum's angle relative to its body times R and a drum that does not turn keeps
+    its rope when the span swings round it. The angle is measured from a reference tangent point fixed
+    on the drum (an auxiliary span from a point of the drum's body 2 R off the centre), which makes it
+    the wrap row of core/bodies.py (no rope weight: the wound rope's is not modelled)."""
+    from ..geometry import tangent, wrap_angle
+    sh = bs.sheaves[rb.stops[0].sheave]
+    c, R, a, sgn = rb.geo[0]
+    T_out = rb.spans[0][0]
+    ref = c - 2.0 * (T_out - c)                        # opposite the leaving tangent point
+    _, T_ref = tangent(ref, 0.0, None, 1.0, c, R, a, sgn)
+    aux = bs.nlr.span((sh.body, ref, 0.0, 1.0, None), (sh.body, c, R, sgn, np.asarray(sh.axis, float)))
+    off = -R * wrap_angle(c, a, sgn, T_ref, T_out)
+    bs.nlr.wrap_row(node, aux, rb.nl_spans[0], rb.sig[0], R, sgn, a, np.zeros(3), 0.0, offset=off)
 
 
 def _wrap_weight(bs: BuildState, rb: _Rope):
