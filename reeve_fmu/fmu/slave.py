@@ -123,6 +123,9 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         self._dirty: Optional[str] = None      # step raised; needs setFMUstate or reset
         self._bad_inputs: dict[str, str] = {}  # name -> reason (value was rejected)
         self._pending: list[str] = []          # one-shot call errors, reported by the next doStep
+        #: doSteps refused because of the call (wrong state or time, bad inputs, earlier call errors),
+        #: not the model: the FMI 3.0 adapter returns fmi3Error for these, fmi3Discard otherwise
+        self.refused_steps = 0
         self.package_info: dict[str, Any] = {}
         if self.version is None:
             try:
@@ -372,6 +375,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
             return False
 
     def _reject_step(self, t, dt, now) -> bool:
+        self.refused_steps += 1
         if not (dt > 0.0) or dt == math.inf:
             self._error(f"doStep rejected: communicationStepSize={dt!r} at t={t!r} (must be finite and > 0)")
         elif t - t != 0.0:
@@ -382,6 +386,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         return False
 
     def _refuse_step(self, t, dt) -> bool:
+        self.refused_steps += 1
         if self._fault:
             self._error(f"doStep(t={t!r}) refused: the instance is faulty (reset or re-instantiate).\n"
                         + self._fault)

@@ -1,0 +1,673 @@
+/* FMI 3.0 co-simulation adapter of the native loader (included by fmu_loader.c when compiled with
+ * -DREEVE_FMI3; reeve_fmu.fmu.native.install_loader(..., fmi_version=3)).
+ *
+ * An FMI 3.0 instance is a thin shell around one FMI 2.0 instance of this loader (the fmi2* functions
+ * above, with their loading, clean exit, thread states, error relay and fast path): every fmi3 call
+ * becomes the fmi2 call(s) of the same meaning, so the model runs in the same guarded state machine
+ * (reeve_fmu.fmu.slave.ReeveSlave) as in the FMI 2.0 FMU. Float64 is fmi2Real, Int32 fmi2Integer,
+ * Boolean fmi2Boolean (converted: bool vs int), String the same. Value references: as in the FMI 3.0
+ * Reference FMUs, 0 is the independent variable `time` (the slave's time, read-only); every other one
+ * is the FMI 2.0 value reference + 1 (reeve_fmu.fmu.description.Declarations.to_xml3).
+ *
+ * What the adapter adds:
+ * - the FMI 3.0 logger (no varargs, no instance name): the loader's messages are formatted here;
+ * - a call that logged an Error or Fatal message returns fmi3Error (the slave rejects calls out of
+ *   order, bad values, unknown value references with a logged reason; pythonfmu returns fmi2OK from
+ *   several of them);
+ * - the FMI 3.0 call order (instantiated, initialization mode, step mode, terminated): a call in the
+ *   wrong state is fmi3Error with the reason, and is not forwarded;
+ * - nValues checked against the number of values the value references hold;
+ * - fmi3DoStep's out-arguments: lastSuccessfulTime, terminateSimulation; no events, no early return
+ *   (hasEventMode and mightReturnEarlyFromDoStep are false in the modelDescription);
+ * - everything the FMU does not provide (Model Exchange, Scheduled Execution, clocks, other types,
+ *   derivatives, configuration and event mode) is fmi3Error with a logged reason, never a crash.
+ */
+#include <stdbool.h>
+#include <stdint.h>
+
+typedef void *fmi3Instance;
+typedef void *fmi3InstanceEnvironment;
+typedef void *fmi3FMUState;
+typedef uint32_t fmi3ValueReference;
+typedef float fmi3Float32;
+typedef double fmi3Float64;
+typedef int8_t fmi3Int8;
+typedef uint8_t fmi3UInt8;
+typedef int16_t fmi3Int16;
+typedef uint16_t fmi3UInt16;
+typedef int32_t fmi3Int32;
+typedef uint32_t fmi3UInt32;
+typedef int64_t fmi3Int64;
+typedef uint64_t fmi3UInt64;
+typedef bool fmi3Boolean;
+typedef char fmi3Char;
+typedef const fmi3Char *fmi3String;
+typedef uint8_t fmi3Byte;
+typedef const fmi3Byte *fmi3Binary;
+typedef bool fmi3Clock;
+typedef enum { fmi3OK, fmi3Warning, fmi3Discard, fmi3Error, fmi3Fatal } fmi3Status;
+typedef enum { fmi3Independent, fmi3Constant, fmi3Fixed, fmi3Tunable, fmi3Discrete, fmi3Dependent } fmi3DependencyKind;
+typedef enum { fmi3IntervalNotYetKnown, fmi3IntervalUnchanged, fmi3IntervalChanged } fmi3IntervalQualifier;
+typedef void (*fmi3LogMessageCallback)(fmi3InstanceEnvironment, fmi3Status, fmi3String, fmi3String);
+typedef void (*fmi3IntermediateUpdateCallback)(fmi3InstanceEnvironment, fmi3Float64, fmi3Boolean, fmi3Boolean,
+                                               fmi3Boolean, fmi3Boolean, fmi3Boolean *, fmi3Float64 *);
+typedef void (*fmi3ClockUpdateCallback)(fmi3InstanceEnvironment);
+typedef void (*fmi3LockPreemptionCallback)(void);
+typedef void (*fmi3UnlockPreemptionCallback)(void);
+
+enum { S3_INSTANTIATED, S3_INIT, S3_STEP, S3_TERMINATED };
+static const char *state3_name[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
+
+typedef struct {
+    fmi2Component c;                /* the FMI 2.0 instance (Wrap) this instance runs on */
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+    char *name;
+    unsigned errors;                /* Error/Fatal messages logged so far */
+    int state;
+    double start_time;              /* `time` before the slave has one */
+    double refused_steps;           /* the slave's count of refused doSteps, as last seen */
+} Inst3;
+
+/* the FMI 2.0 logger the inner instance gets: formats the message and hands it to the FMI 3.0 one */
+static void log3_bridge(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status status,
+                        fmi2String category, fmi2String message, ...)
+{
+    Inst3 *x = (Inst3 *)env;
+    char small[2048], *buf = small;
+    int n;
+    va_list ap;
+    (void)instance;
+    va_start(ap, message);
+    n = vsnprintf(small, sizeof small, message ? message : "", ap);
+    va_end(ap);
+    if (n >= (int)sizeof small && (buf = (char *)malloc((size_t)n + 1)) != NULL) {
+        va_start(ap, message);
+        vsnprintf(buf, (size_t)n + 1, message, ap);
+        va_end(ap);
+    }
+    if (!buf) buf = small;
+    if (status >= fmi2Error && status != fmi2Pending) x->errors++;
+    if (status == fmi2Pending) status = fmi2OK;
+    if (x->log)
+        x->log(x->env, (fmi3Status)status, category ? category : status_category(status), buf);
+    else
+        fprintf(stderr, "[%s] %s: %s\n", status_category(status), REEVE_MODEL_IDENTIFIER, buf);
+    if (buf != small) free(buf);
+}
+
+static void log3(Inst3 *x, fmi3Status status, const char *fmt, ...)
+{
+    char buf[4096];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    if (status >= fmi3Error) x->errors++;
+    if (x->log)
+        x->log(x->env, status, status_category((fmi2Status)status), buf);
+    else
+        fprintf(stderr, "[%s] %s: %s\n", status_category((fmi2Status)status), REEVE_MODEL_IDENTIFIER, buf);
+}
+
+/* fmi2 status of a forwarded call -> fmi3 status: Error when the call logged an error */
+static fmi3Status done3(Inst3 *x, fmi2Status s, unsigned errors_before)
+{
+    if (s == fmi2Pending) s = fmi2Error;
+    if (x->errors != errors_before && s < fmi2Error) s = fmi2Error;
+    return (fmi3Status)s;
+}
+
+static int in_state(Inst3 *x, const char *fn, int allowed_mask)
+{
+    if (allowed_mask & (1 << x->state)) return 1;
+    log3(x, fmi3Error, "%s: %s called in state %s", x->name, fn, state3_name[x->state]);
+    return 0;
+}
+#define ANY_STATE 0xF
+#define BIT(s) (1 << (s))
+
+static int values_match(Inst3 *x, const char *fn, size_t nvr, size_t nValues)
+{
+    if (nValues == nvr) return 1;
+    log3(x, fmi3Error, "%s: %s: nValues = %zu, but the %zu value reference(s) hold %zu value(s) "
+         "(this FMU has no array variables)", x->name, fn, nValues, nvr, nvr);
+    return 0;
+}
+
+/* FMI 3.0 value references -> FMI 2.0 ones (into buf, or a malloc'ed array when nvr is large; free
+ * it with unmap_vrs). A reference 0 (`time`) is reported with `fn` when time_ok is 0, otherwise
+ * mapped to 0 and counted in *n_time. NULL after a logged error. */
+#define SMALL_VRS 64
+static fmi2ValueReference *map_vrs(Inst3 *x, const char *fn, const fmi3ValueReference *vr, size_t nvr,
+                                   fmi2ValueReference *buf, int time_ok, size_t *n_time)
+{
+    size_t i;
+    fmi2ValueReference *out = nvr <= SMALL_VRS ? buf : (fmi2ValueReference *)malloc(nvr * sizeof *out);
+    if (!out) return NULL;
+    if (n_time) *n_time = 0;
+    for (i = 0; i < nvr; i++) {
+        if (vr[i] == 0) {
+            if (!time_ok) {
+                log3(x, fmi3Error, "%s: %s: value reference 0 is the independent variable time (Float64, "
+                     "read-only)", x->name, fn);
+                if (out != buf) free(out);
+                return NULL;
+            }
+            if (n_time) (*n_time)++;
+            out[i] = 0;
+        } else {
+            out[i] = vr[i] - 1;
+        }
+    }
+    return out;
+}
+
+static void unmap_vrs(fmi2ValueReference *v, fmi2ValueReference *buf)
+{
+    if (v && v != buf) free(v);
+}
+
+/* a number attribute of the Python slave (`fallback` when it has none or it is None) */
+static double slave_number(Inst3 *x, const char *attr, double fallback)
+{
+    Wrap *w = (Wrap *)x->c;
+    double v = fallback;
+    int gil;
+    PyObject *o;
+    if (!w->slave) return fallback;
+    ensure_thread_state();
+    gil = py.GILStateEnsure();
+    o = py.ObjectGetAttrString(w->slave, attr);
+    if (o) {
+        v = py.FloatAsDouble(o); /* None: -1 with an error set */
+        py.DecRef(o);
+        if (v == -1.0 && py.ErrOccurred()) v = fallback;
+    }
+    py.ErrClear();
+    py.GILStateRelease(gil);
+    return v;
+}
+
+/* ------------------------------------------------------------------ instance lifecycle *//* ------------------------------------------------------------------ instance lifecycle */
+EXPORT const char *fmi3GetVersion(void) { return "3.0"; }
+
+/* an absolute path as a file URI the loader's uri_to_path reads back (reserved characters escaped) */
+static int path_to_uri(const char *path, char *out, size_t size)
+{
+    size_t i, j = 7;
+    if (!path || path[0] != '/' || size < 8) return -1;
+    memcpy(out, "file://", 7);
+    for (i = 0; path[i]; i++) {
+        unsigned char ch = (unsigned char)path[i];
+        if (j + 4 >= size) return -1;
+        if (ch == '%' || ch == ' ' || ch == '#' || ch == '?' || ch < 0x20) {
+            snprintf(out + j, 4, "%%%02X", ch);
+            j += 3;
+        } else {
+            out[j++] = (char)ch;
+        }
+    }
+    out[j] = 0;
+    return 0;
+}
+
+EXPORT fmi3Instance fmi3InstantiateCoSimulation(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath, fmi3Boolean visible,
+    fmi3Boolean loggingOn, fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+    const fmi3ValueReference requiredIntermediateVariables[], size_t nRequiredIntermediateVariables,
+    fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
+    fmi3IntermediateUpdateCallback intermediateUpdate)
+{
+    char uri[8300];
+    fmi2CallbackFunctions cb;
+    Inst3 *x = (Inst3 *)calloc(1, sizeof(Inst3));
+    (void)requiredIntermediateVariables;
+    (void)intermediateUpdate;
+    (void)earlyReturnAllowed; /* the FMU never returns early: allowed or not changes nothing */
+    if (!x) return NULL;
+    x->env = instanceEnvironment;
+    x->log = logMessage;
+    x->name = strdup(instanceName ? instanceName : "");
+    if (eventModeUsed || nRequiredIntermediateVariables) {
+        log3(x, fmi3Error, "%s: cannot instantiate: %s (the modelDescription declares hasEventMode and "
+             "providesIntermediateUpdate false)", x->name,
+             eventModeUsed ? "eventModeUsed = true, but this FMU has no Event Mode"
+                           : "intermediate variables were requested, but this FMU has no Intermediate Update Mode");
+        goto fail;
+    }
+    if (path_to_uri(resourcePath, uri, sizeof uri) != 0) {
+        log3(x, fmi3Error, "%s: cannot instantiate: resourcePath '%s' is not an absolute path", x->name,
+             resourcePath ? resourcePath : "(null)");
+        goto fail;
+    }
+    memset(&cb, 0, sizeof cb);
+    cb.logger = log3_bridge;
+    cb.componentEnvironment = x;
+    x->c = fmi2Instantiate(instanceName, fmi2CoSimulation, instantiationToken, uri, &cb, visible, loggingOn);
+    if (!x->c) goto fail;
+    x->state = S3_INSTANTIATED;
+    return (fmi3Instance)x;
+fail:
+    free(x->name);
+    free(x);
+    return NULL;
+}
+
+EXPORT void fmi3FreeInstance(fmi3Instance instance)
+{
+    Inst3 *x = (Inst3 *)instance;
+    if (!x) return;
+    fmi2FreeInstance(x->c);
+    free(x->name);
+    free(x);
+}
+
+#define GUARD3(fn, mask)                                                                             \
+    Inst3 *x = (Inst3 *)instance;                                                                    \
+    unsigned before;                                                                                 \
+    if (!x) return fmi3Error;                                                                        \
+    if (!in_state(x, fn, mask)) return fmi3Error;                                                    \
+    before = x->errors
+
+EXPORT fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                                      const fmi3String categories[])
+{
+    GUARD3("fmi3SetDebugLogging", ANY_STATE);
+    return done3(x, fmi2SetDebugLogging(x->c, loggingOn, nCategories, categories), before);
+}
+
+EXPORT fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined,
+                                              fmi3Float64 tolerance, fmi3Float64 startTime,
+                                              fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
+{
+    fmi2Status s;
+    GUARD3("fmi3EnterInitializationMode", BIT(S3_INSTANTIATED));
+    s = fmi2SetupExperiment(x->c, toleranceDefined, tolerance, startTime, stopTimeDefined, stopTime);
+    if (s < fmi2Error && x->errors == before) s = fmi2EnterInitializationMode(x->c);
+    if (s < fmi2Error && x->errors == before) {
+        x->state = S3_INIT;
+        x->start_time = startTime;
+    }
+    return done3(x, s, before);
+}
+
+EXPORT fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
+{
+    fmi2Status s;
+    GUARD3("fmi3ExitInitializationMode", BIT(S3_INIT));
+    s = fmi2ExitInitializationMode(x->c);
+    x->state = S3_STEP; /* as the slave: a failed initialization is reported by every later doStep */
+    return done3(x, s, before);
+}
+
+EXPORT fmi3Status fmi3Terminate(fmi3Instance instance)
+{
+    GUARD3("fmi3Terminate", BIT(S3_INIT) | BIT(S3_STEP));
+    x->state = S3_TERMINATED;
+    return done3(x, fmi2Terminate(x->c), before);
+}
+
+EXPORT fmi3Status fmi3Reset(fmi3Instance instance)
+{
+    fmi2Status s;
+    GUARD3("fmi3Reset", ANY_STATE);
+    s = fmi2Reset(x->c);
+    x->state = S3_INSTANTIATED;
+    x->refused_steps = 0; /* a new Python slave */
+    return done3(x, s, before);
+}
+
+EXPORT fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
+                             fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                             fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation,
+                             fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
+{
+    fmi2Status s;
+    fmi2Real last = currentCommunicationPoint;
+    fmi2Boolean stop = 0;
+    GUARD3("fmi3DoStep", BIT(S3_STEP));
+    s = fmi2DoStep(x->c, currentCommunicationPoint, communicationStepSize, noSetFMUStatePriorToCurrentPoint);
+    if (s <= fmi2Warning) {
+        last = currentCommunicationPoint + communicationStepSize;
+    } else if (s == fmi2Discard) {
+        if (fmi2GetRealStatus(x->c, fmi2LastSuccessfulTime, &last) != fmi2OK || last != last)
+            last = currentCommunicationPoint;
+        if (fmi2GetBooleanStatus(x->c, fmi2Terminated, &stop) != fmi2OK) stop = 0;
+    }
+    if (eventHandlingNeeded) *eventHandlingNeeded = false;
+    if (earlyReturn) *earlyReturn = false;
+    if (terminateSimulation) *terminateSimulation = stop != 0;
+    if (lastSuccessfulTime) *lastSuccessfulTime = last;
+    if (s == fmi2Discard) {
+        /* the slave refused the call (time not contiguous, bad inputs, ...): the host's error; the
+         * model could not do the step: Discard, as in FMI 2.0. Both are logged with the reason. */
+        double refused = slave_number(x, "refused_steps", 0.0);
+        if (refused == x->refused_steps) return fmi3Discard;
+        x->refused_steps = refused;
+        return fmi3Error;
+    }
+    return done3(x, s, before);
+}
+
+/* ------------------------------------------------------------------ values */
+#define SETTABLE (BIT(S3_INSTANTIATED) | BIT(S3_INIT) | BIT(S3_STEP))
+
+EXPORT fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                 fmi3Float64 values[], size_t nValues)
+{
+    fmi2ValueReference buf[SMALL_VRS], *v;
+    fmi2Status s = fmi2OK;
+    size_t i, n_time;
+    GUARD3("fmi3GetFloat64", ANY_STATE);
+    if (!values_match(x, "fmi3GetFloat64", nvr, nValues)) return fmi3Error;
+    if (!(v = map_vrs(x, "fmi3GetFloat64", vr, nvr, buf, 1, &n_time))) return fmi3Error;
+    if (n_time == 0) {
+        s = fmi2GetReal(x->c, v, nvr, values);
+    } else {
+        double t = slave_number(x, "time", x->start_time);
+        for (i = 0; i < nvr && s < fmi2Error; i++) /* time among other variables: one by one */
+            s = vr[i] == 0 ? (values[i] = t, fmi2OK) : fmi2GetReal(x->c, &v[i], 1, &values[i]);
+    }
+    unmap_vrs(v, buf);
+    return done3(x, s, before);
+}
+
+EXPORT fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                 const fmi3Float64 values[], size_t nValues)
+{
+    fmi2ValueReference buf[SMALL_VRS], *v;
+    fmi2Status s;
+    GUARD3("fmi3SetFloat64", SETTABLE);
+    if (!values_match(x, "fmi3SetFloat64", nvr, nValues)) return fmi3Error;
+    if (!(v = map_vrs(x, "fmi3SetFloat64", vr, nvr, buf, 0, NULL))) return fmi3Error;
+    s = fmi2SetReal(x->c, v, nvr, values);
+    unmap_vrs(v, buf);
+    return done3(x, s, before);
+}
+
+/* the other types: value references mapped, no `time` among them */
+#define MAPPED(fn, call)                                                                             \
+    do {                                                                                             \
+        fmi2ValueReference buf[SMALL_VRS], *v;                                                       \
+        fmi2Status s;                                                                                \
+        if (!values_match(x, fn, nvr, nValues)) return fmi3Error;                                    \
+        if (!(v = map_vrs(x, fn, vr, nvr, buf, 0, NULL))) return fmi3Error;                          \
+        s = call;                                                                                    \
+        unmap_vrs(v, buf);                                                                           \
+        return done3(x, s, before);                                                                  \
+    } while (0)
+
+EXPORT fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                               fmi3Int32 values[], size_t nValues)
+{
+    GUARD3("fmi3GetInt32", ANY_STATE);
+    MAPPED("fmi3GetInt32", fmi2GetInteger(x->c, v, nvr, values));
+}
+
+EXPORT fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                               const fmi3Int32 values[], size_t nValues)
+{
+    GUARD3("fmi3SetInt32", SETTABLE);
+    MAPPED("fmi3SetInt32", fmi2SetInteger(x->c, v, nvr, values));
+}
+
+/* fmi3Boolean is a bool, fmi2Boolean an int: converted through tmp */
+static fmi2Status get_bool(fmi2Component c, const fmi2ValueReference *v, size_t nvr, fmi3Boolean values[])
+{
+    size_t i;
+    fmi2Status s;
+    fmi2Boolean *tmp = (fmi2Boolean *)calloc(nvr ? nvr : 1, sizeof *tmp);
+    if (!tmp) return fmi2Error;
+    s = fmi2GetBoolean(c, v, nvr, tmp);
+    for (i = 0; i < nvr; i++) values[i] = tmp[i] != 0;
+    free(tmp);
+    return s;
+}
+
+static fmi2Status set_bool(fmi2Component c, const fmi2ValueReference *v, size_t nvr, const fmi3Boolean values[])
+{
+    size_t i;
+    fmi2Status s;
+    fmi2Boolean *tmp = (fmi2Boolean *)calloc(nvr ? nvr : 1, sizeof *tmp);
+    if (!tmp) return fmi2Error;
+    for (i = 0; i < nvr; i++) tmp[i] = values[i] ? 1 : 0;
+    s = fmi2SetBoolean(c, v, nvr, tmp);
+    free(tmp);
+    return s;
+}
+
+EXPORT fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                 fmi3Boolean values[], size_t nValues)
+{
+    GUARD3("fmi3GetBoolean", ANY_STATE);
+    MAPPED("fmi3GetBoolean", get_bool(x->c, v, nvr, values));
+}
+
+EXPORT fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                 const fmi3Boolean values[], size_t nValues)
+{
+    GUARD3("fmi3SetBoolean", SETTABLE);
+    MAPPED("fmi3SetBoolean", set_bool(x->c, v, nvr, values));
+}
+
+EXPORT fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                fmi3String values[], size_t nValues)
+{
+    GUARD3("fmi3GetString", ANY_STATE);
+    MAPPED("fmi3GetString", fmi2GetString(x->c, v, nvr, values));
+}
+
+EXPORT fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                const fmi3String values[], size_t nValues)
+{
+    GUARD3("fmi3SetString", SETTABLE);
+    MAPPED("fmi3SetString", fmi2SetString(x->c, v, nvr, values));
+}
+
+/* types this FMU has no variables of: an empty call is fine, anything else names the reference */
+static fmi3Status no_such_type(fmi3Instance instance, const char *fn, const fmi3ValueReference vr[], size_t nvr)
+{
+    Inst3 *x = (Inst3 *)instance;
+    if (!x) return fmi3Error;
+    if (nvr == 0) return fmi3OK;
+    log3(x, fmi3Error, "%s: %s: value reference %u is not a variable of this type (the FMU's variables "
+         "are Float64, Int32, Boolean and String)", x->name, fn, vr ? vr[0] : 0u);
+    return fmi3Error;
+}
+
+#define NO_TYPE(T)                                                                                   \
+    EXPORT fmi3Status fmi3Get##T(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
+                                 fmi3##T values[], size_t nValues)                                   \
+    {                                                                                                \
+        (void)values; (void)nValues;                                                                 \
+        return no_such_type(instance, "fmi3Get" #T, vr, nvr);                                        \
+    }                                                                                                \
+    EXPORT fmi3Status fmi3Set##T(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
+                                 const fmi3##T values[], size_t nValues)                             \
+    {                                                                                                \
+        (void)values; (void)nValues;                                                                 \
+        return no_such_type(instance, "fmi3Set" #T, vr, nvr);                                        \
+    }
+NO_TYPE(Float32)
+NO_TYPE(Int8)
+NO_TYPE(UInt8)
+NO_TYPE(Int16)
+NO_TYPE(UInt16)
+NO_TYPE(UInt32)
+NO_TYPE(Int64)
+NO_TYPE(UInt64)
+
+EXPORT fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                size_t valueSizes[], fmi3Binary values[], size_t nValues)
+{
+    (void)valueSizes; (void)values; (void)nValues;
+    return no_such_type(instance, "fmi3GetBinary", vr, nvr);
+}
+
+EXPORT fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                                const size_t valueSizes[], const fmi3Binary values[], size_t nValues)
+{
+    (void)valueSizes; (void)values; (void)nValues;
+    return no_such_type(instance, "fmi3SetBinary", vr, nvr);
+}
+
+EXPORT fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[])
+{
+    (void)values;
+    return no_such_type(instance, "fmi3GetClock", vr, nvr);
+}
+
+EXPORT fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
+                               const fmi3Clock values[])
+{
+    (void)values;
+    return no_such_type(instance, "fmi3SetClock", vr, nvr);
+}
+
+/* ------------------------------------------------------------------ FMU state */
+EXPORT fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *state)
+{
+    GUARD3("fmi3GetFMUState", SETTABLE | BIT(S3_TERMINATED));
+    return done3(x, fmi2GetFMUstate(x->c, state), before);
+}
+
+EXPORT fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState state)
+{
+    GUARD3("fmi3SetFMUState", SETTABLE | BIT(S3_TERMINATED));
+    if (!state) {
+        log3(x, fmi3Error, "%s: fmi3SetFMUState: the state is NULL", x->name);
+        return fmi3Error;
+    }
+    return done3(x, fmi2SetFMUstate(x->c, state), before);
+}
+
+EXPORT fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *state)
+{
+    GUARD3("fmi3FreeFMUState", ANY_STATE);
+    if (!state || !*state) return fmi3OK;
+    return done3(x, fmi2FreeFMUstate(x->c, state), before);
+}
+
+EXPORT fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState state, size_t *size)
+{
+    GUARD3("fmi3SerializedFMUStateSize", ANY_STATE);
+    return done3(x, fmi2SerializedFMUstateSize(x->c, state, size), before);
+}
+
+EXPORT fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState state, fmi3Byte serializedState[],
+                                        size_t size)
+{
+    GUARD3("fmi3SerializeFMUState", ANY_STATE);
+    return done3(x, fmi2SerializeFMUstate(x->c, state, (fmi2Byte *)serializedState, size), before);
+}
+
+EXPORT fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
+                                          fmi3FMUState *state)
+{
+    GUARD3("fmi3DeserializeFMUState", ANY_STATE);
+    return done3(x, fmi2DeSerializeFMUstate(x->c, (const fmi2Byte *)serializedState, size, state), before);
+}
+
+/* ------------------------------------------------------------------ what this FMU does not provide */
+static fmi3Status unsupported(fmi3Instance instance, const char *fn)
+{
+    Inst3 *x = (Inst3 *)instance;
+    if (!x) return fmi3Error;
+    log3(x, fmi3Error, "%s: %s is not supported by this FMU (co-simulation without Event Mode, "
+         "Intermediate Update Mode, clocks or derivatives)", x->name, fn);
+    return fmi3Error;
+}
+
+EXPORT fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                                 fmi3String resourcePath, fmi3Boolean visible,
+                                                 fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
+                                                 fmi3LogMessageCallback logMessage)
+{
+    (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    if (logMessage)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "this FMU supports co-simulation only (fmi3InstantiateModelExchange)");
+    (void)instanceName;
+    return NULL;
+}
+
+EXPORT fmi3Instance fmi3InstantiateScheduledExecution(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath, fmi3Boolean visible,
+    fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
+    fmi3ClockUpdateCallback clockUpdate, fmi3LockPreemptionCallback lockPreemption,
+    fmi3UnlockPreemptionCallback unlockPreemption)
+{
+    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
+    if (logMessage)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                   "this FMU supports co-simulation only (fmi3InstantiateScheduledExecution)");
+    return NULL;
+}
+
+#define UNSUPPORTED(name, params, uses)                                                              \
+    EXPORT fmi3Status name params                                                                    \
+    {                                                                                                \
+        uses;                                                                                        \
+        return unsupported(instance, #name);                                                         \
+    }
+UNSUPPORTED(fmi3EnterEventMode, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3EnterStepMode, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3EnterConfigurationMode, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3ExitConfigurationMode, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3EvaluateDiscreteStates, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3EnterContinuousTimeMode, (fmi3Instance instance), (void)0)
+UNSUPPORTED(fmi3UpdateDiscreteStates, (fmi3Instance instance, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *c,
+                                       fmi3Boolean *d, fmi3Boolean *e, fmi3Float64 *f),
+            (void)a; (void)b; (void)c; (void)d; (void)e; (void)f)
+UNSUPPORTED(fmi3GetNumberOfVariableDependencies, (fmi3Instance instance, fmi3ValueReference v, size_t *n),
+            (void)v; (void)n)
+UNSUPPORTED(fmi3GetVariableDependencies, (fmi3Instance instance, fmi3ValueReference d, size_t e[],
+                                          fmi3ValueReference i[], size_t ei[], fmi3DependencyKind k[], size_t n),
+            (void)d; (void)e; (void)i; (void)ei; (void)k; (void)n)
+UNSUPPORTED(fmi3GetDirectionalDerivative, (fmi3Instance instance, const fmi3ValueReference u[], size_t nu,
+                                           const fmi3ValueReference k[], size_t nk, const fmi3Float64 s[],
+                                           size_t ns, fmi3Float64 o[], size_t no),
+            (void)u; (void)nu; (void)k; (void)nk; (void)s; (void)ns; (void)o; (void)no)
+UNSUPPORTED(fmi3GetAdjointDerivative, (fmi3Instance instance, const fmi3ValueReference u[], size_t nu,
+                                       const fmi3ValueReference k[], size_t nk, const fmi3Float64 s[],
+                                       size_t ns, fmi3Float64 o[], size_t no),
+            (void)u; (void)nu; (void)k; (void)nk; (void)s; (void)ns; (void)o; (void)no)
+UNSUPPORTED(fmi3GetOutputDerivatives, (fmi3Instance instance, const fmi3ValueReference v[], size_t nv,
+                                       const fmi3Int32 o[], fmi3Float64 x[], size_t n),
+            (void)v; (void)nv; (void)o; (void)x; (void)n)
+UNSUPPORTED(fmi3GetIntervalDecimal, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                     fmi3Float64 i[], fmi3IntervalQualifier q[]),
+            (void)v; (void)n; (void)i; (void)q)
+UNSUPPORTED(fmi3GetIntervalFraction, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                      fmi3UInt64 c[], fmi3UInt64 r[], fmi3IntervalQualifier q[]),
+            (void)v; (void)n; (void)c; (void)r; (void)q)
+UNSUPPORTED(fmi3GetShiftDecimal, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                  fmi3Float64 s[]), (void)v; (void)n; (void)s)
+UNSUPPORTED(fmi3GetShiftFraction, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                   fmi3UInt64 c[], fmi3UInt64 r[]), (void)v; (void)n; (void)c; (void)r)
+UNSUPPORTED(fmi3SetIntervalDecimal, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                     const fmi3Float64 i[]), (void)v; (void)n; (void)i)
+UNSUPPORTED(fmi3SetIntervalFraction, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                      const fmi3UInt64 c[], const fmi3UInt64 r[]),
+            (void)v; (void)n; (void)c; (void)r)
+UNSUPPORTED(fmi3SetShiftDecimal, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                  const fmi3Float64 s[]), (void)v; (void)n; (void)s)
+UNSUPPORTED(fmi3SetShiftFraction, (fmi3Instance instance, const fmi3ValueReference v[], size_t n,
+                                   const fmi3UInt64 c[], const fmi3UInt64 r[]),
+            (void)v; (void)n; (void)c; (void)r)
+UNSUPPORTED(fmi3ActivateModelPartition, (fmi3Instance instance, fmi3ValueReference c, fmi3Float64 t),
+            (void)c; (void)t)
+UNSUPPORTED(fmi3CompletedIntegratorStep, (fmi3Instance instance, fmi3Boolean a, fmi3Boolean *b,
+                                          fmi3Boolean *c), (void)a; (void)b; (void)c)
+UNSUPPORTED(fmi3SetTime, (fmi3Instance instance, fmi3Float64 t), (void)t)
+UNSUPPORTED(fmi3SetContinuousStates, (fmi3Instance instance, const fmi3Float64 s[], size_t n), (void)s; (void)n)
+UNSUPPORTED(fmi3GetContinuousStateDerivatives, (fmi3Instance instance, fmi3Float64 d[], size_t n),
+            (void)d; (void)n)
+UNSUPPORTED(fmi3GetEventIndicators, (fmi3Instance instance, fmi3Float64 e[], size_t n), (void)e; (void)n)
+UNSUPPORTED(fmi3GetContinuousStates, (fmi3Instance instance, fmi3Float64 s[], size_t n), (void)s; (void)n)
+UNSUPPORTED(fmi3GetNominalsOfContinuousStates, (fmi3Instance instance, fmi3Float64 s[], size_t n),
+            (void)s; (void)n)
+UNSUPPORTED(fmi3GetNumberOfEventIndicators, (fmi3Instance instance, size_t *n), (void)n)
+UNSUPPORTED(fmi3GetNumberOfContinuousStates, (fmi3Instance instance, size_t *n), (void)n)
