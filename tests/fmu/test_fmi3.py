@@ -1,0 +1,203 @@
+"""FMI 3.0 co-simulation FMUs (`reeve-fmu build --fmi 3`): validation, the same variables as the FMI 2.0
+FMUs, the same results bit for bit, state save/restore and serialization, bad calls of an FMI 3.0 host,
+the C host through the FMI 3.0 API, clean exit.
+
+The FMI 3.0 FMUs are built once per module with the CLI; the FMI 2.0 ones are the session's (`fmus`).
+Every FMU-loading check runs in its own process (tests/support/fmi3_jobs.py via run_in_subprocess, the C
+host, or scripts judged by their exit code).
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import zipfile
+from xml.etree import ElementTree as ET
+
+import pytest
+
+from reeve_fmu.fmu.native import loader_supported
+from reeve_fmu.fmu.runner import run_in_subprocess
+from tests.support import ROOT
+from tests.support.fmu_host import chost
+
+pytestmark = pytest.mark.skipif(not loader_supported(), reason="the FMI 3.0 adapter is part of the native loader "
+                                                               "(Linux x86-64 only)")
+
+JOBS = str(ROOT / "tests" / "support" / "fmi3_jobs.py")
+OK, DISCARD, ERROR = 0, 2, 3
+
+
+@pytest.fixture(scope="module")
+def fmus3(tmp_path_factory):
+    dest = tmp_path_factory.mktemp("fmi3")
+    p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "build", "--fmi", "3", "--dest", str(dest)],
+                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return {"plant": str(dest / "ReevingPlant.fmu"), "drive": str(dest / "ElectricDrive.fmu")}
+
+
+def _md(fmu):
+    with zipfile.ZipFile(fmu) as zf:
+        return ET.fromstring(zf.read("modelDescription.xml")), zf.namelist()
+
+
+def _variables2(root):
+    out = {}
+    for sv in root.find("ModelVariables"):
+        t = sv[0]
+        out[sv.get("name")] = {**sv.attrib, **t.attrib, "type": t.tag}
+    return out
+
+
+def _variables3(root):
+    return {v.get("name"): {**v.attrib, "type": v.tag} for v in root.find("ModelVariables")}
+
+
+# ------------------------------------------------------------------------------------------------
+# build and modelDescription
+# ------------------------------------------------------------------------------------------------
+def test_fmi3_fmus_validate_and_declare_the_fmi2_variables(fmus, fmus3):
+    """fmpy validate finds no problems; every FMI 2.0 variable is there with the same attributes, its value
+    reference + 1 (0 is `time`, as in the FMI 3.0 Reference FMUs); outputs, their dependencies and the
+    initial unknowns correspond; the binaries are the loader's, under x86_64-linux."""
+    kinds = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+    for key in ("plant", "drive"):
+        p = subprocess.run([sys.executable, "-m", "fmpy", "validate", fmus3[key]], capture_output=True, text=True,
+                           timeout=600)
+        assert p.returncode == 0 and "No problems found" in p.stdout, p.stdout + p.stderr
+        r2, _ = _md(fmus[key])
+        r3, names = _md(fmus3[key])
+        assert r3.get("fmiVersion") == "3.0" and r3.get("instantiationToken") == "{" + r2.get("guid") + "}"
+        model = r3.find("CoSimulation").get("modelIdentifier")
+        assert sorted(n for n in names if n.startswith("binaries/")) == sorted(
+            f"binaries/x86_64-linux/{model}{s}.so" for s in ("", "_pythonfmu", "_pyexit"))
+        cs = r3.find("CoSimulation").attrib
+        assert cs["canGetAndSetFMUState"] == cs["canSerializeFMUState"] == "true"
+        assert cs["hasEventMode"] == cs["mightReturnEarlyFromDoStep"] == "false"
+        v2, v3 = _variables2(r2), _variables3(r3)
+        assert v3.pop("time") == {"name": "time", "valueReference": "0", "causality": "independent",
+                                  "variability": "continuous", "description": "Simulation time", "unit": "s",
+                                  "type": "Float64"}
+        assert set(v3) == set(v2), key
+        index_to_vr = {i: int(d["valueReference"]) + 1 for i, d in enumerate(v2.values(), start=1)}
+        for name, a in v2.items():
+            b = v3[name]
+            assert b["type"] == kinds[a["type"]] and int(b["valueReference"]) == int(a["valueReference"]) + 1
+            for attr in ("causality", "variability", "initial", "unit", "displayUnit", "declaredType", "start",
+                         "min", "max", "description"):
+                assert a.get(attr) == b.get(attr), (key, name, attr)
+            if "derivative" in a:
+                assert int(b["derivative"]) == index_to_vr[int(a["derivative"])], name
+        outs2 = [(index_to_vr[int(u.get("index"))],
+                  sorted(index_to_vr[int(i)] for i in u.get("dependencies", "").split()))
+                 for u in r2.find("ModelStructure/Outputs")]
+        outs3 = [(int(u.get("valueReference")), sorted(int(i) for i in u.get("dependencies", "").split()))
+                 for u in r3.find("ModelStructure").iter("Output")]
+        assert outs3 == outs2 and outs3
+        assert [int(u.get("valueReference")) for u in r3.find("ModelStructure").iter("InitialUnknown")] == \
+            [index_to_vr[int(u.get("index"))] for u in r2.find("ModelStructure/InitialUnknowns")]
+
+
+# ------------------------------------------------------------------------------------------------
+# results and state
+# ------------------------------------------------------------------------------------------------
+def test_fmi3_trip_equals_the_fmi2_trip_bit_for_bit(fmus, fmus3):
+    """fmpy's FMI 3.0 co-simulation (FMU3Slave) and its FMI 2.0 one (FMU2Slave), the same Gauss-Seidel
+    loop at 1 ms over the first 4 s of the R1 trip (pre-torque, brake lift, acceleration to 1.6 m/s):
+    the recorded plant outputs are equal as floats. No event falls inside a step here; the adapter adds
+    nothing but the interface."""
+    n = 4000
+    a = run_in_subprocess(f"{JOBS}:trip", fmus["plant"], fmus["drive"], n, timeout=900)
+    b = run_in_subprocess(f"{JOBS}:trip", fmus3["plant"], fmus3["drive"], n, timeout=900)
+    assert (a["fmi3"], b["fmi3"]) == (False, True)
+    assert len(b["rows"]) == n and b["rows"] == a["rows"]
+    assert b["rows"][-1][1] > 1.5          # the car runs at rated speed: the window covers the start
+
+
+def test_fmi3_state_rewind_and_serialization_are_exact(fmus3):
+    """fmi3GetFMUState / SetFMUState / Serialize / Deserialize on both FMUs after 1.5 s: re-running the
+    next 0.5 s from the saved and from the deserialized state repeats the first run bit for bit, and
+    `time` follows the restored state."""
+    r = run_in_subprocess(f"{JOBS}:state", fmus3["plant"], fmus3["drive"], 1500, 500, timeout=900)
+    assert r["rewound"] == r["first"] and r["restored"] == r["first"]
+    assert r["first"][0] != r["first"][-1] and all(b > 0 for b in r["bytes"])
+    assert r["time_after"] == 2.0
+
+
+# ------------------------------------------------------------------------------------------------
+# bad calls: fmi3Error with the reason logged, never a crash
+# ------------------------------------------------------------------------------------------------
+EXPECTED = {  # call: (status, words of the logged reason)
+    "doStep_before_init": (ERROR, "fmi3DoStep called in state Instantiated"),
+    "exit_before_enter": (ERROR, "fmi3ExitInitializationMode called in state Instantiated"),
+    "event_mode": (ERROR, "fmi3EnterEventMode is not supported"),
+    "enter_twice": (ERROR, "fmi3EnterInitializationMode called in state Step Mode"),
+    "nvalues_mismatch": (ERROR, "nValues = 3, but the 2 value reference(s) hold 2 value(s)"),
+    "set_time": (ERROR, "value reference 0 is the independent variable time"),
+    "set_output": (ERROR, "motor.torque is not a settable Real variable"),
+    "unknown_vr": (ERROR, "is not a Real variable"),
+    "set_nan": (ERROR, "motor.speed = nan is not finite"),
+    "step_after_nan": (ERROR, "invalid inputs were rejected"),
+    "int8": (ERROR, "fmi3GetInt8: value reference"),
+    "directional_derivative": (ERROR, "fmi3GetDirectionalDerivative is not supported"),
+    "refused_after_errors": (ERROR, "refused because of earlier call errors"),
+    "time_jump": (ERROR, "currentCommunicationPoint=0.5 but the FMU is at t=0.001"),
+    "negative_step": (ERROR, "communicationStepSize=-0.001"),
+    "terminate_twice": (ERROR, "fmi3Terminate called in state Terminated"),
+}
+
+
+def test_fmi3_bad_calls_return_error_with_the_reason_and_the_instance_goes_on(fmus3):
+    r = run_in_subprocess(f"{JOBS}:bad_calls", fmus3["drive"], timeout=600)
+    for call, (status, words) in EXPECTED.items():
+        got, log = r[call]
+        assert got == status, (call, got, log)
+        assert any(words in m for m in log), (call, log)
+    for call in ("empty_int8", "ok_step", "ok_step_after"):
+        assert r[call] == [OK, []], (call, r[call])
+    assert r["time"] == 2e-3
+
+
+def test_fmi3_event_mode_request_is_refused_with_the_reason(fmus3):
+    r = run_in_subprocess(f"{JOBS}:instantiate_refused", fmus3["drive"], timeout=600)
+    assert r["instantiated"] is False
+    assert any("eventModeUsed = true, but this FMU has no Event Mode" in m for m in r["log"]), r
+
+
+# ------------------------------------------------------------------------------------------------
+# hosts
+# ------------------------------------------------------------------------------------------------
+def test_c_host_through_the_fmi3_api_equals_its_fmi2_run(fmus, fmus3, host, tmp_path):
+    """The C host (no LD_PRELOAD, no PYTHONPATH, logging off) runs both FMI 3.0 FMUs through
+    fmi3InstantiateCoSimulation ... fmi3DoStep ... fmi3FreeInstance for 2 s of the trip, exits 0, and
+    records what the same host records through the FMI 2.0 API with the FMI 2.0 FMUs, bit for bit."""
+    steps, h = 2000, 1e-3
+    record = ["car.position", "car.velocity", "motor.speed", "traction.tension_in"]
+    rows = {}
+    for version, f in (("2", fmus), ("3", fmus3)):
+        dirs = {k: str(chost.extract(f[k], tmp_path / version / k)) for k in ("plant", "drive")}
+        plan = chost.cosim_plan(f["plant"], f["drive"], dirs["plant"], dirs["drive"], step=h, steps=steps,
+                                drive_values={"pretorque[1]": 522.5, "pretorque[2]": 331.5}, record=record,
+                                drive_record=["motor.torque"], stop_time=steps * h)
+        assert ("fmi 3" in plan) == (version == "3")
+        r = chost.run_host(host, plan, tmp_path / version)
+        assert r["returncode"] == 0, r["stdout"] + r["stderr"]
+        assert "[ERROR]" not in r["stderr"] and "[FATAL]" not in r["stderr"], r["stderr"]
+        rows[version] = r["rows"]
+    assert len(rows["3"]) == steps + 1 and rows["3"] == rows["2"]
+    assert rows["3"][-1][1] > 0.1          # the car moved
+
+
+SCRIPT = """
+from fmpy import simulate_fmu
+for fmu in ({drive!r}, {plant!r}):
+    r = simulate_fmu(fmu, stop_time=0.01, output_interval=1e-3)
+    assert len(r) == 11, len(r)
+"""
+
+
+def test_fmi3_fmpy_scripts_exit_cleanly(fmus3, tmp_path):
+    """A plain fmpy script running simulate_fmu (FMI 3.0 co-simulation) of both FMUs, 10 runs: every run
+    exits 0."""
+    code = SCRIPT.format(plant=fmus3["plant"], drive=fmus3["drive"])
+    assert chost.failed_runs({"fmi3_pair": code}, tmp_path, chost.clean_env()) == []
