@@ -344,13 +344,14 @@ def _pythonfmu_build(entry: Path, stem: str, out_dir: Path, files, opts) -> Path
 
 #: where an FMI 3.0 FMU keeps its Linux x86-64 binaries (FMI 3.0 platform tuple)
 FMI3_PLATFORM_DIR = "binaries/x86_64-linux"
+FMI3_ARRAYS = "resources/reeve_fmi3_arrays.txt"
 
 
 def _to_fmi3(built: Path, entry: Path, stem: str) -> None:
     """Rewrite `built` (pythonfmu's FMI 2.0 FMU with the loader compiled for FMI 3.0) as an FMI 3.0
     co-simulation FMU: the modelDescription from the slave's declarations (Declarations.to_xml3, with
-    the FMI 2.0 document's header and capabilities), the Linux binaries under x86_64-linux, and no
-    Windows binary (pythonfmu's is FMI 2.0 only)."""
+    the FMI 2.0 document's header and capabilities) and the table of its array variables, the Linux
+    binaries under x86_64-linux, and no Windows binary (pythonfmu's is FMI 2.0 only)."""
     from xml.etree import ElementTree as ET
 
     from .native import PLATFORM_DIR
@@ -361,7 +362,9 @@ def _to_fmi3(built: Path, entry: Path, stem: str) -> None:
             for name in zf.namelist():
                 if name.startswith("resources/"):
                     zf.extract(name, tmp)
-        root = _entry_slave(Path(tmp) / "resources", entry.name, stem).to_xml3(fmi2)
+        slave = _entry_slave(Path(tmp) / "resources", entry.name, stem)
+        root = slave.to_xml3(fmi2)
+        arrays = slave.fmi3_arrays().encode()
     ET.indent(root, space="\t")
     xml = ('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n").encode()
     new = built.with_suffix(".fmi3.tmp")
@@ -374,6 +377,8 @@ def _to_fmi3(built: Path, entry: Path, stem: str) -> None:
             if name.startswith(PLATFORM_DIR + "/"):
                 item.filename = FMI3_PLATFORM_DIR + name[len(PLATFORM_DIR):]
             zout.writestr(item, data)
+        if arrays:   # the adapter's table of array variables (native/fmi3.c)
+            zout.writestr(FMI3_ARRAYS, arrays)
     os.replace(new, built)
 
 

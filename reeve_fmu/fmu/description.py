@@ -269,6 +269,31 @@ class Declarations:
     def vr(self, name: str) -> int:
         return self._by_name[name].vr
 
+    def add_array(self, name: str, elements: Iterable[str], description: Optional[str] = None) -> str:
+        """An FMI 3.0 array variable whose elements are the declared scalars `elements` (in that order;
+        they must agree in type, causality, variability, initial, unit). The FMI 2.0 FMU does not show
+        it; in the FMI 3.0 FMU the scalars stay and the array is one more variable over the same values."""
+        elements = list(elements)
+        if name in self._by_name or any(a[0] == name for a in self._arrays):
+            raise ValueError(f"variable {name!r} declared twice")
+        specs = [self._by_name.get(e) for e in elements]
+        if not specs or None in specs or specs[0].kind == "String":
+            raise ValueError(f"{name}: the elements {elements} must be declared numeric or Boolean variables")
+        keys = {(s.kind, s.causality, s.variability, s.initial, s.unit, s.declared_type, s.display_unit)
+                for s in specs}
+        if len(keys) != 1:
+            raise ValueError(f"{name}: the elements {elements} differ in causality, variability, initial, "
+                             f"unit or type")
+        self._arrays.append((name, specs, description))
+        return name
+
+    def fmi3_arrays(self) -> str:
+        """The FMI 3.0 adapter's table of array variables (resources/reeve_fmi3_arrays.txt): one line per
+        array, its FMI 3.0 value reference, its size, the FMI 2.0 value references of its elements."""
+        n = len(self._specs) + 1
+        return "".join(f"{n + i} {len(specs)} {' '.join(str(s.vr) for s in specs)}\n"
+                       for i, (_, specs, _) in enumerate(self._arrays))
+
     # ------------------------------------------------------------------ modelDescription.xml
     def to_xml(self, model_options: dict = dict()) -> Element:
         """pythonfmu's XML plus units, types, derivatives and a complete ModelStructure.
@@ -386,12 +411,43 @@ class Declarations:
             node = SubElement(mv, _FMI3_KIND[s.kind], attr)
             if start is not None:
                 SubElement(node, "Start", {"value": start})
+        array_vr = {}
+        for i, (name, specs, description) in enumerate(self._arrays):
+            array_vr[name] = vr = len(self._specs) + 1 + i
+            first = specs[0]
+            attr = {"name": name, "valueReference": str(vr)}
+            if description:
+                attr["description"] = description
+            attr["causality"] = first.causality.name
+            attr["variability"] = first.variability.name
+            if first.initial is not None:
+                attr["initial"] = first.initial.name
+            attr.update(self._value_attr(first, None))
+            for key in ("min", "max", "nominal"):
+                if len({getattr(s, key) for s in specs}) > 1:
+                    attr.pop(key, None)   # differs per element: in the scalars only (an array has one)
+            if "start" in attr:
+                attr["start"] = " ".join(_fmt(s.start) for s in specs)
+            node = SubElement(mv, _FMI3_KIND[first.kind], attr)
+            SubElement(node, "Dimension", {"start": str(len(specs))})
         ms = SubElement(root, "ModelStructure")
         for s in self._specs:
             if s.causality == Fmi2Causality.output:
                 SubElement(ms, "Output", self._unknown_attr(s, "valueReference", lambda v: v.vr + 1))
-        for s in self._initial_unknowns():
-            SubElement(ms, "InitialUnknown", {"valueReference": str(s.vr + 1)})
+        for name, specs, _ in self._arrays:
+            if specs[0].causality == Fmi2Causality.output:
+                deps = [self._unknown_attr(s, "valueReference", lambda v: v.vr + 1).get("dependencies")
+                        for s in specs]
+                attr = {"valueReference": str(array_vr[name])}
+                if None not in deps:
+                    attr["dependencies"] = " ".join(sorted({d for x in deps for d in x.split()}, key=int))
+                SubElement(ms, "Output", attr)
+        initial = [(s.vr + 1) for s in self._initial_unknowns()]
+        initial += [array_vr[name] for name, specs, _ in self._arrays
+                    if specs[0].causality == Fmi2Causality.output
+                    and specs[0].initial in (Fmi2Initial.approx, Fmi2Initial.calculated)]
+        for vr in initial:
+            SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})
         return root
 
     def _unknown_attr(self, s: _Spec, key: str = "index", ref=lambda v: v.index) -> dict:

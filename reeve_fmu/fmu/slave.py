@@ -105,6 +105,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         self._set = {k: {} for k in _KINDS}   # kind -> {vr: spec} (settable variables only)
         self._real_names: list = []            # vr -> name of a Real kept in self.values (else None)
         self._user_setters: dict[str, Callable] = {}
+        self._arrays: list = []                # FMI 3.0 array variables over declared scalars (add_array)
         self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
         self._deferred: Optional[Callable] = None  # writes the outputs step() left for later
         self._eager_vrs: frozenset = frozenset()   # Reals step() always writes (see defer_outputs)

@@ -193,3 +193,33 @@ def instantiate_refused(drive_fmu):
         return {"instantiated": True, "log": log}
     except Exception as exc:
         return {"instantiated": False, "error": str(exc), "log": log}
+
+
+def arrays(plant_fmu, drive_fmu, n):
+    """The trip with the drive's pre-torques set through the array `pretorques`, the plant's sheave
+    forces read through the array `sheaves.tension_in` beside the scalars; a read with the wrong
+    nValues."""
+    drive = Fmu(drive_fmu, "drive")
+    plant = Fmu(plant_fmu, "plant")
+    drive.fmu.enterInitializationMode(startTime=0.0)
+    pre = drive.v["pretorques"].valueReference
+    values = list(drive.fmu.getFloat64([pre], nValues=8))
+    values[:2] = DRIVE_VALUES["pretorque[1]"], DRIVE_VALUES["pretorque[2]"]
+    drive.fmu.setFloat64([pre], values)
+    drive.fmu.exitInitializationMode()
+    plant.start()
+    arr = plant.v["sheaves.tension_in"].valueReference
+    scalars = [n_ for n_ in plant.v if n_.endswith(".tension_in") and n_ != "sheaves.tension_in"]
+    rows, same = [], True
+    for k in range(n):
+        rows += _gs(plant, drive, k, 1)
+        a = list(plant.fmu.getFloat64([arr], nValues=3))
+        same = same and a == plant.get(scalars)
+    mismatch = _try(plant, lambda: plant.fmu.getFloat64([arr], nValues=1))
+    both = list(plant.fmu.getFloat64([arr, plant.v["car.position"].valueReference], nValues=4))
+    result = {"rows": rows, "same": same, "scalars": scalars, "mismatch": mismatch,
+              "both": both, "pretorques": list(drive.fmu.getFloat64([pre], nValues=8)),
+              "car": plant.get(["car.position"])[0], "tension": plant.get(scalars)}
+    plant.close()
+    drive.close()
+    return result

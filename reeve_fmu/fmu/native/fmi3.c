@@ -16,6 +16,8 @@
  *   several of them);
  * - the FMI 3.0 call order (instantiated, initialization mode, step mode, terminated): a call in the
  *   wrong state is fmi3Error with the reason, and is not forwarded;
+ * - array variables (Declarations.add_array): views over declared scalars, listed in
+ *   resources/reeve_fmi3_arrays.txt (FMI 3.0 value reference, size, the elements' FMI 2.0 references);
  * - nValues checked against the number of values the value references hold;
  * - fmi3DoStep's out-arguments: lastSuccessfulTime, terminateSimulation; no events, no early return
  *   (hasEventMode and mightReturnEarlyFromDoStep are false in the modelDescription);
@@ -59,7 +61,15 @@ enum { S3_INSTANTIATED, S3_INIT, S3_STEP, S3_TERMINATED };
 static const char *state3_name[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
 
 typedef struct {
+    fmi3ValueReference vr;
+    size_t n;
+    fmi2ValueReference *el;
+} Array3;
+
+typedef struct {
     fmi2Component c;                /* the FMI 2.0 instance (Wrap) this instance runs on */
+    Array3 *arrays;                 /* the array variables (resources/reeve_fmi3_arrays.txt) */
+    size_t narrays;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
     char *name;
@@ -127,40 +137,89 @@ static int in_state(Inst3 *x, const char *fn, int allowed_mask)
 #define ANY_STATE 0xF
 #define BIT(s) (1 << (s))
 
-static int values_match(Inst3 *x, const char *fn, size_t nvr, size_t nValues)
-{
-    if (nValues == nvr) return 1;
-    log3(x, fmi3Error, "%s: %s: nValues = %zu, but the %zu value reference(s) hold %zu value(s) "
-         "(this FMU has no array variables)", x->name, fn, nValues, nvr, nvr);
-    return 0;
-}
-
-/* FMI 3.0 value references -> FMI 2.0 ones (into buf, or a malloc'ed array when nvr is large; free
- * it with unmap_vrs). A reference 0 (`time`) is reported with `fn` when time_ok is 0, otherwise
- * mapped to 0 and counted in *n_time. NULL after a logged error. */
-#define SMALL_VRS 64
-static fmi2ValueReference *map_vrs(Inst3 *x, const char *fn, const fmi3ValueReference *vr, size_t nvr,
-                                   fmi2ValueReference *buf, int time_ok, size_t *n_time)
+/* an array variable of the FMU (resources/reeve_fmi3_arrays.txt): its elements' FMI 2.0 references */
+static const Array3 *array_of(const Inst3 *x, fmi3ValueReference vr)
 {
     size_t i;
-    fmi2ValueReference *out = nvr <= SMALL_VRS ? buf : (fmi2ValueReference *)malloc(nvr * sizeof *out);
+    for (i = 0; i < x->narrays; i++)
+        if (x->arrays[i].vr == vr) return &x->arrays[i];
+    return NULL;
+}
+
+/* number of values of one FMI 3.0 value reference */
+static size_t values_of(const Inst3 *x, fmi3ValueReference vr)
+{
+    const Array3 *a = x->narrays ? array_of(x, vr) : NULL;
+    return a ? a->n : 1;
+}
+
+/* FMI 3.0 value references -> the FMI 2.0 references of their values, *n of them (into buf, or a
+ * malloc'ed array when there are many; free it with unmap_vrs). nValues must be that number. A
+ * reference 0 (`time`) is reported with `fn` when time_ok is 0, otherwise it becomes a 0 placeholder.
+ * NULL after a logged error. */
+#define SMALL_VRS 64
+static fmi2ValueReference *map_vrs(Inst3 *x, const char *fn, const fmi3ValueReference *vr, size_t nvr,
+                                   size_t nValues, fmi2ValueReference *buf, int time_ok, size_t *n)
+{
+    size_t i, j, k, total = 0;
+    fmi2ValueReference *out;
+    for (i = 0; i < nvr; i++) total += values_of(x, vr[i]);
+    if (total != nValues) {
+        log3(x, fmi3Error, "%s: %s: nValues = %zu, but the %zu value reference(s) hold %zu value(s)", x->name, fn,
+             nValues, nvr, total);
+        return NULL;
+    }
+    out = total <= SMALL_VRS ? buf : (fmi2ValueReference *)malloc(total * sizeof *out);
     if (!out) return NULL;
-    if (n_time) *n_time = 0;
-    for (i = 0; i < nvr; i++) {
-        if (vr[i] == 0) {
+    for (i = 0, j = 0; i < nvr; i++) {
+        const Array3 *a = x->narrays ? array_of(x, vr[i]) : NULL;
+        if (a) {
+            for (k = 0; k < a->n; k++) out[j++] = a->el[k];
+        } else if (vr[i] == 0) {
             if (!time_ok) {
                 log3(x, fmi3Error, "%s: %s: value reference 0 is the independent variable time (Float64, "
                      "read-only)", x->name, fn);
                 if (out != buf) free(out);
                 return NULL;
             }
-            if (n_time) (*n_time)++;
-            out[i] = 0;
+            out[j++] = 0;
         } else {
-            out[i] = vr[i] - 1;
+            out[j++] = vr[i] - 1;
         }
     }
+    *n = total;
     return out;
+}
+
+/* the table of array variables, if the FMU has one */
+static void read_arrays(Inst3 *x, const char *resources)
+{
+    char path[4200];
+    unsigned long vr, n, k, e;
+    FILE *f;
+    snprintf(path, sizeof path, "%s/reeve_fmi3_arrays.txt", resources);
+    if (!(f = fopen(path, "r"))) return;
+    while (fscanf(f, "%lu %lu", &vr, &n) == 2 && n > 0 && n < 1000000) {
+        Array3 *grown = (Array3 *)realloc(x->arrays, (x->narrays + 1) * sizeof *grown);
+        if (!grown) break;
+        x->arrays = grown;
+        grown[x->narrays].vr = (fmi3ValueReference)vr;
+        grown[x->narrays].n = 0;
+        if (!(grown[x->narrays].el = (fmi2ValueReference *)calloc(n, sizeof(fmi2ValueReference)))) break;
+        for (k = 0; k < n && fscanf(f, "%lu", &e) == 1; k++) grown[x->narrays].el[k] = (fmi2ValueReference)e;
+        grown[x->narrays].n = k;
+        x->narrays++;
+    }
+    fclose(f);
+}
+
+static void free_inst3(Inst3 *x)
+{
+    size_t i;
+    for (i = 0; i < x->narrays; i++) free(x->arrays[i].el);
+    free(x->arrays);
+    free(x->name);
+    free(x);
 }
 
 static void unmap_vrs(fmi2ValueReference *v, fmi2ValueReference *buf)
@@ -246,11 +305,11 @@ EXPORT fmi3Instance fmi3InstantiateCoSimulation(
     cb.componentEnvironment = x;
     x->c = fmi2Instantiate(instanceName, fmi2CoSimulation, instantiationToken, uri, &cb, visible, loggingOn);
     if (!x->c) goto fail;
+    read_arrays(x, resourcePath);
     x->state = S3_INSTANTIATED;
     return (fmi3Instance)x;
 fail:
-    free(x->name);
-    free(x);
+    free_inst3(x);
     return NULL;
 }
 
@@ -259,8 +318,7 @@ EXPORT void fmi3FreeInstance(fmi3Instance instance)
     Inst3 *x = (Inst3 *)instance;
     if (!x) return;
     fmi2FreeInstance(x->c);
-    free(x->name);
-    free(x);
+    free_inst3(x);
 }
 
 #define GUARD3(fn, mask)                                                                             \
@@ -358,16 +416,18 @@ EXPORT fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference
 {
     fmi2ValueReference buf[SMALL_VRS], *v;
     fmi2Status s = fmi2OK;
-    size_t i, n_time;
+    size_t i, j, m, n;
     GUARD3("fmi3GetFloat64", ANY_STATE);
-    if (!values_match(x, "fmi3GetFloat64", nvr, nValues)) return fmi3Error;
-    if (!(v = map_vrs(x, "fmi3GetFloat64", vr, nvr, buf, 1, &n_time))) return fmi3Error;
-    if (n_time == 0) {
-        s = fmi2GetReal(x->c, v, nvr, values);
+    if (!(v = map_vrs(x, "fmi3GetFloat64", vr, nvr, nValues, buf, 1, &n))) return fmi3Error;
+    for (i = 0; i < nvr && vr[i] != 0; i++) {}
+    if (i == nvr) {
+        s = fmi2GetReal(x->c, v, n, values);
     } else {
         double t = slave_number(x, "time", x->start_time);
-        for (i = 0; i < nvr && s < fmi2Error; i++) /* time among other variables: one by one */
-            s = vr[i] == 0 ? (values[i] = t, fmi2OK) : fmi2GetReal(x->c, &v[i], 1, &values[i]);
+        for (i = 0, j = 0; i < nvr && s < fmi2Error; i++, j += m) { /* time among the others: one by one */
+            m = values_of(x, vr[i]);
+            s = vr[i] == 0 ? (values[j] = t, fmi2OK) : fmi2GetReal(x->c, &v[j], m, &values[j]);
+        }
     }
     unmap_vrs(v, buf);
     return done3(x, s, before);
@@ -378,21 +438,21 @@ EXPORT fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference
 {
     fmi2ValueReference buf[SMALL_VRS], *v;
     fmi2Status s;
+    size_t n;
     GUARD3("fmi3SetFloat64", SETTABLE);
-    if (!values_match(x, "fmi3SetFloat64", nvr, nValues)) return fmi3Error;
-    if (!(v = map_vrs(x, "fmi3SetFloat64", vr, nvr, buf, 0, NULL))) return fmi3Error;
-    s = fmi2SetReal(x->c, v, nvr, values);
+    if (!(v = map_vrs(x, "fmi3SetFloat64", vr, nvr, nValues, buf, 0, &n))) return fmi3Error;
+    s = fmi2SetReal(x->c, v, n, values);
     unmap_vrs(v, buf);
     return done3(x, s, before);
 }
 
-/* the other types: value references mapped, no `time` among them */
+/* the other types: value references mapped (arrays are Float64: none among them), no `time` */
 #define MAPPED(fn, call)                                                                             \
     do {                                                                                             \
         fmi2ValueReference buf[SMALL_VRS], *v;                                                       \
         fmi2Status s;                                                                                \
-        if (!values_match(x, fn, nvr, nValues)) return fmi3Error;                                    \
-        if (!(v = map_vrs(x, fn, vr, nvr, buf, 0, NULL))) return fmi3Error;                          \
+        size_t n;                                                                                    \
+        if (!(v = map_vrs(x, fn, vr, nvr, nValues, buf, 0, &n))) return fmi3Error;                   \
         s = call;                                                                                    \
         unmap_vrs(v, buf);                                                                           \
         return done3(x, s, before);                                                                  \
@@ -402,14 +462,14 @@ EXPORT fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference v
                                fmi3Int32 values[], size_t nValues)
 {
     GUARD3("fmi3GetInt32", ANY_STATE);
-    MAPPED("fmi3GetInt32", fmi2GetInteger(x->c, v, nvr, values));
+    MAPPED("fmi3GetInt32", fmi2GetInteger(x->c, v, n, values));
 }
 
 EXPORT fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                const fmi3Int32 values[], size_t nValues)
 {
     GUARD3("fmi3SetInt32", SETTABLE);
-    MAPPED("fmi3SetInt32", fmi2SetInteger(x->c, v, nvr, values));
+    MAPPED("fmi3SetInt32", fmi2SetInteger(x->c, v, n, values));
 }
 
 /* fmi3Boolean is a bool, fmi2Boolean an int: converted through tmp */
@@ -441,28 +501,28 @@ EXPORT fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference
                                  fmi3Boolean values[], size_t nValues)
 {
     GUARD3("fmi3GetBoolean", ANY_STATE);
-    MAPPED("fmi3GetBoolean", get_bool(x->c, v, nvr, values));
+    MAPPED("fmi3GetBoolean", get_bool(x->c, v, n, values));
 }
 
 EXPORT fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                  const fmi3Boolean values[], size_t nValues)
 {
     GUARD3("fmi3SetBoolean", SETTABLE);
-    MAPPED("fmi3SetBoolean", set_bool(x->c, v, nvr, values));
+    MAPPED("fmi3SetBoolean", set_bool(x->c, v, n, values));
 }
 
 EXPORT fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                 fmi3String values[], size_t nValues)
 {
     GUARD3("fmi3GetString", ANY_STATE);
-    MAPPED("fmi3GetString", fmi2GetString(x->c, v, nvr, values));
+    MAPPED("fmi3GetString", fmi2GetString(x->c, v, n, values));
 }
 
 EXPORT fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                 const fmi3String values[], size_t nValues)
 {
     GUARD3("fmi3SetString", SETTABLE);
-    MAPPED("fmi3SetString", fmi2SetString(x->c, v, nvr, values));
+    MAPPED("fmi3SetString", fmi2SetString(x->c, v, n, values));
 }
 
 /* types this FMU has no variables of: an empty call is fine, anything else names the reference */
