@@ -76,6 +76,8 @@ def test_fmi3_fmus_validate_and_declare_the_fmi2_variables(fmus, fmus3):
         assert cs["canGetAndSetFMUState"] == cs["canSerializeFMUState"] == "true"
         assert cs["hasEventMode"] == cs["mightReturnEarlyFromDoStep"] == "false"
         v2, v3 = _variables2(r2), _variables3(r3)
+        arrays = {n: v3.pop(n) for n in [n for n in v3 if n not in v2 and n != "time"]}
+        _check_arrays(arrays, v2, zipfile.ZipFile(fmus3[key]).read("resources/reeve_fmi3_arrays.txt").decode(), key)
         assert v3.pop("time") == {"name": "time", "valueReference": "0", "causality": "independent",
                                   "variability": "continuous", "description": "Simulation time", "unit": "s",
                                   "type": "Float64"}
@@ -93,10 +95,35 @@ def test_fmi3_fmus_validate_and_declare_the_fmi2_variables(fmus, fmus3):
                   sorted(index_to_vr[int(i)] for i in u.get("dependencies", "").split()))
                  for u in r2.find("ModelStructure/Outputs")]
         outs3 = [(int(u.get("valueReference")), sorted(int(i) for i in u.get("dependencies", "").split()))
-                 for u in r3.find("ModelStructure").iter("Output")]
+                 for u in r3.find("ModelStructure").iter("Output")
+                 if int(u.get("valueReference")) not in {int(a["valueReference"]) for a in arrays.values()}]
         assert outs3 == outs2 and outs3
+        output_arrays = [int(a["valueReference"]) for a in arrays.values() if a["causality"] == "output"]
         assert [int(u.get("valueReference")) for u in r3.find("ModelStructure").iter("InitialUnknown")] == \
-            [index_to_vr[int(u.get("index"))] for u in r2.find("ModelStructure/InitialUnknowns")]
+            [index_to_vr[int(u.get("index"))] for u in r2.find("ModelStructure/InitialUnknowns")] + output_arrays
+
+
+#: the FMI 3.0 arrays over the scalars: name -> element names
+ARRAYS = {"plant": {f"sheaves.{q}": [f"{s}.{q}" for s in ("car_sheave", "traction", "cw_sheave")]
+                    for q in ("angle", "speed", "tension_in", "tension_out")},
+          "drive": {"landings": [f"landing[{k}]" for k in range(1, 9)],
+                    "pretorques": [f"pretorque[{k}]" for k in range(1, 9)],
+                    "trip.targets": [f"trip.target[{k}]" for k in range(1, 17)]}}
+
+
+def _check_arrays(arrays, v2, table, key):
+    """Each array has the size, type, causality, unit of its scalars and their start values; the
+    adapter's table maps it onto the scalars' FMI 2.0 value references."""
+    assert set(arrays) == set(ARRAYS[key]), key
+    rows = {int(line.split()[0]): [int(x) for x in line.split()[1:]] for line in table.splitlines()}
+    for name, a in arrays.items():
+        elems = [v2[e] for e in ARRAYS[key][name]]
+        kind = {"Real": "Float64", "Integer": "Int32"}[elems[0]["type"]]
+        assert a["type"] == kind and a["causality"] == elems[0]["causality"], name
+        assert a.get("unit") == elems[0].get("unit") and a.get("declaredType") == elems[0].get("declaredType")
+        if "start" in elems[0]:
+            assert a["start"].split() == [e["start"] for e in elems], name
+        assert rows[int(a["valueReference"])] == [len(elems)] + [int(e["valueReference"]) for e in elems], name
 
 
 # ------------------------------------------------------------------------------------------------
@@ -113,6 +140,22 @@ def test_fmi3_trip_equals_the_fmi2_trip_bit_for_bit(fmus, fmus3):
     assert (a["fmi3"], b["fmi3"]) == (False, True)
     assert len(b["rows"]) == n and b["rows"] == a["rows"]
     assert b["rows"][-1][1] > 1.5          # the car runs at rated speed: the window covers the start
+
+
+def test_fmi3_arrays_are_the_scalars(fmus, fmus3):
+    """The trip with the drive's pre-torques set through the array `pretorques` and the plant's sheave
+    forces read through `sheaves.tension_in` every step: the array equals its three scalars at every
+    step, a read of an array and a scalar together returns both, and the trip equals the FMI 2.0 trip
+    (pre-torques set as scalars) bit for bit."""
+    n = 2000
+    a = run_in_subprocess(f"{JOBS}:trip", fmus["plant"], fmus["drive"], n, timeout=900)
+    r = run_in_subprocess(f"{JOBS}:arrays", fmus3["plant"], fmus3["drive"], n, timeout=900)
+    assert r["same"] and r["rows"] == a["rows"]
+    assert r["scalars"] == ["car_sheave.tension_in", "traction.tension_in", "cw_sheave.tension_in"]
+    assert r["both"] == r["tension"] + [r["car"]]
+    assert r["pretorques"][:2] == [522.2, 331.3]
+    assert r["mismatch"] == [ERROR, ["plant: fmi3GetFloat64: nValues = 1, but the 1 value reference(s) hold "
+                                     "3 value(s)"]]
 
 
 def test_fmi3_state_rewind_and_serialization_are_exact(fmus3):
@@ -134,6 +177,7 @@ EXPECTED = {  # call: (status, words of the logged reason)
     "event_mode": (ERROR, "fmi3EnterEventMode is not supported"),
     "enter_twice": (ERROR, "fmi3EnterInitializationMode called in state Step Mode"),
     "nvalues_mismatch": (ERROR, "nValues = 3, but the 2 value reference(s) hold 2 value(s)"),
+    "array_nvalues": (ERROR, "nValues = 1, but the 1 value reference(s) hold 8 value(s)"),
     "set_time": (ERROR, "value reference 0 is the independent variable time"),
     "set_output": (ERROR, "motor.torque is not a settable Real variable"),
     "unknown_vr": (ERROR, "is not a Real variable"),

@@ -158,6 +158,7 @@ def bad_calls(drive_fmu):
     vr = (fmi3ValueReference * 2)(speed, torque)
     vals = (fmi3Float64 * 3)()
     res["nvalues_mismatch"] = _try(d, lambda: f.fmi3GetFloat64(f.component, vr, 2, vals, 3))
+    res["array_nvalues"] = _try(d, lambda: f.getFloat64([d.v["landings"].valueReference], nValues=1))
     res["set_time"] = _try(d, lambda: f.setFloat64([0], [1.0]))
     res["set_output"] = _try(d, lambda: f.setFloat64([torque], [1.0]))
     res["unknown_vr"] = _try(d, lambda: f.getFloat64([10_000]))
