@@ -59,10 +59,11 @@ class Fmu:
         return list(self.fmu.getFloat64(vrs) if self.fmi3 else self.fmu.getReal(vrs))
 
     def set(self, names, values):
-        if self.fmi3:
-            self.fmu.setFloat64(self.vrs(names), [float(x) for x in values])
-        else:
-            self.fmu.setReal(self.vrs(names), [float(x) for x in values])
+        for name, x in zip(names, values):
+            integer = self.v[name].type in ("Integer", "Int32")
+            call = {(True, True): "setInt32", (True, False): "setInteger", (False, True): "setFloat64",
+                    (False, False): "setReal"}[integer, self.fmi3]
+            getattr(self.fmu, call)(self.vrs([name]), [int(x) if integer else float(x)])
 
     def step(self, t, h):
         return self.fmu.doStep(t, h)
@@ -72,25 +73,41 @@ class Fmu:
         self.fmu.freeInstance()
 
 
-def _pair(plant_fmu, drive_fmu):
+def _pair(plant_fmu, drive_fmu, drive_values=DRIVE_VALUES, plant_values=None):
     drive = Fmu(drive_fmu, "drive")
     plant = Fmu(plant_fmu, "plant")
-    drive.start(DRIVE_VALUES)
-    plant.start()
+    drive.start(drive_values)
+    plant.start(plant_values)
     return plant, drive
 
 
-def _gs(plant, drive, k0, n, record=RECORD):
-    """n Gauss-Seidel steps from t = k0 * DT; the recorded plant outputs after every step."""
+def _gs(plant, drive, k0, n, record=RECORD, to_drive=TO_DRIVE, to_plant=TO_PLANT, dt=DT):
+    """n Gauss-Seidel steps from t = k0 * dt; the recorded plant outputs after every step."""
     out = []
     for k in range(k0, k0 + n):
-        t = k * DT
-        drive.set([a for a, _ in TO_DRIVE], plant.get([b for _, b in TO_DRIVE]))
-        drive.step(t, DT)
-        plant.set([a for a, _ in TO_PLANT], drive.get([b for _, b in TO_PLANT]))
-        plant.step(t, DT)
+        t = k * dt
+        drive.set([a for a, _ in to_drive], plant.get([b for _, b in to_drive]))
+        drive.step(t, dt)
+        plant.set([a for a, _ in to_plant], drive.get([b for _, b in to_plant]))
+        plant.step(t, dt)
         out.append(plant.get(list(record)))
     return out
+
+
+#: the crane pair as reeve_fmu.fmu.crane.cosimulate_crane couples it (slew by speed, 5 ms)
+CRANE = {"to_drive": (("motor.speed", "motor.speed"), ("slew.angular_velocity", "jib.angular_velocity")),
+         "to_plant": (("motor.torque", "motor.torque"), ("slew.speed", "slew.speed")),
+         "record": ("payload.position.z", "payload.swing_radial", "jib.angle", "motor.speed", "tip.tension_out"),
+         "dt": 5e-3}
+
+
+def crane(plant_fmu, drive_fmu, drive_values, n):
+    """The crane plant and drive, n steps of 5 ms from the start (slew and hoist start)."""
+    plant, drive = _pair(plant_fmu, drive_fmu, drive_values, {"slew.input": 1})
+    rows = _gs(plant, drive, 0, n, **CRANE)
+    plant.close()
+    drive.close()
+    return {"rows": rows, "fmi3": plant.fmi3}
 
 
 def trip(plant_fmu, drive_fmu, n):
