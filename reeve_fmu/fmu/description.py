@@ -117,6 +117,19 @@ def _fmt(x) -> str:
     return str(x)
 
 
+def _var_attr(name: str, vr: int, description: Optional[str], spec: "_Spec") -> dict:
+    """A variable's attributes in both versions, in this order: name, value reference, description,
+    causality, variability, initial (of `spec`)."""
+    attr = {"name": name, "valueReference": str(vr)}
+    if description:
+        attr["description"] = description
+    attr["causality"] = spec.causality.name
+    attr["variability"] = spec.variability.name
+    if spec.initial is not None:
+        attr["initial"] = spec.initial.name
+    return attr
+
+
 def _type_attr(quantity, unit, display_unit) -> dict:
     attr = {"quantity": quantity, "unit": unit}
     if display_unit:
@@ -333,14 +346,7 @@ class Declarations:
 
         mv = SubElement(root, "ModelVariables")
         for s in self._specs:
-            attr = {"name": s.name, "valueReference": str(s.vr)}
-            if s.description:
-                attr["description"] = s.description
-            attr["causality"] = s.causality.name
-            attr["variability"] = s.variability.name
-            if s.initial is not None:
-                attr["initial"] = s.initial.name
-            sv = SubElement(mv, "ScalarVariable", attr)
+            sv = SubElement(mv, "ScalarVariable", _var_attr(s.name, s.vr, s.description, s))
             tattr = self._value_attr(s, self._by_name[s.derivative_of].index if s.derivative_of else None)
             SubElement(sv, s.kind, tattr)
 
@@ -399,13 +405,7 @@ class Declarations:
                                    "variability": "continuous", "description": "Simulation time",
                                    "unit": "s"})
         for s in self._specs:
-            attr = {"name": s.name, "valueReference": str(s.vr + 1)}
-            if s.description:
-                attr["description"] = s.description
-            attr["causality"] = s.causality.name
-            attr["variability"] = s.variability.name
-            if s.initial is not None:
-                attr["initial"] = s.initial.name
+            attr = _var_attr(s.name, s.vr + 1, s.description, s)
             attr.update(self._value_attr(s, self._by_name[s.derivative_of].vr + 1 if s.derivative_of else None))
             start = attr.pop("start", None) if s.kind == "String" else None
             node = SubElement(mv, _FMI3_KIND[s.kind], attr)
@@ -415,13 +415,7 @@ class Declarations:
         for i, (name, specs, description) in enumerate(self._arrays):
             array_vr[name] = vr = len(self._specs) + 1 + i
             first = specs[0]
-            attr = {"name": name, "valueReference": str(vr)}
-            if description:
-                attr["description"] = description
-            attr["causality"] = first.causality.name
-            attr["variability"] = first.variability.name
-            if first.initial is not None:
-                attr["initial"] = first.initial.name
+            attr = _var_attr(name, vr, description, first)
             attr.update(self._value_attr(first, None))
             for key in ("min", "max", "nominal"):
                 if len({getattr(s, key) for s in specs}) > 1:
