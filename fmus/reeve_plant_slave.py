@@ -25,6 +25,7 @@ from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 class ReevingPlantSlave(ReeveSlave):
     description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
+    might_return_early = True      # FMI 3.0: at brake engagement, slack, snap-taut (_step_to_event)
 
     def define(self):
         with open(self.resource_path(PLANT_CONFIG), encoding="utf-8") as fh:
@@ -92,12 +93,30 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
+        if self.early_return_allowed and not self.plant.joint_inputs:
+            return self._step_to_event(t, dt)
         y = self.plant.step(dt, v["motor.torque"], v["brake.command"])   # a new array every step
         v["motor.speed"] = y.item(self._iw)
         v["motor.angle"] = y.item(self._ia)
         self._last = y                   # the snapshot _write_last writes when something reads it
         self.defer_outputs(self._writer)
         return True
+
+    def _step_to_event(self, t, dt):
+        """FMI 3.0 with early return allowed: the step ends at the end of the solver step in which the
+        brake engages or releases or a rope force reaches or leaves 0 (Plant.step_to_event)."""
+        v = self.values
+        y, t_end, event = self.plant.step_to_event(dt, v["motor.torque"], v["brake.command"])
+        if t_end >= t + dt:                  # no event, or at the step's end: a full step
+            event = None
+        v["motor.speed"] = y.item(self._iw)
+        v["motor.angle"] = y.item(self._ia)
+        self._last = y
+        self.defer_outputs(self._writer)
+        if event is None:
+            return True
+        self.log(f"early return at t = {t_end!r} s (step {t!r} + {dt!r} s): {event}", Fmi2Status.ok)
+        return t_end
 
     def _write_last(self):
         self._write(self._last)

@@ -383,6 +383,8 @@ class Declarations:
         cs = {k.replace("FMUstate", "FMUState"): v for k, v in cs2.attrib.items()
               if k not in FMI2_ONLY_CAPABILITIES}
         cs.update(FMI3_CAPABILITIES)
+        if getattr(self, "might_return_early", False):
+            cs["mightReturnEarlyFromDoStep"] = "true"
         SubElement(root, "CoSimulation", cs)
         used_types, unit_defs = self._unit_definitions(extra=("s",))
         if unit_defs is not None:

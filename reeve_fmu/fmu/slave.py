@@ -91,6 +91,9 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
     default_experiment: Optional[DefaultExperiment] = None
     #: relative tolerance (of dt) for the check currentCommunicationPoint == end of the last step
     time_tolerance: float = 1e-6
+    #: step() may end a step early at an event (FMI 3.0: mightReturnEarlyFromDoStep); it does so only
+    #: after the host allowed it (allow_early_return, called by the FMI 3.0 adapter)
+    might_return_early: bool = False
 
     # ------------------------------------------------------------------ construction
     def __init__(self, **kwargs):
@@ -127,6 +130,9 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         #: doSteps refused because of the call (wrong state or time, bad inputs, earlier call errors),
         #: not the model: the FMI 3.0 adapter returns fmi3Error for these, fmi3Discard otherwise
         self.refused_steps = 0
+        #: the FMI 3.0 host instantiated with earlyReturnAllowed (never in FMI 2.0): step() may then
+        #: return the time of an event inside the step instead of True
+        self.early_return_allowed = False
         self.package_info: dict[str, Any] = {}
         if self.version is None:
             try:
@@ -166,6 +172,11 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
 
     def on_terminate(self) -> None:
         """Called by fmi2Terminate."""
+
+    def allow_early_return(self) -> None:
+        """Called by the FMI 3.0 adapter when the host passed earlyReturnAllowed (and the model declares
+        might_return_early): step() may from now on end a step at an event time."""
+        self.early_return_allowed = bool(self.might_return_early)
 
     # ------------------------------------------------------------------ deferred outputs (speed)
     def set_eager_outputs(self, names: Iterable[str]) -> None:
@@ -368,6 +379,14 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
                 if len(self.log_queue) == n_log:
                     self._error(f"step(t={t!r}, dt={dt!r}) returned False without logging a reason",
                                 Fmi2Status.warning)
+                return False
+            if ok is not True and type(ok) is float:
+                if self.early_return_allowed and t < ok < t + dt:
+                    self.time = ok    # an early return at an event (step() logged the reason)
+                    return True
+                self._dirty = (f"step(t={t!r}, dt={dt!r}) returned the time {ok!r}: an early return needs "
+                               f"earlyReturnAllowed (FMI 3.0) and a time inside the step")
+                self._error(self._dirty)
                 return False
             self.time = t + dt
             return True

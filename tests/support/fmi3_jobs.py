@@ -110,10 +110,10 @@ def crane(plant_fmu, drive_fmu, drive_values, n):
     return {"rows": rows, "fmi3": plant.fmi3}
 
 
-def trip(plant_fmu, drive_fmu, n):
-    """The R1 trip's first n steps at 1 ms (pre-torque, brake lift, acceleration)."""
+def trip(plant_fmu, drive_fmu, n, h=DT):
+    """The R1 trip's first n steps at h (pre-torque, brake lift, acceleration)."""
     plant, drive = _pair(plant_fmu, drive_fmu)
-    rows = _gs(plant, drive, 0, n)
+    rows = _gs(plant, drive, 0, n, dt=h)
     plant.close()
     drive.close()
     return {"rows": rows, "fmi3": plant.fmi3}
@@ -241,3 +241,44 @@ def arrays(plant_fmu, drive_fmu, n):
     plant.close()
     drive.close()
     return result
+
+
+def early_return(plant_fmu, drive_fmu, h, n_max):
+    """The trip at communication step h with the plant instantiated with earlyReturnAllowed: Gauss-Seidel
+    steps until the plant returns early (its state and inputs saved before each step). Then the step is
+    redone from the saved state in solver steps (1 ms, one doStep each), and the first solver step after
+    which brake.engaged changed gives the event time to compare. Also the rows before the event, to
+    compare with a run without early return."""
+    drive = Fmu(drive_fmu, "drive")
+    plant = Fmu(plant_fmu, "plant", earlyReturnAllowed=True, loggingOn=True)
+    drive.start(DRIVE_VALUES)
+    plant.start()
+    t, rows, hit = 0.0, [], None
+    for k in range(n_max):
+        t = k * h
+        drive.set([a for a, _ in TO_DRIVE], plant.get([b for _, b in TO_DRIVE]))
+        drive.step(t, h)
+        inputs = drive.get([b for _, b in TO_PLANT])
+        plant.set([a for a, _ in TO_PLANT], inputs)
+        saved = plant.fmu.getFMUState()
+        engaged0 = plant.get(["brake.engaged"])[0]
+        n_log = len(plant.log)
+        event, stop, early, last = plant.step(t, h)
+        if early:
+            hit = {"t": t, "last": last, "log": [m for _, m in plant.log[n_log:]], "engaged0": engaged0,
+                   "engaged": plant.get(["brake.engaged"])[0], "time": plant.get(["time"])[0]}
+            break
+        rows.append(plant.get(list(RECORD)))
+    fine = []
+    if hit is not None:                  # the same step in solver steps, without early return
+        plant.fmu.setFMUState(saved)
+        plant.set([a for a, _ in TO_PLANT], inputs)
+        tk, m = t, round(h / 1e-3)
+        for j in range(1, m + 1):
+            t_next = t + h if j == m else t + j * (h / m)
+            r = plant.step(tk, t_next - tk)
+            fine.append((t_next, plant.get(["brake.engaged"])[0], bool(r[2])))
+            tk = t_next
+    plant.close()
+    drive.close()
+    return {"hit": hit, "fine": fine, "rows": rows}

@@ -19,8 +19,10 @@
  * - array variables (Declarations.add_array): views over declared scalars, listed in
  *   resources/reeve_fmi3_arrays.txt (FMI 3.0 value reference, size, the elements' FMI 2.0 references);
  * - nValues checked against the number of values the value references hold;
- * - fmi3DoStep's out-arguments: lastSuccessfulTime, terminateSimulation; no events, no early return
- *   (hasEventMode and mightReturnEarlyFromDoStep are false in the modelDescription);
+ * - fmi3DoStep's out-arguments: lastSuccessfulTime, terminateSimulation, earlyReturn: when the host
+ *   passed earlyReturnAllowed, the slave is told so (allow_early_return) and a model that declares
+ *   mightReturnEarlyFromDoStep (the elevator plant) may end a step at an event; the time it reached is
+ *   lastSuccessfulTime. No Event Mode (hasEventMode is false);
  * - everything the FMU does not provide (Model Exchange, Scheduled Execution, clocks, other types,
  *   derivatives, configuration and event mode) is fmi3Error with a logged reason, never a crash.
  */
@@ -77,6 +79,8 @@ typedef struct {
     int state;
     double start_time;              /* `time` before the slave has one */
     double refused_steps;           /* the slave's count of refused doSteps, as last seen */
+    int early_allowed;              /* the host passed earlyReturnAllowed */
+    int early_return;               /* ... and the slave accepted it */
 } Inst3;
 
 /* the FMI 2.0 logger the inner instance gets: formats the message and hands it to the FMI 3.0 one */
@@ -248,6 +252,28 @@ static double slave_number(Inst3 *x, const char *attr, double fallback)
     return v;
 }
 
+/* call a method of the Python slave without arguments: 1 when it ran */
+static int slave_call(Inst3 *x, const char *method)
+{
+    Wrap *w = (Wrap *)x->c;
+    int gil, ok = 0;
+    PyObject *m, *r = NULL;
+    if (!w->slave) return 0;
+    ensure_thread_state();
+    gil = py.GILStateEnsure();
+    if ((m = py.ObjectGetAttrString(w->slave, method)) != NULL) {
+        r = py.CallFunctionObjArgs(m, NULL);
+        py.DecRef(m);
+    }
+    if (r) {
+        ok = 1;
+        py.DecRef(r);
+    }
+    py.ErrClear();
+    py.GILStateRelease(gil);
+    return ok;
+}
+
 /* ------------------------------------------------------------------ instance lifecycle *//* ------------------------------------------------------------------ instance lifecycle */
 EXPORT const char *fmi3GetVersion(void) { return "3.0"; }
 
@@ -283,7 +309,6 @@ EXPORT fmi3Instance fmi3InstantiateCoSimulation(
     Inst3 *x = (Inst3 *)calloc(1, sizeof(Inst3));
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate;
-    (void)earlyReturnAllowed; /* the FMU never returns early: allowed or not changes nothing */
     if (!x) return NULL;
     x->env = instanceEnvironment;
     x->log = logMessage;
@@ -306,6 +331,8 @@ EXPORT fmi3Instance fmi3InstantiateCoSimulation(
     x->c = fmi2Instantiate(instanceName, fmi2CoSimulation, instantiationToken, uri, &cb, visible, loggingOn);
     if (!x->c) goto fail;
     read_arrays(x, resourcePath);
+    x->early_allowed = earlyReturnAllowed;
+    if (earlyReturnAllowed) x->early_return = slave_call(x, "allow_early_return");
     x->state = S3_INSTANTIATED;
     return (fmi3Instance)x;
 fail:
@@ -373,6 +400,7 @@ EXPORT fmi3Status fmi3Reset(fmi3Instance instance)
     s = fmi2Reset(x->c);
     x->state = S3_INSTANTIATED;
     x->refused_steps = 0; /* a new Python slave */
+    if (x->early_allowed) x->early_return = slave_call(x, "allow_early_return");
     return done3(x, s, before);
 }
 
@@ -384,17 +412,25 @@ EXPORT fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunica
     fmi2Status s;
     fmi2Real last = currentCommunicationPoint;
     fmi2Boolean stop = 0;
+    bool early = false;
     GUARD3("fmi3DoStep", BIT(S3_STEP));
     s = fmi2DoStep(x->c, currentCommunicationPoint, communicationStepSize, noSetFMUStatePriorToCurrentPoint);
     if (s <= fmi2Warning) {
         last = currentCommunicationPoint + communicationStepSize;
+        if (x->early_return) { /* the slave's time: before t + h after an event (reason logged) */
+            double reached = slave_number(x, "time", last);
+            if (reached < last) {
+                last = reached;
+                early = true;
+            }
+        }
     } else if (s == fmi2Discard) {
         if (fmi2GetRealStatus(x->c, fmi2LastSuccessfulTime, &last) != fmi2OK || last != last)
             last = currentCommunicationPoint;
         if (fmi2GetBooleanStatus(x->c, fmi2Terminated, &stop) != fmi2OK) stop = 0;
     }
     if (eventHandlingNeeded) *eventHandlingNeeded = false;
-    if (earlyReturn) *earlyReturn = false;
+    if (earlyReturn) *earlyReturn = early;
     if (terminateSimulation) *terminateSimulation = stop != 0;
     if (lastSuccessfulTime) *lastSuccessfulTime = last;
     if (s == fmi2Discard) {
