@@ -89,7 +89,8 @@ def _gs(plant, drive, k0, n, record=RECORD, to_drive=TO_DRIVE, to_plant=TO_PLANT
         drive.set([a for a, _ in to_drive], plant.get([b for _, b in to_drive]))
         drive.step(t, dt)
         plant.set([a for a, _ in to_plant], drive.get([b for _, b in to_plant]))
-        plant.step(t, dt)
+        if plant.fmi3 and plant.step(t, dt)[2] or not plant.fmi3 and plant.step(t, dt):
+            raise RuntimeError(f"plant step at t = {t!r}: an early return or a status other than OK")
         out.append(plant.get(list(record)))
     return out
 
