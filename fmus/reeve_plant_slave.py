@@ -15,6 +15,10 @@ it). A solver failure (an event: vanishing span, no Newton convergence) raises i
 ReeveSlave logs it through the FMU logger (the message names the event and its time) and returns
 fmi2Discard; the outputs keep the values of the last good step; further steps are refused until the
 master restores an FMU state or resets.
+
+Built with `reeve-fmu build --fmi 3` (FMI 3.0): also the arrays sheaves.angle, .speed, .tension_in,
+.tension_out over the sheaves' scalars, and, when the host allows early return, steps that end at the
+solver step of a brake engagement or release, a slack or snap-taut rope (_step_to_event).
 """
 import json
 

@@ -34,6 +34,8 @@ Subclass contract (see the example in tests/support/fmu_toy/reeve_toy_slave.py):
             self.add_real("sheave.w", "output", unit="rad/s", display_unit="rpm")
         def initialize(self):             # exitInitializationMode: build the model from parameters
         def step(self, t, dt) -> bool:    # one communication step; write outputs into self.values
+                                          # (FMI 3.0, early_return_allowed: may return the float time
+                                          # of an event inside the step instead, see might_return_early)
         def get_hidden_state(self) -> dict    # builtin types only (ndarray.tolist())
         def set_hidden_state(self, state)     # inverse of get_hidden_state
 
