@@ -122,7 +122,8 @@ def trip(plant_fmu, drive_fmu, n, h=DT):
 
 def state(plant_fmu, drive_fmu, n1, n2):
     """Run n1 steps, save both FMUs' states (and serialize them), run n2 steps; restore the saved states
-    and run the n2 steps again; restore the deserialized states and again."""
+    and run the n2 steps again; restore the deserialized states and again; reset both FMUs and run the
+    n1 + n2 steps from the start."""
     plant, drive = _pair(plant_fmu, drive_fmu)
     _gs(plant, drive, 0, n1)
     s = [f.fmu.getFMUState() if f.fmi3 else f.fmu.getFMUstate() for f in (plant, drive)]
@@ -135,10 +136,14 @@ def state(plant_fmu, drive_fmu, n1, n2):
         f.fmu.setFMUState(f.fmu.deserializeFMUState(bytes(b)))
     restored = _gs(plant, drive, n1, n2)
     time_after = plant.get(["time"])[0]
+    for f, values in ((plant, None), (drive, DRIVE_VALUES)):      # fmi3Reset: a fresh instance
+        f.fmu.reset()
+        f.start(values)
+    after_reset = _gs(plant, drive, 0, n1 + n2)[n1:]
     plant.close()
     drive.close()
     return {"first": first, "rewound": rewound, "restored": restored, "bytes": [len(b) for b in blobs],
-            "time_after": time_after}
+            "time_after": time_after, "after_reset": after_reset}
 
 
 def _status(exc):
