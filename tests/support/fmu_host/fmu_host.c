@@ -169,6 +169,11 @@ int main(int argc, char **argv)
     int logging = 0, i, j;
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     struct timespec t0, t1, c0, c1;
+    static const char *names2[] = {"fmi2SetReal", "fmi2GetReal", "fmi2DoStep", "fmi2ExitInitializationMode",
+                                   "fmi2SetInteger"};
+    static const char *names3[] = {"fmi3SetFloat64", "fmi3GetFloat64", "fmi3DoStep", "fmi3ExitInitializationMode",
+                                   "fmi3SetInt32"};
+    const char **fn;
 
     if (argc != 3) {
         fprintf(stderr, "usage: fmu_host PLAN OUT.csv\n");
@@ -222,6 +227,8 @@ int main(int argc, char **argv)
     }
     fclose(plan);
 
+    /* the names in messages: set, get, step, exit initialization, set integer */
+    fn = fmi3 ? names3 : names2;
     for (i = 0; i < nf; i++) {
         Fmu *f = &fmus[i];
         char path[4200], uri[4200];
@@ -259,7 +266,8 @@ int main(int argc, char **argv)
             f->c = f->instantiate(f->name, 1, f->guid, uri, &cb, 0, logging);
         }
         if (!f->c) {
-            fprintf(stderr, "instantiating %s returned NULL\n", f->name);
+            fprintf(stderr, "%s of %s returned NULL\n", fmi3 ? "fmi3InstantiateCoSimulation" : "fmi2Instantiate",
+                    f->name);
             return 1;
         }
         if (fmi3) {
@@ -268,12 +276,12 @@ int main(int argc, char **argv)
             check(f->setup(f->c, 0, 0.0, 0.0, stop > 0, stop > 0 ? stop : 0.0), "fmi2SetupExperiment", f, 0);
             check(f->enter(f->c), "fmi2EnterInitializationMode", f, 0);
         }
-        if (f->nstart_r) check(set_real(f, f->sr_vr, f->nstart_r, f->sr_val), "SetReal", f, 0);
+        if (f->nstart_r) check(set_real(f, f->sr_vr, f->nstart_r, f->sr_val), fn[0], f, 0);
         if (f->nstart_i)
             check(fmi3 ? f->setInt32(f->c, f->si_vr, f->nstart_i, f->si_val, f->nstart_i)
-                       : f->setInteger(f->c, f->si_vr, f->nstart_i, f->si_val), "SetInteger", f, 0);
-        check(f->exit_(f->c), "ExitInitializationMode", f, 0);
-        if (f->nout) check(get_real(f, f->out_vr, f->nout, f->out_val), "GetReal", f, 0);
+                       : f->setInteger(f->c, f->si_vr, f->nstart_i, f->si_val), fn[4], f, 0);
+        check(f->exit_(f->c), fn[3], f, 0);
+        if (f->nout) check(get_real(f, f->out_vr, f->nout, f->out_val), fn[1], f, 0);
     }
     if (failed) return 1;
     out = fopen(argv[2], "w");
@@ -295,10 +303,10 @@ int main(int argc, char **argv)
             Fmu *f = &fmus[i];
             if (f->nin) {
                 for (j = 0; j < f->nin; j++) f->in_val[j] = fmus[f->in_src[j]].out_val[f->in_idx[j]];
-                check(set_real(f, f->in_vr, f->nin, f->in_val), "SetReal", f, t);
+                check(set_real(f, f->in_vr, f->nin, f->in_val), fn[0], f, t);
             }
-            check(do_step(f, t, h), "DoStep", f, t);
-            if (f->nout) check(get_real(f, f->out_vr, f->nout, f->out_val), "GetReal", f, t);
+            check(do_step(f, t, h), fn[2], f, t);
+            if (f->nout) check(get_real(f, f->out_vr, f->nout, f->out_val), fn[1], f, t);
         }
         fprintf(out, "%.17g", ((double)(k + 1) * ns) / 1e9);
         for (j = 0; j < nrec; j++) fprintf(out, ",%.17g", fmus[rec_f[j]].out_val[rec_i[j]]);
