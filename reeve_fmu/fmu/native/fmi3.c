@@ -494,72 +494,38 @@ EXPORT fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference
         return done3(x, s, before);                                                                  \
     } while (0)
 
-EXPORT fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                               fmi3Int32 values[], size_t nValues)
-{
-    GUARD3("fmi3GetInt32", ANY_STATE);
-    MAPPED("fmi3GetInt32", fmi2GetInteger(x->c, v, n, values));
-}
-
-EXPORT fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                               const fmi3Int32 values[], size_t nValues)
-{
-    GUARD3("fmi3SetInt32", SETTABLE);
-    MAPPED("fmi3SetInt32", fmi2SetInteger(x->c, v, n, values));
-}
-
-/* fmi3Boolean is a bool, fmi2Boolean an int: converted through tmp */
-static fmi2Status get_bool(fmi2Component c, const fmi2ValueReference *v, size_t nvr, fmi3Boolean values[])
+/* fmi3Boolean is a bool, fmi2Boolean an int: converted through tmp; `get` receives, or `set` gives, them */
+static fmi2Status bools(fmi2Component c, const fmi2ValueReference *v, size_t nvr, fmi3Boolean *get,
+                        const fmi3Boolean *set)
 {
     size_t i;
     fmi2Status s;
     fmi2Boolean *tmp = (fmi2Boolean *)calloc(nvr ? nvr : 1, sizeof *tmp);
     if (!tmp) return fmi2Error;
-    s = fmi2GetBoolean(c, v, nvr, tmp);
-    for (i = 0; i < nvr; i++) values[i] = tmp[i] != 0;
+    for (i = 0; set && i < nvr; i++) tmp[i] = set[i] ? 1 : 0;
+    s = set ? fmi2SetBoolean(c, v, nvr, tmp) : fmi2GetBoolean(c, v, nvr, tmp);
+    for (i = 0; get && i < nvr; i++) get[i] = tmp[i] != 0;
     free(tmp);
     return s;
 }
 
-static fmi2Status set_bool(fmi2Component c, const fmi2ValueReference *v, size_t nvr, const fmi3Boolean values[])
-{
-    size_t i;
-    fmi2Status s;
-    fmi2Boolean *tmp = (fmi2Boolean *)calloc(nvr ? nvr : 1, sizeof *tmp);
-    if (!tmp) return fmi2Error;
-    for (i = 0; i < nvr; i++) tmp[i] = values[i] ? 1 : 0;
-    s = fmi2SetBoolean(c, v, nvr, tmp);
-    free(tmp);
-    return s;
-}
-
-EXPORT fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                 fmi3Boolean values[], size_t nValues)
-{
-    GUARD3("fmi3GetBoolean", ANY_STATE);
-    MAPPED("fmi3GetBoolean", get_bool(x->c, v, n, values));
-}
-
-EXPORT fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                 const fmi3Boolean values[], size_t nValues)
-{
-    GUARD3("fmi3SetBoolean", SETTABLE);
-    MAPPED("fmi3SetBoolean", set_bool(x->c, v, n, values));
-}
-
-EXPORT fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                fmi3String values[], size_t nValues)
-{
-    GUARD3("fmi3GetString", ANY_STATE);
-    MAPPED("fmi3GetString", fmi2GetString(x->c, v, n, values));
-}
-
-EXPORT fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
-                                const fmi3String values[], size_t nValues)
-{
-    GUARD3("fmi3SetString", SETTABLE);
-    MAPPED("fmi3SetString", fmi2SetString(x->c, v, n, values));
-}
+/* Int32, Boolean and String: the fmi2 call on the mapped references */
+#define GET_SET(T, C3, GET, SET)                                                                     \
+    EXPORT fmi3Status fmi3Get##T(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
+                                 C3 values[], size_t nValues)                                        \
+    {                                                                                                \
+        GUARD3("fmi3Get" #T, ANY_STATE);                                                             \
+        MAPPED("fmi3Get" #T, GET);                                                                   \
+    }                                                                                                \
+    EXPORT fmi3Status fmi3Set##T(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,   \
+                                 const C3 values[], size_t nValues)                                  \
+    {                                                                                                \
+        GUARD3("fmi3Set" #T, SETTABLE);                                                              \
+        MAPPED("fmi3Set" #T, SET);                                                                   \
+    }
+GET_SET(Int32, fmi3Int32, fmi2GetInteger(x->c, v, n, values), fmi2SetInteger(x->c, v, n, values))
+GET_SET(Boolean, fmi3Boolean, bools(x->c, v, n, values, NULL), bools(x->c, v, n, NULL, values))
+GET_SET(String, fmi3String, fmi2GetString(x->c, v, n, values), fmi2SetString(x->c, v, n, values))
 
 /* types this FMU has no variables of: an empty call is fine, anything else names the reference */
 static fmi3Status no_such_type(fmi3Instance instance, const char *fn, const fmi3ValueReference vr[], size_t nvr)
