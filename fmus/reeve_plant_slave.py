@@ -59,12 +59,7 @@ class ReevingPlantSlave(ReeveSlave):
                           description=o["description"],
                           dependencies=["motor.torque"] if o["depends"] else ())
             self._names.append(o["name"])
-        # FMI 3.0 arrays over the sheaves' scalars, in scene order: sheaves.angle, .speed, .tension_in, ...
-        sheaves = [n[:-len(".tension_in")] for n in self._names if n.endswith(".tension_in")]
-        for q in ("angle", "speed", "tension_in", "tension_out"):
-            if all(f"{s}.{q}" in self._by_name for s in sheaves) and sheaves:
-                self.add_array(f"sheaves.{q}", [f"{s}.{q}" for s in sheaves],
-                               description=f"{q} of the sheaves {', '.join(sheaves)}")
+        self.add_output_arrays()      # FMI 3.0: sheaves.angle, .speed, .tension_in, .tension_out
         self.plant = None
 
     def initialize(self):

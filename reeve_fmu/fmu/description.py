@@ -300,6 +300,24 @@ class Declarations:
         self._arrays.append((name, specs, description))
         return name
 
+    def add_output_arrays(self) -> list:
+        """FMI 3.0 arrays over the declared outputs: `<p>.x`, `<p>.y`, `<p>.z` as the vector `<p>` (e.g.
+        payload.rotation), and over the sheaves (the outputs `<s>.tension_in`, in declaration order)
+        sheaves.angle, .speed, .tension_in, .tension_out. Returns the arrays' names."""
+        outs = [s.name for s in self._specs if s.causality == Fmi2Causality.output]
+        have, names = set(outs), []
+        for n in outs:
+            base = n[:-2]
+            if n.endswith(".x") and {base + ".y", base + ".z"} <= have and base not in self._by_name:
+                names.append(self.add_array(base, [base + ".x", base + ".y", base + ".z"],
+                                            description=f"{base} as the vector (x, y, z)"))
+        sheaves = [n[:-len(".tension_in")] for n in outs if n.endswith(".tension_in")]
+        for q in ("angle", "speed", "tension_in", "tension_out"):
+            if sheaves and all(f"{s}.{q}" in have for s in sheaves):
+                names.append(self.add_array(f"sheaves.{q}", [f"{s}.{q}" for s in sheaves],
+                                            description=f"{q} of the sheaves {', '.join(sheaves)}"))
+        return names
+
     def fmi3_arrays(self) -> str:
         """The FMI 3.0 adapter's table of array variables (resources/reeve_fmi3_arrays.txt): one line per
         array, its FMI 3.0 value reference, its size, the FMI 2.0 value references of its elements."""

@@ -106,9 +106,14 @@ def crane(plant_fmu, drive_fmu, drive_values, n):
     """The crane plant and drive, n steps of 5 ms from the start (slew and hoist start)."""
     plant, drive = _pair(plant_fmu, drive_fmu, drive_values, {"slew.input": 1})
     rows = _gs(plant, drive, 0, n, **CRANE)
+    vectors = {}
+    if plant.fmi3:     # the arrays (x, y, z) against their scalars
+        for name in ("payload.position", "payload.rotation", "payload.rotation_rate"):
+            vectors[name] = [list(plant.fmu.getFloat64([plant.v[name].valueReference], nValues=3)),
+                             plant.get([name + ".x", name + ".y", name + ".z"])]
     plant.close()
     drive.close()
-    return {"rows": rows, "fmi3": plant.fmi3}
+    return {"rows": rows, "fmi3": plant.fmi3, "vectors": vectors}
 
 
 def trip(plant_fmu, drive_fmu, n, h=DT):
