@@ -1,6 +1,7 @@
 """FMI 3.0 co-simulation FMUs (`reeve-fmu build --fmi 3`): validation, the same variables as the FMI 2.0
-FMUs, the same results bit for bit, state save/restore and serialization, bad calls of an FMI 3.0 host,
-the C host through the FMI 3.0 API, clean exit.
+FMUs plus arrays over them, the same results bit for bit (elevator and crane), state save/restore,
+serialization and reset, early return at the brake release, bad calls of an FMI 3.0 host, the C host
+through the FMI 3.0 API, clean exit.
 
 The FMI 3.0 FMUs are built once per module with the CLI; the FMI 2.0 ones are the session's (`fmus`).
 Every FMU-loading check runs in its own process (tests/support/fmi3_jobs.py via run_in_subprocess, the C
