@@ -43,6 +43,7 @@ class CranePlantSlave(ReeveSlave):
                           description=o["description"],
                           dependencies=list(CRANE_INPUTS) if o["depends"] else ())
             self._names.append(o["name"])
+        self.add_output_arrays()      # FMI 3.0: payload.position, .rotation, ... (x, y, z); sheaves.*
         self.crane = None
 
     def initialize(self):

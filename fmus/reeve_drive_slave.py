@@ -55,6 +55,12 @@ class ElectricDriveSlave(ReeveSlave):
             else:
                 self.add_real(name, "parameter", "fixed", unit=unit, description=desc,
                               start=defaults[name], min=lo, max=hi)
+        indexed = {}   # landing[k], pretorque[k], trip.target[k]: also FMI 3.0 arrays landings, ...
+        for name, *_ in DRIVE_PARAMETERS:
+            if name.endswith("]"):
+                indexed.setdefault(name[:name.index("[")], []).append(name)
+        for base, names in indexed.items():
+            self.add_array(base + "s", names, description=f"{base}[1] ... {base}[{len(names)}] as one array")
         self.add_real("motor.torque", "output", declared_type="Torque",
                       description="air-gap torque at the end of the step (positive lifts the car)")
         self.add_real("brake.command", "output", "discrete", unit="1",

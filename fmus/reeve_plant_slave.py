@@ -15,6 +15,10 @@ it). A solver failure (an event: vanishing span, no Newton convergence) raises i
 ReeveSlave logs it through the FMU logger (the message names the event and its time) and returns
 fmi2Discard; the outputs keep the values of the last good step; further steps are refused until the
 master restores an FMU state or resets.
+
+Built with `reeve-fmu build --fmi 3` (FMI 3.0): also the arrays sheaves.angle, .speed, .tension_in,
+.tension_out over the sheaves' scalars, and, when the host allows early return, steps that end at the
+solver step of a brake engagement or release, a slack or snap-taut rope (_step_to_event).
 """
 import json
 
@@ -25,6 +29,7 @@ from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 class ReevingPlantSlave(ReeveSlave):
     description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
+    might_return_early = True      # FMI 3.0: at brake engagement, slack, snap-taut (_step_to_event)
 
     def define(self):
         with open(self.resource_path(PLANT_CONFIG), encoding="utf-8") as fh:
@@ -54,6 +59,7 @@ class ReevingPlantSlave(ReeveSlave):
                           description=o["description"],
                           dependencies=["motor.torque"] if o["depends"] else ())
             self._names.append(o["name"])
+        self.add_output_arrays()      # FMI 3.0: sheaves.angle, .speed, .tension_in, .tension_out
         self.plant = None
 
     def initialize(self):
@@ -86,12 +92,30 @@ class ReevingPlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
+        if self.early_return_allowed and not self.plant.joint_inputs:
+            return self._step_to_event(t, dt)
         y = self.plant.step(dt, v["motor.torque"], v["brake.command"])   # a new array every step
         v["motor.speed"] = y.item(self._iw)
         v["motor.angle"] = y.item(self._ia)
         self._last = y                   # the snapshot _write_last writes when something reads it
         self.defer_outputs(self._writer)
         return True
+
+    def _step_to_event(self, t, dt):
+        """FMI 3.0 with early return allowed: the step ends at the end of the solver step in which the
+        brake engages or releases or a rope force reaches or leaves 0 (Plant.step_to_event)."""
+        v = self.values
+        y, t_end, event = self.plant.step_to_event(dt, v["motor.torque"], v["brake.command"])
+        if t_end >= t + dt:                  # no event, or at the step's end: a full step
+            event = None
+        v["motor.speed"] = y.item(self._iw)
+        v["motor.angle"] = y.item(self._ia)
+        self._last = y
+        self.defer_outputs(self._writer)
+        if event is None:
+            return True
+        self.log(f"early return at t = {t_end!r} s (step {t!r} + {dt!r} s): {event}", Fmi2Status.ok)
+        return t_end
 
     def _write_last(self):
         self._write(self._last)

@@ -246,7 +246,9 @@ def _cfg_build(p):
     p.add_argument("--name", default=None, help="plant FMU model name (default: ReevingPlant for the reference "
                    "scene scenes/elevator_2to1.toml as it is, CranePlant for scenes/slewing_crane.toml as it is, "
                    "Plant_<scene name> for any other scene or --set)")
-    p.add_argument("--dest", default="fmus", help="output directory (default: fmus/)")
+    p.add_argument("--dest", default=None, help="output directory (default: fmus/, with --fmi 3 fmus/fmi3/)")
+    p.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version of the co-simulation FMUs "
+                   "(default 2; 3: FMI 3.0, docs/fmu-hosts.md)")
     p.add_argument("--standalone", action="store_true", help="FMUs that carry their Python runtime (libpython, "
                    "stdlib, numpy, numba): a native host runs them on a machine without Python (docs/fmu-hosts.md)")
     _add_set(p)

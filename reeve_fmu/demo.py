@@ -272,7 +272,7 @@ def cli_demo(args) -> int:
     return 0
 
 
-def _build_crane(dest: Path, scene: Path, name: str, standalone: bool = False) -> int:
+def _build_crane(dest: Path, scene: Path, name: str, standalone: bool = False, fmi_version: int = 2) -> int:
     """A crane scene (a revolute joint and a hoist drive): the crane plant FMU `name`, CraneDrive.fmu
     and DEST/<name>.drive.json, the drive parameters sized from the scene."""
     import json
@@ -280,7 +280,8 @@ def _build_crane(dest: Path, scene: Path, name: str, standalone: bool = False) -
     from .fmu.crane import build_crane_fmus
 
     t0 = time.perf_counter()
-    plant, drive, values = build_crane_fmus(dest, scene, name=name, standalone=standalone)
+    plant, drive, values = build_crane_fmus(dest, scene, name=name, standalone=standalone,
+                                            fmi_version=fmi_version)
     print(f"built {plant} and {drive} ({time.perf_counter() - t0:.1f} s)")
     p = dest / f"{name}.drive.json"
     p.write_text(json.dumps({"drive": values}, indent=1) + "\n", encoding="utf-8")
@@ -300,7 +301,8 @@ def cli_build(args) -> int:
     from .fmu import cosim
     from .studies.overrides import apply_to_data, dump_toml, load_scene_data, parse_sets, scene_with, split
 
-    dest = Path(getattr(args, "dest", None) or "fmus")
+    fmi_version = int(getattr(args, "fmi", None) or 2)
+    dest = Path(getattr(args, "dest", None) or ("fmus" if fmi_version == 2 else "fmus/fmi3"))
     standalone = bool(getattr(args, "standalone", False))
     scene = Path(getattr(args, "scene", None) or cosim.default_scene_path())
     scene_sets, drive_sets, load = split(parse_sets(getattr(args, "set", None)))
@@ -319,12 +321,12 @@ def cli_build(args) -> int:
         path.write_text(dump_toml(apply_to_data(load_scene_data(scene), scene_sets)), encoding="utf-8")
         scene = path
     if crane:
-        return _build_crane(dest, scene, name, standalone)
+        return _build_crane(dest, scene, name, standalone, fmi_version)
     t0 = time.perf_counter()
-    plant, _ = cosim.build_plant_fmu(dest, scene, name, standalone=standalone)
+    plant, _ = cosim.build_plant_fmu(dest, scene, name, standalone=standalone, fmi_version=fmi_version)
     print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
-    drive, _ = cosim.build_drive_fmu(dest, standalone=standalone)
+    drive, _ = cosim.build_drive_fmu(dest, standalone=standalone, fmi_version=fmi_version)
     print(f"built {drive} ({time.perf_counter() - t0:.1f} s)")
     if "elevator" in sc.extra:
         from .studies.trip import trip_case

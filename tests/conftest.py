@@ -114,6 +114,7 @@ _COLLECTED: set = set()   # ids of the tests collected here, before deselection 
 SLOW_FILES = frozenset({
     "tests/core/test_no_jit.py",
     "tests/fmu/test_cosim.py", "tests/fmu/test_crane_fmu.py", "tests/fmu/test_fmu_hosts.py",
+    "tests/fmu/test_fmi3.py",
     "tests/fmu/test_fmu_machinery.py", "tests/fmu/test_fmu_portable.py", "tests/fmu/test_plant_fmu.py",
     "tests/hil/test_hil.py", "tests/hil/test_hil_network.py",
     "tests/studies/test_lagrangian.py", "tests/studies/test_physical_fuzz.py",

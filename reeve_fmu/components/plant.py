@@ -115,6 +115,7 @@ class Plant:
                         if b.joint is not None and b.motion.kind.endswith("-input")]
         self.joint_inputs = tuple(f"{ji.body}.{ji.kind}" for ji in self._joints)
         self.state: State = self.sim.initial_state()
+        self._event_index = None      # step_to_event's output indices, found on first use
         self.warnings += self.sim.warnings
         self._y = self.sim.outputs(self.state)
 
@@ -140,6 +141,50 @@ class Plant:
             self._set_joints(st, dt, joints)
         self._y = self.sim.step(st, st.t + dt, torque, brake_command).copy()
         return self._y
+
+    def step_to_event(self, dt: float, torque: float, brake_command: float) -> tuple:
+        """As step() (no joint inputs), ending early at the end of the first solver step in which an event
+        happens: the brake engages or releases (brake.engaged, a first-order lag after the command,
+        crosses 1/2: it has no sharper instant), a rope force reaches 0 (slack) or leaves 0 (snap-taut).
+        Returns (outputs, time reached, the event or None). The step is made as by step(); only when
+        the watched signs differ at its end is it made again from its start in solver steps to find the
+        first one (an event undone within the same step is not seen). Without an event the result is
+        step()'s bit for bit."""
+        if self._joints:
+            raise ValueError("step_to_event: this plant has joint inputs; use step()")
+        start, y_start = self.state.copy(), self._y
+        before = self._indicators(y_start)
+        self.step(dt, torque, brake_command)
+        if self._indicators(self._y) == before:
+            return self._y, self.state.t, None
+        self.state, self._y = start, y_start
+        t0 = start.t
+        n = max(1, math.ceil(dt / self.sim.h - 1e-9))
+        for k in range(1, n + 1):
+            tk = t0 + dt if k == n else t0 + k * (dt / n)
+            self.step(tk - self.state.t, torque, brake_command)
+            self.state.t = tk
+            now = self._indicators(self._y)
+            if now != before:
+                return self._y, tk, self._event(before, now)
+        return self._y, self.state.t, None      # an event undone within the step
+
+    def _indicators(self, y) -> tuple:
+        """(brake at least half engaged, every rope force > 0): what step_to_event watches."""
+        idx = self._event_index
+        if idx is None:
+            names = self.output_names
+            forces = [i for i, n in enumerate(names) if ".tension" in n]
+            idx = self._event_index = (names.index("brake.engaged") if "brake.engaged" in names else -1, forces)
+        brake, forces = idx
+        return (brake >= 0 and float(y[brake]) >= 0.5, tuple(float(y[i]) > 0.0 for i in forces))
+
+    def _event(self, before, now) -> str:
+        if before[0] != now[0]:
+            return "the brake engages" if now[0] else "the brake releases"
+        names = [n for n in self.output_names if ".tension" in n]
+        changed = [(n, b) for n, a, b in zip(names, before[1], now[1]) if a != b]
+        return "; ".join(f"{n} {'snap-taut' if taut else 'slack'}" for n, taut in changed)
 
     def _set_joints(self, st: State, dt: float, joints) -> None:
         if len(joints) != len(self._joints):

@@ -26,6 +26,7 @@ entry script or resource.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import json
@@ -168,7 +169,7 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
               resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
               validate: bool = True, requirements: Iterable = DEFAULT_REQUIREMENTS,
               native_loader="auto", log=None, kernels: bool = True, standalone: bool = False,
-              **options) -> Path:
+              fmi_version: int = 2, **options) -> Path:
     """Build the FMU of `entry_script` into `dest_dir` and return its path.
 
     entry_script   file defining exactly one deepest ReeveSlave subclass; its module name must be
@@ -189,6 +190,8 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
     standalone     carry the interpreter too (reeve_fmu.fmu.standalone): libpython, the stdlib and
                    the packages the model imports, so that a native host runs the FMU on a machine
                    without Python (Linux x86-64 with the native loader only)
+    fmi_version    2 (default) or 3: an FMI 3.0 co-simulation FMU of the same slave (`_to_fmi3`); it
+                   needs the native loader (its FMI 3.0 adapter is the FMU's only binary)
     options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
 
     Raises FmuBuildError if pythonfmu fails or `fmpy validate` finds problems; an existing FMU at
@@ -221,6 +224,11 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             loader_note = str(exc)
     elif native_loader is True:
         raise FmuBuildError(f"the native loader is only built on Linux x86-64, not on {sys.platform}")
+    if fmi_version not in (2, 3):
+        raise FmuBuildError(f"fmi_version must be 2 or 3, not {fmi_version!r}")
+    if fmi_version == 3 and compiler is None:
+        raise FmuBuildError("an FMI 3.0 FMU needs the native loader: a C compiler on Linux x86-64"
+                            + (f" ({loader_note})" if loader_note else ""))
     if standalone and compiler is None:
         raise FmuBuildError("a standalone FMU needs the native loader: a C compiler on Linux x86-64"
                             + (f" ({loader_note})" if loader_note else ""))
@@ -277,9 +285,11 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             try:
                 native.install_loader(built, _model_identifier(built), compiler=compiler,
                                       libpython=env["libpython"] or "",
-                                      py_version=env["python_version"])
+                                      py_version=env["python_version"], fmi_version=fmi_version)
             except Exception as exc:
                 raise FmuBuildError(f"building the native loader of {built.name} failed: {exc}") from exc
+        if fmi_version == 3:
+            _to_fmi3(built, entry, stem)
         elif loader_note:
             log(f"reeve_fmu build: {built.name} keeps pythonfmu's own binary: {loader_note}")
         # 4. validation gate
@@ -303,26 +313,87 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
 _IMPORT_LOCK = threading.Lock()
 
 
-def _pythonfmu_build(entry: Path, stem: str, out_dir: Path, files, opts) -> Path:
-    """pythonfmu's build of `entry` into out_dir. It imports the entry script through sys.path: one
-    build at a time in a process (the rest of two builds runs side by side), sys.path and the entry's
-    module restored after."""
-    from pythonfmu.builder import FmuBuilder
-
+@contextlib.contextmanager
+def _entry_import(stem: str):
+    """pythonfmu imports the entry script through sys.path: one such import at a time in a process
+    (the rest of two builds runs side by side), sys.path and the entry's module restored after."""
     with _IMPORT_LOCK:
         saved_path = list(sys.path)
         saved_mod = sys.modules.pop(stem, None)
+        try:
+            yield
+        finally:
+            sys.path[:] = saved_path
+            sys.modules.pop(stem, None)
+            if saved_mod is not None:
+                sys.modules[stem] = saved_mod
+
+
+def _pythonfmu_build(entry: Path, stem: str, out_dir: Path, files, opts) -> Path:
+    """pythonfmu's build of `entry` into out_dir."""
+    from pythonfmu.builder import FmuBuilder
+
+    with _entry_import(stem):
         try:
             return Path(FmuBuilder.build_FMU(entry, dest=out_dir, project_files=files, **opts))
         except FmuBuildError:
             raise
         except Exception as exc:
             raise FmuBuildError(f"pythonfmu failed to build {entry.name}: {type(exc).__name__}: {exc}") from exc
-        finally:
-            sys.path[:] = saved_path
-            sys.modules.pop(stem, None)
-            if saved_mod is not None:
-                sys.modules[stem] = saved_mod
+
+
+#: where an FMI 3.0 FMU keeps its Linux x86-64 binaries (FMI 3.0 platform tuple)
+FMI3_PLATFORM_DIR = "binaries/x86_64-linux"
+FMI3_ARRAYS = "resources/reeve_fmi3_arrays.txt"
+
+
+def _to_fmi3(built: Path, entry: Path, stem: str) -> None:
+    """Rewrite `built` (pythonfmu's FMI 2.0 FMU with the loader compiled for FMI 3.0) as an FMI 3.0
+    co-simulation FMU: the modelDescription from the slave's declarations (Declarations.to_xml3, with
+    the FMI 2.0 document's header and capabilities) and the table of its array variables, the Linux
+    binaries under x86_64-linux, and no Windows binary (pythonfmu's is FMI 2.0 only)."""
+    from xml.etree import ElementTree as ET
+
+    from .native import PLATFORM_DIR
+
+    with tempfile.TemporaryDirectory(prefix="reeve_fmi3_") as tmp:
+        with zipfile.ZipFile(built) as zf:
+            fmi2 = ET.fromstring(zf.read("modelDescription.xml"))
+            for name in zf.namelist():
+                if name.startswith("resources/"):
+                    zf.extract(name, tmp)
+        slave = _entry_slave(Path(tmp) / "resources", entry.name, stem)
+        root = slave.to_xml3(fmi2)
+        arrays = slave.fmi3_arrays().encode()
+    ET.indent(root, space="\t")
+    xml = ('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n").encode()
+    new = built.with_suffix(".fmi3.tmp")
+    with zipfile.ZipFile(built) as zin, zipfile.ZipFile(new, "w", zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            name = item.filename
+            if name.startswith("binaries/") and not name.startswith(PLATFORM_DIR + "/"):
+                continue
+            data = xml if name == "modelDescription.xml" else zin.read(name)
+            if name.startswith(PLATFORM_DIR + "/"):
+                item.filename = FMI3_PLATFORM_DIR + name[len(PLATFORM_DIR):]
+            zout.writestr(item, data)
+        if arrays:   # the adapter's table of array variables (native/fmi3.c)
+            zout.writestr(FMI3_ARRAYS, arrays)
+    os.replace(new, built)
+
+
+def _entry_slave(resources: Path, entry_name: str, stem: str):
+    """The FMU's slave as pythonfmu instantiates it at build time, from the FMU's own resources."""
+    from pythonfmu.builder import get_model_class
+
+    with _entry_import(stem):
+        try:
+            sys.path.insert(0, str(resources))
+            cls = get_model_class(resources / entry_name)
+            return cls(instance_name="dummyInstance", resources=str(resources))
+        except Exception as exc:
+            raise FmuBuildError(f"the FMI 3.0 description of {entry_name} failed: {type(exc).__name__}: "
+                                f"{exc}") from exc
 
 
 def _carry(built: Path, reqs, *, kernels: bool, standalone: bool, log) -> None:

@@ -214,9 +214,9 @@ def plant_build_inputs(scene=None, name: str = PLANT_NAME, workdir: Optional[Pat
 
 
 def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True,
-                    standalone: bool = False) -> tuple[Path, bool]:
+                    standalone: bool = False, fmi_version: int = 2) -> tuple[Path, bool]:
     """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?).
-    standalone: the FMU carries its interpreter (build_fmu)."""
+    standalone: the FMU carries its interpreter; fmi_version 3: an FMI 3.0 FMU (build_fmu)."""
     from .build import build_fmu, fmu_is_stale
 
     dest = Path(dest)
@@ -225,17 +225,19 @@ def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: b
         path = dest / f"{name}.fmu"
         if not force and not fmu_is_stale(path, entry, res):
             return path, False
-        return build_fmu(entry, dest, resources=res, standalone=standalone), True
+        return build_fmu(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version), True
 
 
-def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False) -> tuple[Path, bool]:
+def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False,
+                    fmi_version: int = 2) -> tuple[Path, bool]:
     from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
 
     entry = entry_script("drive")
     path = Path(dest) / f"{DRIVE_NAME}.fmu"
     if not force and not fmu_is_stale(path, entry):
         return path, False
-    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA), standalone=standalone), True   # no TOML read
+    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA), standalone=standalone,   # no TOML read
+                     fmi_version=fmi_version), True
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,

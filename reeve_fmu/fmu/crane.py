@@ -126,8 +126,8 @@ def crane_plant_name(scene_path, scene=None, name: Optional[str] = None) -> str:
     return "Plant_" + _slug((scene if scene is not None else load_scene(scene_path)).name)
 
 
-def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
-                     standalone: bool = False) -> tuple[Path, Path, dict]:
+def build_crane_fmus(dest, scene, *, name: Optional[str] = None, standalone: bool = False,
+                     fmi_version: int = 2) -> tuple[Path, Path, dict]:
     """Build the crane plant FMU of `scene` (a path; model name `crane_plant_name`, or `name`) and
     CraneDrive.fmu into dest; returns their paths and the drive parameters sized for the scene (start
     values for CraneDrive.fmu)."""
@@ -150,8 +150,9 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
             copy = Path(work) / f"reeve_crane_{_slug(name)}_slave.py"
             copy.write_bytes(entry.read_bytes())
             entry = copy
-        plant = build_fmu(entry, dest, resources=res, standalone=standalone)
-    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone)
+        plant = build_fmu(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version)
+    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone,
+                      fmi_version=fmi_version)
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 

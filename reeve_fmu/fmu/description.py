@@ -85,6 +85,13 @@ _CAUS = {c.name: c for c in Fmi2Causality}
 _VAR = {v.name: v for v in Fmi2Variability}
 _INIT = {i.name: i for i in Fmi2Initial}
 _KINDS = ("Real", "Integer", "Boolean", "String")
+_FMI3_KIND = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+#: FMI 2.0 CoSimulation attributes that FMI 3.0 does not have
+FMI2_ONLY_CAPABILITIES = ("canInterpolateInputs", "canNotUseMemoryManagementFunctions",
+                          "canRunAsynchronuously", "maxOutputDerivativeOrder")
+#: what the FMI 3.0 adapter declares beyond the FMI 2.0 flags
+FMI3_CAPABILITIES = {"hasEventMode": "false", "mightReturnEarlyFromDoStep": "false",
+                     "canReturnEarlyAfterIntermediateUpdate": "false", "providesIntermediateUpdate": "false"}
 _PYVAR = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 
 
@@ -108,6 +115,26 @@ def _fmt(x) -> str:
             raise ValueError(f"non-finite value {x!r} cannot be written to modelDescription.xml")
         return repr(x)
     return str(x)
+
+
+def _var_attr(name: str, vr: int, description: Optional[str], spec: "_Spec") -> dict:
+    """A variable's attributes in both versions, in this order: name, value reference, description,
+    causality, variability, initial (of `spec`)."""
+    attr = {"name": name, "valueReference": str(vr)}
+    if description:
+        attr["description"] = description
+    attr["causality"] = spec.causality.name
+    attr["variability"] = spec.variability.name
+    if spec.initial is not None:
+        attr["initial"] = spec.initial.name
+    return attr
+
+
+def _type_attr(quantity, unit, display_unit) -> dict:
+    attr = {"quantity": quantity, "unit": unit}
+    if display_unit:
+        attr["displayUnit"] = display_unit
+    return attr
 
 
 class _Spec:
@@ -255,6 +282,49 @@ class Declarations:
     def vr(self, name: str) -> int:
         return self._by_name[name].vr
 
+    def add_array(self, name: str, elements: Iterable[str], description: Optional[str] = None) -> str:
+        """An FMI 3.0 array variable whose elements are the declared scalars `elements` (in that order;
+        they must agree in type, causality, variability, initial, unit). The FMI 2.0 FMU does not show
+        it; in the FMI 3.0 FMU the scalars stay and the array is one more variable over the same values."""
+        elements = list(elements)
+        if name in self._by_name or any(a[0] == name for a in self._arrays):
+            raise ValueError(f"variable {name!r} declared twice")
+        specs = [self._by_name.get(e) for e in elements]
+        if not specs or None in specs or specs[0].kind == "String":
+            raise ValueError(f"{name}: the elements {elements} must be declared numeric or Boolean variables")
+        keys = {(s.kind, s.causality, s.variability, s.initial, s.unit, s.declared_type, s.display_unit)
+                for s in specs}
+        if len(keys) != 1:
+            raise ValueError(f"{name}: the elements {elements} differ in causality, variability, initial, "
+                             f"unit or type")
+        self._arrays.append((name, specs, description))
+        return name
+
+    def add_output_arrays(self) -> list:
+        """FMI 3.0 arrays over the declared outputs: `<p>.x`, `<p>.y`, `<p>.z` as the vector `<p>` (e.g.
+        payload.rotation), and over the sheaves (the outputs `<s>.tension_in`, in declaration order)
+        sheaves.angle, .speed, .tension_in, .tension_out. Returns the arrays' names."""
+        outs = [s.name for s in self._specs if s.causality == Fmi2Causality.output]
+        have, names = set(outs), []
+        for n in outs:
+            base = n[:-2]
+            if n.endswith(".x") and {base + ".y", base + ".z"} <= have and base not in self._by_name:
+                names.append(self.add_array(base, [base + ".x", base + ".y", base + ".z"],
+                                            description=f"{base} as the vector (x, y, z)"))
+        sheaves = [n[:-len(".tension_in")] for n in outs if n.endswith(".tension_in")]
+        for q in ("angle", "speed", "tension_in", "tension_out"):
+            if sheaves and all(f"{s}.{q}" in have for s in sheaves):
+                names.append(self.add_array(f"sheaves.{q}", [f"{s}.{q}" for s in sheaves],
+                                            description=f"{q} of the sheaves {', '.join(sheaves)}"))
+        return names
+
+    def fmi3_arrays(self) -> str:
+        """The FMI 3.0 adapter's table of array variables (resources/reeve_fmi3_arrays.txt): one line per
+        array, its FMI 3.0 value reference, its size, the FMI 2.0 value references of its elements."""
+        n = len(self._specs) + 1
+        return "".join(f"{n + i} {len(specs)} {' '.join(str(s.vr) for s in specs)}\n"
+                       for i, (_, specs, _) in enumerate(self._arrays))
+
     # ------------------------------------------------------------------ modelDescription.xml
     def to_xml(self, model_options: dict = dict()) -> Element:
         """pythonfmu's XML plus units, types, derivatives and a complete ModelStructure.
@@ -271,78 +341,31 @@ class Declarations:
         children = list(root)
         cosim_pos = next(i for i, c in enumerate(children) if c.tag == "CoSimulation")
 
-        used_types = sorted({s.declared_type for s in self._specs if s.declared_type})
-        used_units = {s.unit for s in self._specs if s.unit}
-        used_units |= {TYPES[t][1] for t in used_types}
+        used_types, unit_defs = self._unit_definitions()
         insert_at = cosim_pos + 1
-        if used_units:
-            ud = Element("UnitDefinitions")
-            for u in sorted(used_units):
-                exps, factor, displays = UNITS[u]
-                un = SubElement(ud, "Unit", {"name": u})
-                battr = {k: str(v) for k, v in exps.items()}
-                if factor != 1.0:
-                    battr["factor"] = _fmt(factor)
-                SubElement(un, "BaseUnit", battr)
-                for dname, (f, off) in displays.items():
-                    dattr = {"name": dname, "factor": _fmt(f)}
-                    if off:
-                        dattr["offset"] = _fmt(off)
-                    SubElement(un, "DisplayUnit", dattr)
-            root.insert(insert_at, ud)
+        if unit_defs is not None:
+            root.insert(insert_at, unit_defs)
             insert_at += 1
         if used_types:
             td = Element("TypeDefinitions")
             for t in used_types:
                 quantity, unit, disp = TYPES[t]
                 st = SubElement(td, "SimpleType", {"name": t})
-                rattr = {"quantity": quantity, "unit": unit}
-                if disp:
-                    rattr["displayUnit"] = disp
-                SubElement(st, "Real", rattr)
+                SubElement(st, "Real", _type_attr(quantity, unit, disp))
             root.insert(insert_at, td)
             insert_at += 1
         # LogCategories stays where pythonfmu put it (right after CoSimulation, now after types)
         children = list(root)
         log_pos = next((i for i, c in enumerate(children) if c.tag == "LogCategories"), None)
         de_pos = (log_pos + 1) if log_pos is not None else insert_at
-        de = getattr(self, "default_experiment", None)
+        de = self._default_experiment_xml()
         if de is not None:
-            attr = {}
-            for key, val in (("startTime", de.start_time), ("stopTime", de.stop_time),
-                             ("tolerance", de.tolerance), ("stepSize", de.step_size)):
-                if val is not None:
-                    attr[key] = _fmt(float(val))
-            root.insert(de_pos, Element("DefaultExperiment", attr))
+            root.insert(de_pos, de)
 
         mv = SubElement(root, "ModelVariables")
         for s in self._specs:
-            attr = {"name": s.name, "valueReference": str(s.vr)}
-            if s.description:
-                attr["description"] = s.description
-            attr["causality"] = s.causality.name
-            attr["variability"] = s.variability.name
-            if s.initial is not None:
-                attr["initial"] = s.initial.name
-            sv = SubElement(mv, "ScalarVariable", attr)
-            tattr = {}
-            if s.declared_type:
-                tattr["declaredType"] = s.declared_type
-            if s.kind == "Real":
-                if s.unit:
-                    tattr["unit"] = s.unit
-                if s.display_unit:
-                    tattr["displayUnit"] = s.display_unit
-            for key in ("min", "max", "nominal"):
-                v = getattr(s, key)
-                if v is not None:
-                    tattr[key] = _fmt(float(v) if s.kind == "Real" else v)
-            write_start = (s.causality in (Fmi2Causality.input, Fmi2Causality.parameter)
-                           or s.initial in (Fmi2Initial.exact, Fmi2Initial.approx))
-            if write_start:
-                tattr["start"] = _fmt(s.start)
-            if s.derivative_of:
-                tattr["derivative"] = str(self._by_name[s.derivative_of].index)
+            sv = SubElement(mv, "ScalarVariable", _var_attr(s.name, s.vr, s.description, s))
+            tattr = self._value_attr(s, self._by_name[s.derivative_of].index if s.derivative_of else None)
             SubElement(sv, s.kind, tattr)
 
         ms = SubElement(root, "ModelStructure")
@@ -356,30 +379,172 @@ class Declarations:
             dn = SubElement(ms, "Derivatives")
             for s in derivs:  # no dependencies attribute: depends on states (and maybe inputs)
                 SubElement(dn, "Unknown", {"index": str(s.index)})
-        initial = set()
-        for s in self._specs:
-            if s.causality == Fmi2Causality.output and s.initial in (Fmi2Initial.approx, Fmi2Initial.calculated):
-                initial.add(s.index)
-            if s.causality == Fmi2Causality.calculatedParameter:
-                initial.add(s.index)
-        for s in derivs:
-            for v in (self._by_name[s.derivative_of], s):
-                if v.initial in (Fmi2Initial.approx, Fmi2Initial.calculated):
-                    initial.add(v.index)
+        initial = {v.index for v in self._initial_unknowns()}
         if initial:
             iu = SubElement(ms, "InitialUnknowns")
             for idx in sorted(initial):
                 SubElement(iu, "Unknown", {"index": str(idx)})
         return root
 
-    def _unknown_attr(self, s: _Spec) -> dict:
-        attr = {"index": str(s.index)}
+    def to_xml3(self, fmi2: Element) -> Element:
+        """The FMI 3.0 co-simulation modelDescription of the same declarations (fmi3 adapter of the
+        native loader, reeve_fmu/fmu/native/fmi3.c). `fmi2` is the FMU's FMI 2.0 document: its header
+        and capability flags carry over (FMUstate spelled FMUState), the rest is written here. As in
+        the FMI 3.0 Reference FMUs, value reference 0 is the independent variable `time`; every
+        declared variable has its FMI 2.0 value reference + 1."""
+        if self._fault is not None:
+            raise RuntimeError(self._fault)
+        head = {k: v for k, v in fmi2.attrib.items() if k not in ("fmiVersion", "guid", "numberOfEventIndicators")}
+        root = Element("fmiModelDescription", {"fmiVersion": "3.0", "modelName": head.pop("modelName"),
+                                               "instantiationToken": "{" + fmi2.get("guid") + "}", **head})
+        cs2 = fmi2.find("CoSimulation")
+        cs = {k.replace("FMUstate", "FMUState"): v for k, v in cs2.attrib.items()
+              if k not in FMI2_ONLY_CAPABILITIES}
+        cs.update(FMI3_CAPABILITIES)
+        if getattr(self, "might_return_early", False):
+            cs["mightReturnEarlyFromDoStep"] = "true"
+        SubElement(root, "CoSimulation", cs)
+        used_types, unit_defs = self._unit_definitions(extra=("s",))
+        if unit_defs is not None:
+            root.append(unit_defs)
+        if used_types:
+            td = SubElement(root, "TypeDefinitions")
+            for t in used_types:
+                quantity, unit, disp = TYPES[t]
+                SubElement(td, "Float64Type", {"name": t, **_type_attr(quantity, unit, disp)})
+        cats = fmi2.find("LogCategories")
+        if cats is not None:
+            lc = SubElement(root, "LogCategories")
+            for c in cats:
+                SubElement(lc, "Category", {k: v.replace("fmi2", "fmi3") for k, v in c.attrib.items()})
+        de = self._default_experiment_xml()
+        if de is not None:
+            root.append(de)
+        mv = SubElement(root, "ModelVariables")
+        SubElement(mv, "Float64", {"name": "time", "valueReference": "0", "causality": "independent",
+                                   "variability": "continuous", "description": "Simulation time",
+                                   "unit": "s"})
+        for s in self._specs:
+            attr = _var_attr(s.name, s.vr + 1, s.description, s)
+            attr.update(self._value_attr(s, self._by_name[s.derivative_of].vr + 1 if s.derivative_of else None))
+            start = attr.pop("start", None) if s.kind == "String" else None
+            node = SubElement(mv, _FMI3_KIND[s.kind], attr)
+            if start is not None:
+                SubElement(node, "Start", {"value": start})
+        array_vr = {}
+        for i, (name, specs, description) in enumerate(self._arrays):
+            array_vr[name] = vr = len(self._specs) + 1 + i
+            first = specs[0]
+            attr = _var_attr(name, vr, description, first)
+            attr.update(self._value_attr(first, None))
+            for key in ("min", "max", "nominal"):
+                if len({getattr(s, key) for s in specs}) > 1:
+                    attr.pop(key, None)   # differs per element: in the scalars only (an array has one)
+            if "start" in attr:
+                attr["start"] = " ".join(_fmt(s.start) for s in specs)
+            node = SubElement(mv, _FMI3_KIND[first.kind], attr)
+            SubElement(node, "Dimension", {"start": str(len(specs))})
+        ms = SubElement(root, "ModelStructure")
+        for s in self._specs:
+            if s.causality == Fmi2Causality.output:
+                SubElement(ms, "Output", self._unknown_attr(s, "valueReference", lambda v: v.vr + 1))
+        for name, specs, _ in self._arrays:
+            if specs[0].causality == Fmi2Causality.output:
+                deps = [self._unknown_attr(s, "valueReference", lambda v: v.vr + 1).get("dependencies")
+                        for s in specs]
+                attr = {"valueReference": str(array_vr[name])}
+                if None not in deps:
+                    attr["dependencies"] = " ".join(sorted({d for x in deps for d in x.split()}, key=int))
+                SubElement(ms, "Output", attr)
+        initial = [(s.vr + 1) for s in self._initial_unknowns()]
+        initial += [array_vr[name] for name, specs, _ in self._arrays
+                    if specs[0].causality == Fmi2Causality.output
+                    and specs[0].initial in (Fmi2Initial.approx, Fmi2Initial.calculated)]
+        for vr in initial:
+            SubElement(ms, "InitialUnknown", {"valueReference": str(vr)})
+        return root
+
+    def _unknown_attr(self, s: _Spec, key: str = "index", ref=lambda v: v.index) -> dict:
+        """An output's ModelStructure entry: `key` "index" (FMI 2.0) or "valueReference" (3.0), and
+        `ref(spec)` the number written for it and for its dependencies."""
+        attr = {key: str(ref(s))}
         if s.dependencies is not None:
             idx = []
             for d in s.dependencies:
                 dep = self._by_name.get(d)
                 if dep is None or dep.causality != Fmi2Causality.input:
                     raise ValueError(f"{s.name}: dependency {d!r} is not an input variable")
-                idx.append(dep.index)
+                idx.append(ref(dep))
             attr["dependencies"] = " ".join(str(i) for i in sorted(set(idx)))
         return attr
+
+    def _value_attr(self, s: _Spec, derivative_ref) -> dict:
+        """The attributes of a variable's value: type, unit, bounds, start, derivative (written as
+        `derivative_ref`: the index in FMI 2.0, the value reference in FMI 3.0)."""
+        tattr = {}
+        if s.declared_type:
+            tattr["declaredType"] = s.declared_type
+        if s.kind == "Real":
+            if s.unit:
+                tattr["unit"] = s.unit
+            if s.display_unit:
+                tattr["displayUnit"] = s.display_unit
+        for key in ("min", "max", "nominal"):
+            v = getattr(s, key)
+            if v is not None:
+                tattr[key] = _fmt(float(v) if s.kind == "Real" else v)
+        if s.causality in (Fmi2Causality.input, Fmi2Causality.parameter) or \
+                s.initial in (Fmi2Initial.exact, Fmi2Initial.approx):
+            tattr["start"] = _fmt(s.start)
+        if derivative_ref is not None:
+            tattr["derivative"] = str(derivative_ref)
+        return tattr
+
+    def _initial_unknowns(self) -> list:
+        """The variables a master may read in initialization mode that are computed there."""
+        initial = {}
+        for s in self._specs:
+            if s.causality == Fmi2Causality.output and s.initial in (Fmi2Initial.approx, Fmi2Initial.calculated):
+                initial[s.index] = s
+            if s.causality == Fmi2Causality.calculatedParameter:
+                initial[s.index] = s
+        for s in self._specs:
+            if s.derivative_of:
+                for v in (self._by_name[s.derivative_of], s):
+                    if v.initial in (Fmi2Initial.approx, Fmi2Initial.calculated):
+                        initial[v.index] = v
+        return [initial[i] for i in sorted(initial)]
+
+    def _unit_definitions(self, extra=()) -> tuple:
+        """(declared types used, <UnitDefinitions> or None): the same element in FMI 2.0 and 3.0
+        (`extra`: units used by variables that are not declarations, FMI 3.0's time)."""
+        used_types = sorted({s.declared_type for s in self._specs if s.declared_type})
+        used_units = {s.unit for s in self._specs if s.unit} | set(extra)
+        used_units |= {TYPES[t][1] for t in used_types}
+        if not used_units:
+            return used_types, None
+        ud = Element("UnitDefinitions")
+        for u in sorted(used_units):
+            exps, factor, displays = UNITS[u]
+            un = SubElement(ud, "Unit", {"name": u})
+            battr = {k: str(v) for k, v in exps.items()}
+            if factor != 1.0:
+                battr["factor"] = _fmt(factor)
+            SubElement(un, "BaseUnit", battr)
+            for dname, (f, off) in displays.items():
+                dattr = {"name": dname, "factor": _fmt(f)}
+                if off:
+                    dattr["offset"] = _fmt(off)
+                SubElement(un, "DisplayUnit", dattr)
+        return used_types, ud
+
+    def _default_experiment_xml(self) -> Optional[Element]:
+        de = getattr(self, "default_experiment", None)
+        if de is None:
+            return None
+        attr = {}
+        for key, val in (("startTime", de.start_time), ("stopTime", de.stop_time),
+                         ("tolerance", de.tolerance), ("stepSize", de.step_size)):
+            if val is not None:
+                attr[key] = _fmt(float(val))
+        return Element("DefaultExperiment", attr)

@@ -99,7 +99,7 @@ def collect(fmu_path, *, stop_time: float = 1.0, step: float = 1e-3, timeout: fl
                                                                 "NUMBA_CACHE_DIR", "REEVE_FMU_NO_JIT")}
         env.update({"REEVE_FMU_RECORD_KERNELS": str(record), "REEVE_FMU_CPU": "generic"})
         try:
-            p = subprocess.run([sys.executable, str(script), str(fmu_path), repr(stop_time), repr(step)],
+            p = subprocess.run([sys.executable, str(script), str(Path(fmu_path).resolve()), repr(stop_time), repr(step)],
                                capture_output=True, text=True, encoding="utf-8", errors="replace",
                                timeout=timeout, env=env, cwd=tmp)
         except (OSError, subprocess.TimeoutExpired) as exc:

@@ -34,6 +34,8 @@ Subclass contract (see the example in tests/support/fmu_toy/reeve_toy_slave.py):
             self.add_real("sheave.w", "output", unit="rad/s", display_unit="rpm")
         def initialize(self):             # exitInitializationMode: build the model from parameters
         def step(self, t, dt) -> bool:    # one communication step; write outputs into self.values
+                                          # (FMI 3.0, early_return_allowed: may return the float time
+                                          # of an event inside the step instead, see might_return_early)
         def get_hidden_state(self) -> dict    # builtin types only (ndarray.tolist())
         def set_hidden_state(self, state)     # inverse of get_hidden_state
 
@@ -91,6 +93,9 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
     default_experiment: Optional[DefaultExperiment] = None
     #: relative tolerance (of dt) for the check currentCommunicationPoint == end of the last step
     time_tolerance: float = 1e-6
+    #: step() may end a step early at an event (FMI 3.0: mightReturnEarlyFromDoStep); it does so only
+    #: after the host allowed it (allow_early_return, called by the FMI 3.0 adapter)
+    might_return_early: bool = False
 
     # ------------------------------------------------------------------ construction
     def __init__(self, **kwargs):
@@ -105,6 +110,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         self._set = {k: {} for k in _KINDS}   # kind -> {vr: spec} (settable variables only)
         self._real_names: list = []            # vr -> name of a Real kept in self.values (else None)
         self._user_setters: dict[str, Callable] = {}
+        self._arrays: list = []                # FMI 3.0 array variables over declared scalars (add_array)
         self._fast_real: dict[int, tuple] = {}  # vr -> (name, lo, hi); non-empty only in step mode
         self._deferred: Optional[Callable] = None  # writes the outputs step() left for later
         self._eager_vrs: frozenset = frozenset()   # Reals step() always writes (see defer_outputs)
@@ -123,6 +129,12 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         self._dirty: Optional[str] = None      # step raised; needs setFMUstate or reset
         self._bad_inputs: dict[str, str] = {}  # name -> reason (value was rejected)
         self._pending: list[str] = []          # one-shot call errors, reported by the next doStep
+        #: doSteps refused because of the call (wrong state or time, bad inputs, earlier call errors),
+        #: not the model: the FMI 3.0 adapter returns fmi3Error for these, fmi3Discard otherwise
+        self.refused_steps = 0
+        #: the FMI 3.0 host instantiated with earlyReturnAllowed (never in FMI 2.0): step() may then
+        #: return the time of an event inside the step instead of True
+        self.early_return_allowed = False
         self.package_info: dict[str, Any] = {}
         if self.version is None:
             try:
@@ -162,6 +174,11 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
 
     def on_terminate(self) -> None:
         """Called by fmi2Terminate."""
+
+    def allow_early_return(self) -> None:
+        """Called by the FMI 3.0 adapter when the host passed earlyReturnAllowed (and the model declares
+        might_return_early): step() may from now on end a step at an event time."""
+        self.early_return_allowed = bool(self.might_return_early)
 
     # ------------------------------------------------------------------ deferred outputs (speed)
     def set_eager_outputs(self, names: Iterable[str]) -> None:
@@ -365,6 +382,14 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
                     self._error(f"step(t={t!r}, dt={dt!r}) returned False without logging a reason",
                                 Fmi2Status.warning)
                 return False
+            if ok is not True and type(ok) is float:
+                if self.early_return_allowed and t < ok < t + dt:
+                    self.time = ok    # an early return at an event (step() logged the reason)
+                    return True
+                self._dirty = (f"step(t={t!r}, dt={dt!r}) returned the time {ok!r}: an early return needs "
+                               f"earlyReturnAllowed (FMI 3.0) and a time inside the step")
+                self._error(self._dirty)
+                return False
             self.time = t + dt
             return True
         except Exception:  # pragma: no cover - belt and braces
@@ -372,6 +397,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
             return False
 
     def _reject_step(self, t, dt, now) -> bool:
+        self.refused_steps += 1
         if not (dt > 0.0) or dt == math.inf:
             self._error(f"doStep rejected: communicationStepSize={dt!r} at t={t!r} (must be finite and > 0)")
         elif t - t != 0.0:
@@ -382,6 +408,7 @@ class ReeveSlave(Declarations, FmuState, Fmi2Slave):
         return False
 
     def _refuse_step(self, t, dt) -> bool:
+        self.refused_steps += 1
         if self._fault:
             self._error(f"doStep(t={t!r}) refused: the instance is faulty (reset or re-instantiate).\n"
                         + self._fault)

@@ -85,3 +85,28 @@ def test_brake_stop_decelerates_at_T_over_J_then_sticks():
     after = t > t_stop + 0.05
     check("motor angle range after the stop [rad]", np.ptp(th[after]), 4e-4)
     check('np.mean(th[after][-100:]) - np.mean(th[after][:100])', np.mean(th[after][-100:]) - np.mean(th[after][:100]), 1e-4)
+
+
+def test_step_to_event_ends_at_the_solver_step_of_the_brake_half_engagement():
+    """Plant.step_to_event (the FMI 3.0 early return): the brake's engagement is e(t) = 1 - exp(-(t - t_c)/tau)
+    after the command at t_c, so it crosses 1/2 at t_c + tau ln 2; a 50 ms step ends at the end of the
+    solver step (0.1 ms) that contains that time, released at t_c = 0 and applied at t_c = 1 s. A step
+    without an event is step()'s bit for bit."""
+    tau, h = 0.02, 1e-4
+    p = Plant(loads_scene(HOIST, "brake_stop.toml"))
+    y, t1, event = p.step_to_event(0.05, 210.0, 1.0)
+    assert event == "the brake releases"
+    ulps = "the reached time is t0 + k (dt / n): two ulps of 1 s"
+    check("t1 - (solver step end after tau ln 2)", t1 - math.ceil(tau * math.log(2) / h) * h, 4.4e-16, ulps)
+    assert p.t == t1 and p.output("brake.engaged") < 0.5
+    q = Plant(loads_scene(HOIST, "brake_stop.toml"))
+    q.set_state(p.get_state())
+    while p.t < 1.0 - 1e-9:                        # no event: step_to_event is step()
+        dt = min(0.05, 1.0 - p.t)
+        y, t, event = p.step_to_event(dt, 210.0, 1.0)
+        assert event is None and t == p.t and np.array_equal(y, q.step(dt, 210.0, 1.0))
+    check("p.t - 1", p.t - 1.0, 4.4e-16, ulps)
+    y, t2, event = p.step_to_event(0.05, 0.0, 0.0)
+    assert event == "the brake engages"
+    assert t2 == p.t and p.output("brake.engaged") >= 0.5
+    check("t2 - 1 - ceil(tau ln 2 / h) h", t2 - 1.0 - math.ceil(tau * math.log(2) / h) * h, 4.4e-16, ulps)

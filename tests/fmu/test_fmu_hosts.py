@@ -203,34 +203,12 @@ assert len(r.time) == 11
 """
 
 
-def _failed_runs(scripts, tmp_path, env):
-    """Run each script 10 times (the first alone: it loads, or compiles, the kernels; then two at a time):
-    [(script, run), exit code, stderr] of every run that did not exit 0."""
-    bad = []
-    for name, code in scripts.items():
-        (tmp_path / f"{name}.py").write_text(code, encoding="utf-8")
-        p = subprocess.run([sys.executable, str(tmp_path / f"{name}.py")], cwd=tmp_path, env=env,
-                           capture_output=True, timeout=900)
-        if p.returncode != 0:
-            bad.append(((name, 0), p.returncode, p.stderr.decode("utf-8", "replace")[-2000:]))
-    runs = [(name, i) for name in scripts for i in range(1, 10)]
-    for k in range(0, len(runs), 2):
-        procs = [(run, subprocess.Popen([sys.executable, str(tmp_path / f"{run[0]}.py")], cwd=tmp_path,
-                                        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE))
-                 for run in runs[k:k + 2]]
-        for run, p in procs:
-            out, err = p.communicate(timeout=900)
-            if p.returncode != 0:
-                bad.append((run, p.returncode, err.decode("utf-8", "replace")[-2000:]))
-    return bad
-
-
 def test_fmpy_scripts_exit_cleanly(fmus, tmp_path):
     """simulate_fmu of each FMU and a cosimulate script, 10 runs each (two at a time): every run exits 0
     (pythonfmu's own binary aborted such runs at exit with "corrupted double-linked list")."""
     scripts = {"plant": SIMULATE.format(fmu=fmus["plant"]), "drive": SIMULATE.format(fmu=fmus["drive"]),
                "cosim": COSIMULATE.format(plant=fmus["plant"], drive=fmus["drive"], values=R1_DRIVE)}
-    assert _failed_runs(scripts, tmp_path, chost.clean_env({"PYTHONPATH": str(ROOT)})) == []
+    assert chost.failed_runs(scripts, tmp_path, chost.clean_env({"PYTHONPATH": str(ROOT)})) == []
 
 
 CRANE_COSIMULATE = """
@@ -246,7 +224,7 @@ def test_crane_fmpy_scripts_exit_cleanly(crane_fmus, tmp_path):
     scripts = {"crane_plant": SIMULATE.format(fmu=crane_fmus["plant"]),
                "crane_cosim": CRANE_COSIMULATE.format(plant=crane_fmus["plant"], drive=crane_fmus["drive"],
                                                       values=crane_fmus["drive_values"])}
-    assert _failed_runs(scripts, tmp_path, chost.clean_env({"PYTHONPATH": str(ROOT)})) == []
+    assert chost.failed_runs(scripts, tmp_path, chost.clean_env({"PYTHONPATH": str(ROOT)})) == []
 
 
 def test_failing_step_reason_reaches_a_default_fmpy_user(fmus, tmp_path):

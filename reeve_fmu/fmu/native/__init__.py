@@ -137,8 +137,10 @@ def _c_string(s: str) -> str:
 
 
 def compile_loader(model_identifier: str, out_dir, *, libpython: Optional[str] = None,
-                   py_version: Optional[str] = None, compiler: Optional[list] = None) -> dict:
-    """Compile the loader and the exit helper for `model_identifier` into out_dir.
+                   py_version: Optional[str] = None, compiler: Optional[list] = None,
+                   fmi_version: int = 2) -> dict:
+    """Compile the loader and the exit helper for `model_identifier` into out_dir (fmi_version 3:
+    with the FMI 3.0 adapter, fmi3.c).
 
     Returns {"loader": path, "helper": path, "compiler": argv}. Raises NoCompiler, or RuntimeError
     with the compiler's output."""
@@ -160,6 +162,7 @@ def compile_loader(model_identifier: str, out_dir, *, libpython: Optional[str] =
         [*cc, *common, f"-DREEVE_MODEL_IDENTIFIER={_c_string(model_identifier)}",
          f"-DREEVE_LIBPYTHON={_c_string(libpython)}", f"-DREEVE_PY_VERSION={_c_string(py_version)}",
          f"-DREEVE_PYHOME={_c_string(home)}", *(_pyconfig_flags() if same_python else []),
+         *(["-DREEVE_FMI3"] if fmi_version == 3 else []),
          "-o", str(loader), str(SOURCE), str(PYINIT), "-ldl", "-lpthread"],
         [*cc, *common, "-DREEVE_EXIT_HELPER", "-o", str(helper), str(SOURCE)],
     ]
@@ -176,7 +179,8 @@ def compile_loader(model_identifier: str, out_dir, *, libpython: Optional[str] =
 
 
 def install_loader(fmu_path, model_identifier: str, *, compiler: Optional[list] = None,
-                   libpython: Optional[str] = None, py_version: Optional[str] = None) -> dict:
+                   libpython: Optional[str] = None, py_version: Optional[str] = None,
+                   fmi_version: int = 2) -> dict:
     """Compile the loader and rewrite the FMU at fmu_path in place (see the module doc).
 
     Returns the compile info. The FMU must hold pythonfmu's binaries/linux64/<id>.so."""
@@ -184,7 +188,7 @@ def install_loader(fmu_path, model_identifier: str, *, compiler: Optional[list] 
     orig = f"{PLATFORM_DIR}/{model_identifier}.so"
     with tempfile.TemporaryDirectory(prefix="reeve_loader_") as tmp:
         info = compile_loader(model_identifier, tmp, libpython=libpython, py_version=py_version,
-                              compiler=compiler)
+                              compiler=compiler, fmi_version=fmi_version)
         new = Path(tmp) / "new.fmu"
         with zipfile.ZipFile(fmu_path) as zin, zipfile.ZipFile(new, "w", zipfile.ZIP_DEFLATED) as zout:
             names = zin.namelist()

@@ -60,6 +60,9 @@
  *    before. REEVE_FMU_FAST_PATH=0 in the environment switches it off (the slave declines the link).
  *
  * Every other fmi2 function is forwarded unchanged to pythonfmu's binary.
+ *
+ * Compiled with -DREEVE_FMI3 (an FMI 3.0 FMU) the loader also exports the fmi3 API: fmi3.c, an adapter
+ * over the fmi2 functions here (each FMI 3.0 instance runs on one FMI 2.0 instance of this loader).
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -159,6 +162,10 @@ static struct {
     PyObject *(*ObjectGetAttrString)(PyObject *, const char *);
     void *(*LongAsVoidPtr)(PyObject *);
     void (*ErrClear)(void);
+#ifdef REEVE_FMI3
+    double (*FloatAsDouble)(PyObject *); /* the slave's time (FMI 3.0's `time`), refused steps */
+    PyObject *(*ErrOccurred)(void);
+#endif
 } py;
 
 static const char *py_names[] = {
@@ -169,6 +176,9 @@ static const char *py_names[] = {
     "Py_DecRef", "Py_IncRef", "PyFloat_FromDouble", "PyObject_CallFunctionObjArgs", "PyObject_IsTrue",
     "PyList_New", "PyList_Size", "PyList_GetItem", "PySys_GetObject", "PySys_SetObject",
     "PyObject_GetAttrString", "PyLong_AsVoidPtr", "PyErr_Clear",
+#ifdef REEVE_FMI3
+    "PyFloat_AsDouble", "PyErr_Occurred",
+#endif
 };
 
 /* ------------------------------------------------------------------ the fmi2 functions */
@@ -1154,5 +1164,9 @@ EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, 
     ensure_thread_state();
     return inner_fmi2GetBooleanStatus(w->inner, k, x);
 }
+
+#ifdef REEVE_FMI3
+#include "fmi3.c" /* the FMI 3.0 adapter over the functions above */
+#endif
 
 #endif /* REEVE_EXIT_HELPER */
