@@ -1,8 +1,8 @@
 """The compiled kernels' view of a Model's arrays.
 
 `Kernel` (a namedtuple, filled by model.build_model) is what Python code reads. Passing a namedtuple of ~40 arrays into a
-compiled function that is not inlined costs an atomic incref and decref per array (measured
-0.6 us per call, about a quarter of a step). The compiled code therefore receives the same fields in a
+compiled function that is not inlined costs an atomic incref and decref per array, a sizeable part
+of a step. The compiled code therefore receives the same fields in a
 numba StructRef, which is one reference-counted object. Its constructor is written out (not
 generated) so numba can cache it. Without numba the namedtuple itself is used.
 """

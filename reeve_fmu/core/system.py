@@ -172,7 +172,7 @@ def creep_forces(K, W, v, u, gain):
     sheave's (kappa, rate) there (u[UE_CREEP + UE_STRIDE k + 6, 7]): the last residual of a converged
     step is at its end, so the step's close reads them instead of computing them again.
     A function of its own, not inlined, so that its code stays out of the residual of models without
-    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). It reads the creep table and the
+    creep sheaves (inlined, it slows the rigid rim's 1D trip). It reads the creep table and the
     element arrays, computes on scalars (groove_strains) and is called per residual."""
     Q = W.Q
     Md = W.Md
@@ -288,7 +288,7 @@ def assemble_ws(K, W, c, q, v, t, u):
         _nl_update(K, K, c, q, v)   # nonlinear rows (nl_frz: kept from the last update, solver)
     for ie in range(el_map.shape[0]):
         # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
-        # this loop cost ~30 % of the 1D step
+        # this loop are a large part of the 1D step
         gather(K, c, q, v, ie, QE, VE)
         if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
             status = -1 - ie   # vanishing span: the event names the element (checked before any 1/l)
@@ -332,7 +332,7 @@ def _nl_convect_all(K, MEs, QEs, Q, q):
     """Convective terms of the nonlinear rows (bodies.nl_convect) for every element: QEs[ie] gets
     them as before, and Q the change, scattered like the element forces; then the W1 wraps' rope
     weight (bodies.wrap_weight). Called here, not from assemble_ws, so that the residual of models
-    without nonlinear rows compiles as before (the call in assemble_ws cost the 1D trip ~10 %)."""
+    without nonlinear rows compiles as before (the call in assemble_ws slows the 1D trip)."""
     el_map = K.el_map
     el_coef = K.el_coef
     ne = QEs.shape[1]

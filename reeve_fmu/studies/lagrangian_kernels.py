@@ -11,6 +11,7 @@ import numpy as np
 from ..core._jit import njit
 from ..core.elements.linear import end_tension, linear_element_at
 from ..core.profiles import profile_eval
+from ..core.solver.genalpha import newmark_factors, newmark_update, newton_correct
 from ..core.solver.lu import lu_factor, lu_solve
 
 KB = 3   # half-bandwidth of the node block: two coordinates per node, nearest-neighbour coupling
@@ -274,7 +275,7 @@ def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, s
         R = LK.sh_R[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
-                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
+                continue    # cheap test first: a call that receives LK pays the tuple's refcounts
             act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
@@ -397,7 +398,7 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
         kt = LK.sh_kt[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
-                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
+                continue    # cheap test first: a call that receives LK pays the tuple's refcounts
             act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
             if not act:
                 continue
@@ -618,15 +619,6 @@ def outputs(LK, q, v, qdd, t, X, V, A, QE, VE, MEs, QEs, Nel, torque, y):
             y[k] = hi_ / lo_ if lo_ > 0.0 else math.inf
 
 
-@njit(cache=True, inline="always")
-def _update(n, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
-    for i in range(n):
-        a1 = ((1.0 - af) * qdd[i] + af * qddo[i] - am * ao[i]) / (1.0 - am)
-        a[i] = a1
-        q[i] = qo[i] + h * vo[i] + h * h * ((0.5 - beta) * ao[i] + beta * a1)
-        v[i] = vo[i] + h * ((1.0 - gamma) * ao[i] + gamma * a1)
-
-
 @njit(cache=True)
 def _step_start(LK, q, v, t, X, V, A, xo, co, tho):
     """Node positions, sheave centres and angles at the start of a step (friction reference)."""
@@ -656,6 +648,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     maxit = int(params[5])
     jac_every = int(params[6])
     n = q.shape[0]
+    every = np.arange(n)     # the coordinates the Newmark relations update: all of them
     nb = LK.nb
     m = LK.m
     nn = LK.node_dof.shape[0]
@@ -720,8 +713,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                 qdd[:] = qdd1
                 z[:] = z1
                 have_jac = False
-            bq = hs * hs * beta * (1.0 - af) / (1.0 - am)
-            gv = hs * gamma * (1.0 - af) / (1.0 - am)
+            bq, gv = newmark_factors(hs, am, af, beta, gamma)
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 _step_start(LK, q, v, ts - hs, X, V, A, xo, co, tho)
@@ -730,7 +722,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                 vo[:] = v
                 ao[:] = a
                 qddo[:] = qdd
-                _update(n, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
+                newmark_update(every, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
                 if jac_h != hs or since >= jac_every:
                     have_jac = False
                 status = 1
@@ -748,15 +740,8 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                         jac_h = hs
                         since = 0
                     bb_solve(J, Xs, D, S, piv, r)
-                    dmax = 0.0
-                    amax = 0.0
-                    for i in range(n):
-                        qdd[i] -= r[i]
-                        if abs(r[i]) > dmax:
-                            dmax = abs(r[i])
-                        if abs(qdd[i]) > amax:
-                            amax = abs(qdd[i])
-                    _update(n, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
+                    dmax, amax, _ = newton_correct(every, n, r, qdd, q)
+                    newmark_update(every, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
                     info[1] += 1
                     if not (dmax == dmax) or dmax > 1e300:
                         break

@@ -34,10 +34,36 @@ def converged(dmax, dprev, amax, qmax, bq, tol, last):
 
 
 @njit(cache=True, inline="always")
-def newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
-    for fi in range(K.free.shape[0]):
-        i = K.free[fi]
+def newmark_factors(h, am, af, beta, gamma):
+    """(d q / d qdd, d v / d qdd) of one step: how the step's end state moves with the accelerations."""
+    return h * h * beta * (1.0 - af) / (1.0 - am), h * gamma * (1.0 - af) / (1.0 - am)
+
+
+@njit(cache=True, inline="always")
+def newmark_update(idx, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
+    """(a, q, v) at the step end from the accelerations qdd, for the coordinates idx."""
+    for fi in range(idx.shape[0]):
+        i = idx[fi]
         a1 = ((1.0 - af) * qdd[i] + af * qddo[i] - am * ao[i]) / (1.0 - am)
         a[i] = a1
         q[i] = qo[i] + h * vo[i] + h * h * ((0.5 - beta) * ao[i] + beta * a1)
         v[i] = vo[i] + h * ((1.0 - gamma) * ao[i] + gamma * a1)
+
+
+@njit(cache=True, inline="always")
+def newton_correct(idx, n, dx, qdd, q):
+    """qdd[idx[k]] -= dx[k] for k < n; returns (max |dx|, max |qdd|, max |q|) over those coordinates
+    (the exit test's measures)."""
+    dmax = 0.0
+    amax = 0.0
+    qmax = 0.0
+    for k in range(n):
+        i = idx[k]
+        qdd[i] -= dx[k]
+        if abs(dx[k]) > dmax:
+            dmax = abs(dx[k])
+        if abs(qdd[i]) > amax:
+            amax = abs(qdd[i])
+        if abs(q[i]) > qmax:
+            qmax = abs(q[i])
+    return dmax, amax, qmax

@@ -11,7 +11,7 @@ from ..kernel import CREEP, CT_IR, CT_KIND, CT_S
 from ..contact import (INFO_CREEP, UE_CREEP, UE_STRIDE, brake_deflection, creep_angle_at, creep_input_set,
                        traction_deflection, traction_slip, wound_record)
 from ..system import creep_inputs, outputs_ws, workspace
-from .newton import newton_step, newton_step_sparse
+from .newton import newton_step
 
 # the creep sheaves' part of a step (the call sites test for creep sheaves at run time)
 _creep_input_set = gated(CREEP, creep_input_set)
@@ -166,13 +166,8 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     # literal argument is a signature of its own, compiled again)
                     _creep_inputs(K, K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
                 _copy4(qo, vo, ao, qddo, q, v, a, qdd)
-                if SP is None:
-                    status = newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac,
-                                         piv, info, r, r0, am, af, beta, gamma, tol, maxit)
-                else:
-                    status = newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs,
-                                                ue, jac, piv, info, r, r0, rb, am, af, beta, gamma, tol,
-                                                maxit, analytic)
+                status = newton_step(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac, piv, info,
+                                     r, r0, rb, am, af, beta, gamma, tol, maxit, analytic)
                 wfresh = status == 0
                 for k in range(K.drum_dof.shape[0]):
                     if status == 0 and q[K.drum_dof[k]] <= 0.0:
