@@ -17,6 +17,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from ..core.kernel import UE_TORQUE, U_TORQUE
 from ..core.model import State, build_model
 from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
@@ -155,7 +156,7 @@ class Plant:
         the torque that holds the load)."""
         m, st = self.model, self.state
         ue = kernel_inputs_at(m, st)
-        ue[0] = 0.0
+        ue[UE_TORQUE] = 0.0
         M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
         assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
         return float(-Q[m.K.mot_dof] / m.K.mot_gain)
@@ -164,7 +165,7 @@ class Plant:
         """Before the first step: the motor torque acts from t0 on (accelerations and outputs made
         consistent with it), e.g. the holding torque, so that a held load starts at rest."""
         st = self.state
-        st.u[0] = float(torque)
+        st.u[U_TORQUE] = float(torque)
         consistent_acceleration(self.model, st)
         self._y = self.sim.outputs(st).copy()
 

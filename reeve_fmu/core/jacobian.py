@@ -30,12 +30,13 @@ import math
 import numpy as np
 
 from ._jit import njit
+from .contact import creep_kappa, creep_terms, creep_wound, static_end_tension
 from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
 from .elements.cubic_jac import cubic_stiffness, gravity_jac
 from .elements.linear import SLACK_STRAIN, linear_element_at
 from .elements.linear_jac import linear_inertia
+from .kernel import UE_BRAKE_E, UE_BRAKE_Z, UE_CREEP, UE_MOTOR_Q, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z
 from .sparse import bordered_factor, residual_sparse
-from .contact import UE_CREEP, creep_kappa, creep_terms, creep_wound, static_end_tension
 from .system import element_eval, q_terms
 
 FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
@@ -343,8 +344,8 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         if K.mot_crp >= 0 and K.crp_kind[K.mot_crp] == 0 and u.shape[0] > UE_CREEP:
             gain *= creep_terms(K, W.QE, W.VE, v, K.mot_crp, creep_wound(u, K.mot_crp))[0]
         kz = K.mot_gain * creep_kappa(K, u, K.mot_crp)          # dz/dq
-        z = u[2] + kz * (q[j] - u[3])
-        kb = u[1] * K.brake_T / K.brake_wreg * _elastoplastic_d(z, K.brake_wreg)
+        z = u[UE_BRAKE_Z] + kz * (q[j] - u[UE_MOTOR_Q])
+        kb = u[UE_BRAKE_E] * K.brake_T / K.brake_wreg * _elastoplastic_d(z, K.brake_wreg)
         _add(J, pos[j], pos[j], bq * kb * kz * gain, n1, kl, ku, wb, nb)
     if K.trac_s >= 0:
         kap = 1.0
@@ -354,7 +355,7 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         T_in = static_end_tension(K, W.QE, W.QEs, K.trac_el_in, 1)
         T_out = static_end_tension(K, W.QE, W.QEs, K.trac_el_out, 0)
         T_slack = max(min(T_in, T_out), 0.0)
-        z = u[4] - kap * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+        z = u[UE_TRAC_Z] - kap * (q[K.trac_s] - u[UE_TRAC_S]) - K.trac_R * (q[K.trac_th] - u[UE_TRAC_TH])
         kf = T_slack * K.trac_efa / K.trac_zmax * _elastoplastic_d(z, K.trac_zmax)   # -df/dz
         s, th = K.trac_s, K.trac_th
         R = K.trac_R

@@ -33,7 +33,7 @@ import numpy as np
 
 from .geometry import GeometryError
 from .scene import Scene, SceneError
-from .kernel import Kernel, compiled_kernel, new_state_arrays
+from .kernel import IN_BRAKE_E, Kernel, U_BRAKE_CMD, compiled_kernel, new_state_arrays
 from .builder.assemble import kernel_arrays, motor_creep_index
 from .builder.bodies import add_body_coordinates, add_body_inertia
 from .builder.coordinates import node_arrays
@@ -193,8 +193,8 @@ def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     nf = len(model.K.free)
     info = _info_with_wound_records(model, q, c)
     brake = model.scene.brake
-    info[5] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
+    info[IN_BRAKE_E] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
     u = np.zeros(2)
-    u[1] = 0.0 if info[5] > 0 else 1.0
+    u[U_BRAKE_CMD] = 0.0 if info[IN_BRAKE_E] > 0 else 1.0
     return State(t=float(t), q=q, v=np.zeros(nq), a=np.zeros(nq), qdd=np.zeros(nq), c=c,
                  q_ref=q.copy(), u=u, jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=info)

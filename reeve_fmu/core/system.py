@@ -15,10 +15,12 @@ from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element_1d_at, linear_element_at
 from .bodies import nl_convect, nl_update, wrap_weight
-from .contact import (UE_CREEP, UE_STRIDE, brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at,
-                      creep_wound, sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
+from .contact import (brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at, creep_wound,
+                      sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
 from .elements.torsion import torsion_energy, torsion_terms
-from .kernel import CREEP, CT_JR2, CT_KIND, CT_S, CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, new_work
+from .kernel import (CREEP, CR_KAPPA_END, CR_KAPPA_MID, CR_RATE_END, CR_SIGMA, CR_WOUND, CT_JR2, CT_KIND, CT_S,
+                     CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, UE_BRAKE_E, UE_CREEP, UE_STRIDE, UE_TORQUE,
+                     new_work)
 from .profiles import profile_eval
 from .rigid import rigid_terms
 
@@ -87,7 +89,7 @@ def drive_torque(K, t, u):
     if K.drive_kind == 2:
         return _interp(K.torque_table, t)
     if K.drive_kind == 3:
-        return u[0]
+        return u[UE_TORQUE]
     return 0.0
 
 
@@ -187,11 +189,11 @@ def creep_forces(K, W, v, u, gain):
     for k in range(T.shape[0]):
         j = int(T[k, CT_S])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
+        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + CR_WOUND] if full else 0.0, vreg, nd, cubic)
         Q[j] += fc
         if full:
-            u[i + 6] = kap
-            u[i + 7] = rate
+            u[i + CR_KAPPA_END] = kap
+            u[i + CR_RATE_END] = rate
             if T[k, CT_KIND] == 0.0:
                 dm, f = _rim_terms(T[k, CT_JR2], kap, rate, v[j])
                 Md[j] += dm
@@ -459,7 +461,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
-            y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[1]
+            y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[UE_BRAKE_E]
         elif kind == 8:
             y[k] = buffer_force(K, q, v, K.out_i[k])
         elif kind == 9:   # slip speed (scale R > 0) or cumulative slip (scale -R)
@@ -595,10 +597,10 @@ def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
     x, xd, xdd = profile_eval(K.profile, t1)
     x0 = profile_eval(K.profile, t0)[0]
     m = K.mot_crp
-    kap = u[UE_CREEP + UE_STRIDE * m + 4]
+    kap = u[UE_CREEP + UE_STRIDE * m + CR_KAPPA_MID]
     for k in range(K.presc.shape[0]):
         j = K.presc[k]
         gsc = K.presc_gain[k] / kap
-        q[j] = u[UE_CREEP + UE_STRIDE * m + 2] + gsc * (x - x0)
+        q[j] = u[UE_CREEP + UE_STRIDE * m + CR_SIGMA] + gsc * (x - x0)
         v[j] = gsc * xd
         qdd[j] = gsc * xdd

@@ -8,7 +8,7 @@ import numpy as np
 
 from .._jit import gated, njit
 from ..jacobian import jacobian_analytic
-from ..kernel import CREEP, NL_ROWS
+from ..kernel import CREEP, IN_ITERS, IN_JACS, IN_JAC_H, IN_WHERE, NL_ROWS
 from ..sparse import bordered_solve, jacobian_sparse, residual_sparse
 from ..system import assemble_ws, set_prescribed, set_prescribed_creep
 from .genalpha import REFRESH_AFTER, converged, newmark_factors, newmark_update, newton_correct
@@ -169,38 +169,38 @@ def newton_step(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, j
             for fi in range(K.free.shape[0]):   # predictor: constant acceleration
                 qdd[K.free[fi]] = qddo[K.free[fi]]
             newmark_update(K.free, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-        if info[0] != h or attempt > 0:
+        if info[IN_JAC_H] != h or attempt > 0:
             ok = _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic)
-            info[3] += 1
+            info[IN_JACS] += 1
             if ok < 0:
-                info[7] = -ok - 1
+                info[IN_WHERE] = -ok - 1
                 return 2
             if ok == 0:
-                info[0] = 0.0
+                info[IN_JAC_H] = 0.0
                 continue
-            info[0] = h
+            info[IN_JAC_H] = h
         dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
                 ok = _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic)
-                info[3] += 1
+                info[IN_JACS] += 1
                 if ok <= 0:
-                    info[0] = 0.0
+                    info[IN_JAC_H] = 0.0
                     break
             st = _correction(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, rb)
             if st < 0:
-                info[7] = -st - 1
+                info[IN_WHERE] = -st - 1
                 return 2
             dmax, amax, qmax = newton_correct(order, n, rb, qdd, q)
             newmark_update(K.free, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-            info[2] += 1
+            info[IN_ITERS] += 1
             if not (dmax == dmax) or dmax > 1e300:
                 break
             # converged: relative acceleration change below tol, or the position change it
             # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
             if converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
-                    info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
+                    info[IN_JAC_H] = 0.0  # slow contraction: refresh the Newton matrix next step
                 return 0
             dprev = dmax
     return 1

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernel import INFO_CREEP, UE_CREEP, UE_STRIDE
 from ..model import Model, State
-from ..contact import INFO_CREEP, UE_CREEP, UE_STRIDE
 from ..system import assemble, creep_inputs, set_prescribed, set_prescribed_creep
 from .inputs import element_buffers, kernel_inputs_at, outputs_at
 from .result import STATUS_TEXT, Result, SolverError

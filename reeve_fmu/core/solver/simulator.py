@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from .._jit import entry_point
+from ..kernel import IN_JAC_H, IN_WHERE, U_BRAKE_CMD, U_TORQUE
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, jac_shape, pattern_leaks
 from ..system import energy_u, workspace
@@ -69,7 +70,7 @@ class Simulator:
         if st.jac.shape != shape:
             st.jac = np.zeros(shape)
             st.piv = np.zeros(shape[0], np.int64)
-            st.info[0] = 0.0          # no valid factors: rebuild on the next step
+            st.info[IN_JAC_H] = 0.0          # no valid factors: rebuild on the next step
             st.__dict__.pop("_arrays", None)
         return SP
 
@@ -177,8 +178,8 @@ class Simulator:
             self.advance(st, t_end, u=(torque, brake_command))
             return self.outputs(st)
         u = st.u
-        u[0] = torque
-        u[1] = brake_command
+        u[U_TORQUE] = torque
+        u[U_BRAKE_CMD] = brake_command
         n = math.ceil(span / self.h - 1e-9)
         if n < 1:
             n = 1
@@ -208,10 +209,10 @@ class Simulator:
     def _status_message(self, status: int, st: State) -> str:
         msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"
         if status == 4:
-            j = int(self.model.K.drum_dof[int(st.info[7])])
+            j = int(self.model.K.drum_dof[int(st.info[IN_WHERE])])
             msg += f": drum {self.model.q_names[j].rsplit('.', 1)[0]!r} (its stored length reached 0 m)"
         if status == 2:
-            ie = int(st.info[7])
+            ie = int(st.info[IN_WHERE])
             ir, k = self.model.element_span[ie]
             rope = self.model.scene.ropes[ir]
             stops = rope.route

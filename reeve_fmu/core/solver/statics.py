@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..builder.assemble import creep_table
-from ..contact import UE_CREEP, UE_STRIDE
-from ..kernel import compiled_kernel
+from ..kernel import IN_BRAKE_E, IN_BRAKE_Z, IN_TRAC_Z, UE_CREEP, UE_STRIDE, UE_TRAC_Z, compiled_kernel
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, colour_columns, jac_shape, newton_matrix_sparse, newton_pattern, unpack_sparse
 from ..system import assemble, set_prescribed, set_prescribed_creep, workspace
@@ -81,7 +80,7 @@ class Statics:
         K = m.K
         if K.trac_s >= 0:
             preload_traction(m, st, self.warnings)
-        if K.brake_T > 0.0 and st.info[5] > 0.0:
+        if K.brake_T > 0.0 and st.info[IN_BRAKE_E] > 0.0:
             preload_brake(m, st)
         consistent_acceleration(m, st)
         return st
@@ -294,7 +293,7 @@ def preload_traction(m: Model, st: State, warnings: list) -> None:
     M = np.empty((m.nq, m.nq))
     Q = np.empty(m.nq)
     ue = kernel_inputs_at(m, st)
-    ue[4] = 0.0
+    ue[UE_TRAC_Z] = 0.0
     assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)   # friction zero at z = 0
     y = dict(zip(m.output_names, outputs_at(m, st)))
     name = m.q_names[K.trac_s].rsplit(".", 1)[0]
@@ -313,9 +312,9 @@ def preload_traction(m: Model, st: State, warnings: list) -> None:
             f"t = {st.t:g} s: the rope slips on sheave {name!r} from the start: static tension ratio "
             f"{max(T_in, T_out) / max(min(T_in, T_out), 1e-9):.4f} exceeds the friction limit "
             f"e^(f alpha) = {1 + K.trac_efa:.4f}")
-        st.info[8] = float(-np.sign(f_needed) * K.trac_zmax)
+        st.info[IN_TRAC_Z] = float(-np.sign(f_needed) * K.trac_zmax)
     else:
-        st.info[8] = float(-f_needed / k) if k > 0 else 0.0
+        st.info[IN_TRAC_Z] = float(-f_needed / k) if k > 0 else 0.0
 
 
 def preload_brake(m: Model, st: State) -> None:
@@ -326,8 +325,8 @@ def preload_brake(m: Model, st: State) -> None:
     assemble(m.KJ, st.c, st.q, st.v, st.t, kernel_inputs_at(m, st), M, Q)
     kap = kernel_inputs_at(m, st)[UE_CREEP + UE_STRIDE * K.mot_crp] if K.mot_crp >= 0 else 1.0
     tau_hold = -Q[K.mot_dof] / (K.mot_gain * kap)   # brake torque needed (Q = tau * gain)
-    k = st.info[5] * K.brake_T / K.brake_wreg
-    st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
+    k = st.info[IN_BRAKE_E] * K.brake_T / K.brake_wreg
+    st.info[IN_BRAKE_Z] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
 
 
 def consistent_acceleration(m: Model, st: State) -> None:
