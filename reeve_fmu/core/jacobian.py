@@ -249,7 +249,7 @@ def elements_pass(K, SP, W, qdd, pos, J, ba, bq, gv):
     ae = np.empty(ne)
     S = np.empty((9 + 4 * nd + 2 * ne, ne))
     el_map = K.el_map
-    el_coef = K.el_coef
+    el_coef = W.el_coef
     for ie in range(el_map.shape[0]):
         for a in range(ne):
             x = 0.0
@@ -386,10 +386,10 @@ def _refresh(K, c, q, v, W, els, j):
         hit = False
         for a in range(K.el_map.shape[1]):
             for w in range(K.el_map.shape[2]):
-                if K.el_coef[ie, a, w] != 0.0 and K.el_map[ie, a, w] == j:
+                if W.el_coef[ie, a, w] != 0.0 and K.el_map[ie, a, w] == j:
                     hit = True
         if hit:
-            element_eval(K, c, q, v, ie, W.QE, W.VE, W.MEs, W.QEs)
+            element_eval(K, W, c, q, v, ie, W.MEs, W.QEs)
 
 
 @njit(cache=True)

@@ -17,7 +17,9 @@ from collections import namedtuple
 from ._jit import JIT
 
 # The model's arrays, (name, type): "int" / "float" scalars, "int[]" / "float[,]" ... C-contiguous
-# int64 / float64 arrays of one, two, ... dimensions (model.build_model fills them).
+# int64 / float64 arrays of one, two, ... dimensions (model.build_model fills them). Nothing writes
+# them after the build: what a step changes is in the State (STATE_FIELDS) or its Work. el_coef holds
+# the element maps at q0 (State.el_coef follows the nonlinear rows).
 KERNEL_FIELDS = (
     ("nd", "int"), ("nq", "int"), ("B_ptr", "int[]"), ("B_idx", "int[]"), ("B_val", "float[]"),
     ("el_idx", "int[,]"), ("el_map", "int[,,]"), ("el_coef", "float[,,]"), ("el_rhoA", "float[]"),
@@ -37,29 +39,27 @@ KERNEL_FIELDS = (
     # the creep sheaves' constants as one table (columns CT_* below): what the residual reads per sheave
     ("crp_tab", "float[,]"),
     # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
-    # rows, bit 2: joints or spatial rigid bodies; 0: none of them
+    # rows, bit 2: joints or spatial rigid bodies; 0: none of them. nl_ang0: the contact angles at q0,
+    # where a State's warm start (State.nl_ang) begins
     ("nl_on", "int"), ("nl_bq", "int[,]"), ("nl_b0", "float[,]"), ("nl_bk", "int[]"), ("nl_bax", "float[,]"),
-    ("nl_BR", "float[,]"), ("nl_ANG", "float[,]"), ("nl_AX", "float[,]"), ("nl_pb", "int[]"),
-    ("nl_po", "float[,]"), ("nl_sp", "int[,]"), ("nl_sg", "float[,]"), ("nl_sa", "float[,]"),
-    ("nl_rk", "int[,]"), ("nl_rf", "float[,]"), ("nl_P", "float[,]"), ("nl_TW", "float[,]"),
-    ("nl_cols", "int[]"), ("nl_colbody", "int[]"), ("nl_f0", "float[]"), ("nl_fp", "float[]"),
-    ("nl_fm", "float[]"), ("nl_J", "float[,]"), ("nl_qs", "float[]"), ("nl_racc", "float[]"),
-    ("nl_rw", "int[,]"), ("nl_ent", "int[,]"), ("nl_acc", "float[,]"),
-    # nl_frz[0] = 1: the rows keep B(q), c and dB/dt qdot of the last update (solver, Newton matrix)
-    ("nl_frz", "int[]"),
+    ("nl_ang0", "float[,]"), ("nl_pb", "int[]"), ("nl_po", "float[,]"), ("nl_sp", "int[,]"), ("nl_sg", "float[,]"),
+    ("nl_sa", "float[,]"), ("nl_rk", "int[,]"), ("nl_rf", "float[,]"), ("nl_cols", "int[]"),
+    ("nl_colbody", "int[]"), ("nl_rw", "int[,]"), ("nl_ent", "int[,]"),
     # column groups of the dense Newton matrix of a model with nonlinear rows (sparse.dense_groups):
     # [groups G, G + 1 group pointers, free columns by group, nf + 1 reach pointers, reached free rows];
     # G = 0: column by column
     ("nl_grp", "int[]"),
-    # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
+    # joints to the ground (model._joint_tables): prescribed profiles, torque tables (the scene's: a
+    # State's copies take a plant's joint inputs), gravity moments
     ("jp_dof", "int[]"), ("jp_prof", "float[,,]"), ("jt_dof", "int[]"), ("jt_tab", "float[,,]"),
     ("jg_dof", "int[]"), ("jg_A", "float[]"), ("jg_B", "float[]"),
     # spatial rigid bodies (rigid.rigid_terms): rotation-vector indices, inertia tensors in body axes
     ("rb_q", "int[,]"), ("rb_J", "float[,,]"),
     # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
-    # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs
+    # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch at q0 (State.tq_dref
+    # follows it)
     ("tq_el", "int[]"), ("tq_phi", "int[,]"), ("tq_phic", "float[,]"), ("tq_vb", "int[,]"),
-    ("tq_v0", "float[,]"), ("tq_p", "float[,]"), ("tq_dref", "float[]"), ("tq_out", "float[,]"),
+    ("tq_v0", "float[,]"), ("tq_p", "float[,]"), ("tq_dref", "float[]"),
 )
 Kernel = namedtuple("Kernel", [name for name, _ in KERNEL_FIELDS])
 
@@ -123,13 +123,27 @@ CR_KAPPA, CR_ANGLE, CR_SIGMA, CR_RATE, CR_KAPPA_MID, CR_WOUND, CR_KAPPA_END, CR_
 # mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as
 # the kernel (one refcount per call).
 WORK_FIELDS = (("M", "float[,]"), ("Q", "float[]"), ("QE", "float[,]"), ("VE", "float[,]"), ("MEs", "float[,,]"),
-               ("QEs", "float[,]"), ("Md", "float[]"))
+               ("QEs", "float[,]"), ("Md", "float[]"),
+               # the State's arrays an assembly updates (the same buffers: STATE_FIELDS)
+               ("el_coef", "float[,,]"), ("nl_ang", "float[,]"), ("tq_dref", "float[]"), ("jp_prof", "float[,,]"),
+               ("jt_tab", "float[,,]"),
+               # the nonlinear rows at the last update (bodies.nl_update): row values f(q), the
+               # differences' scratch, the Jacobian B(q), convective accelerations per row and per
+               # element coordinate, points, span tangents, body rotations, axes; frz[0] = 1: the
+               # assembly keeps them (the Newton matrix's differences, solver/newton.py)
+               ("nl_f0", "float[]"), ("nl_fp", "float[]"), ("nl_fm", "float[]"), ("nl_qs", "float[]"),
+               ("nl_J", "float[,]"), ("nl_racc", "float[]"), ("nl_acc", "float[,]"), ("nl_P", "float[,]"),
+               ("nl_TW", "float[,]"), ("nl_BR", "float[,]"), ("nl_AX", "float[,]"), ("frz", "int[]"),
+               # the torsion spans' (M, kappa) at the last assembly (outputs)
+               ("tq_out", "float[,]"))
 Work = namedtuple("Work", [name for name, _ in WORK_FIELDS])
 
 # A State's arrays (model.State) in one object, the same buffers: the step call then passes 8
 # arguments instead of 17 (numba's dispatcher types every argument on every call).
 STATE_FIELDS = (("c", "float[]"), ("q_ref", "float[]"), ("q", "float[]"), ("v", "float[]"), ("a", "float[]"),
-                ("qdd", "float[]"), ("u", "float[]"), ("jac", "float[,]"), ("piv", "int[]"), ("info", "float[]"))
+                ("qdd", "float[]"), ("u", "float[]"), ("jac", "float[,]"), ("piv", "int[]"), ("info", "float[]"),
+                ("el_coef", "float[,,]"), ("nl_ang", "float[,]"), ("tq_dref", "float[]"), ("jp_prof", "float[,,]"),
+                ("jt_tab", "float[,,]"))
 StateArrays = namedtuple("StateArrays", [name for name, _ in STATE_FIELDS])
 
 if JIT:

@@ -7,7 +7,7 @@ import numpy as np
 from ..kernel import (IN_BRAKE_E, IN_BRAKE_Z, IN_SLIP, IN_TRAC_Z, UE_BRAKE_E, UE_BRAKE_Z, UE_CREEP, UE_MOTOR_Q,
                       UE_SLIP, UE_STRIDE, UE_TORQUE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z, U_TORQUE)
 from ..model import Model, State
-from ..system import creep_inputs, outputs
+from ..system import creep_inputs, outputs, workspace
 
 
 def kernel_inputs(m: Model, st: State) -> np.ndarray:
@@ -22,13 +22,8 @@ def kernel_inputs(m: Model, st: State) -> np.ndarray:
     ue[UE_TRAC_Z] = st.info[IN_TRAC_Z]
     ue[UE_SLIP] = st.info[IN_SLIP]
     if K.crp_s.shape[0]:
-        creep_inputs(m.KJ, st.c, st.q, st.v, st.info, ue, 0.0, *element_buffers(m), False)
+        creep_inputs(m.KJ, workspace(m.KJ, st.arrays(), False), st.c, st.q, st.v, st.info, ue, 0.0, False)
     return ue
-
-
-def element_buffers(m: Model):
-    n_el, ne = m.K.el_idx.shape
-    return np.empty((n_el, ne)), np.empty((n_el, ne))
 
 
 def kernel_inputs_at(m: Model, st: State) -> np.ndarray:
@@ -46,5 +41,5 @@ def kernel_inputs_at(m: Model, st: State) -> np.ndarray:
 def outputs_at(m: Model, st: State) -> np.ndarray:
     """The model's outputs (m.output_names) at st."""
     y = np.empty(len(m.output_names))
-    outputs(m.KJ, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, kernel_inputs_at(m, st), y)
+    outputs(m.KJ, st.arrays(), st.c, st.q, st.v, st.qdd, st.q_ref, st.t, kernel_inputs_at(m, st), y)
     return y

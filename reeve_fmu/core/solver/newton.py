@@ -88,10 +88,10 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     # p = B q + c is then their exact linearisation; what is left out (tension x curvature of the
     # tangent-point map, ~1e-5 of the mass and axial terms) slows the modified Newton contraction
     # at most, it does not change the solution
-    K.nl_frz[0] = 1
+    W.frz[0] = 1
     if K.nl_grp[0] > 0:
         _coloured(K, K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv)
-        K.nl_frz[0] = 0
+        W.frz[0] = 0
         return 1 if lu_factor(jac, piv) else 0
     for fj in range(nf):
         j = K.free[fj]
@@ -106,7 +106,7 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
         qdd[j] -= dx
         q[j] -= bq * dx
         v[j] -= gv * dx
-    K.nl_frz[0] = 0
+    W.frz[0] = 0
     return 1 if lu_factor(jac, piv) else 0
 
 
@@ -159,9 +159,9 @@ def newton_step(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, j
     bq, gv = newmark_factors(h, am, af, beta, gamma)
     # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
     if K.mot_crp >= 0:
-        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
+        _set_prescribed_creep(K, K, W.jp_prof, ue, t1 - h, t1, q, v, qdd)
     else:
-        set_prescribed(K, q_ref, t1, q, v, qdd)
+        set_prescribed(K, W.jp_prof, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
         a[K.presc[k]] = qdd[K.presc[k]]
     for attempt in range(4):

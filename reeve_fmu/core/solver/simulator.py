@@ -87,7 +87,7 @@ class Simulator:
         am, af, beta, gamma = self.params[:4]
         bq = self.h ** 2 * beta * (1.0 - af) / (1.0 - am)
         gv = self.h * gamma * (1.0 - af) / (1.0 - am)
-        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
+        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, st.arrays(), False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
                               st.t, kernel_inputs_at(m, st), bq, gv)
         if leaks:
             self.warnings.append(f"{m.scene.source}: {leaks} residual rows depend on coordinates outside the "
@@ -236,7 +236,7 @@ class Simulator:
         material rate. The strain energy of rope stored on a creep drum (EA eps^2/2 per unit material,
         eps as wound) depends on its winding history and is not included: its force on the drum's s is
         EA eps^2/2 at the drum."""
-        return energy_u(self.model.KJ, st.c, st.q, st.v, kernel_inputs_at(self.model, st))
+        return energy_u(self.model.KJ, st.arrays(), st.c, st.q, st.v, kernel_inputs_at(self.model, st))
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,
             progress=None) -> Result:

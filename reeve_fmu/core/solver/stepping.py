@@ -94,12 +94,12 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     nq = K.nq
     nf = K.free.shape[0]
     if SP is None:
-        W = workspace(K)
+        W = workspace(K, S)
         r = np.empty(nf)
         r0 = np.empty(nf)
         rb = r
     else:
-        W = workspace(K, False)
+        W = workspace(K, S, False)
         r = np.empty(nq)
         r0 = np.empty(nq)
         rb = np.empty(max(nf, 1))
@@ -167,7 +167,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
                     # fresh = False as a runtime bool (ncrp > 0 here), not the literal False: numba
                     # then compiles one creep_inputs for this call and the Python callers' (a
                     # literal argument is a signature of its own, compiled again)
-                    _creep_inputs(K, K, c, q, v, info, ue, hs, W.QE, W.VE, ncrp < 0)
+                    _creep_inputs(K, K, W, c, q, v, info, ue, hs, ncrp < 0)
                 _copy4(qo, vo, ao, qddo, q, v, a, qdd)
                 status = newton_step(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, ts, hs, ue, jac, piv, info,
                                      r, r0, rb, am, af, beta, gamma, tol, maxit, analytic)
