@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from ._jit import gated, njit
-from .elements.linear import SLACK_STRAIN
+from .elements.linear import SLACK_STRAIN, chord
 from .kernel import (CR_ANGLE, CR_KAPPA_MID, CR_RATE, CR_SIGMA, CR_WOUND, CT_EA, CT_IN, CT_IR, CT_OUT, CT_S,
                      CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, CUBIC, INFO_CREEP, MULTI_D, UE_BRAKE_E, UE_BRAKE_Z,
                      UE_CREEP, UE_MOTOR_Q, UE_SLIP, UE_STRIDE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z)
@@ -323,11 +323,7 @@ def brake_torque(K, q, v, u):
 def static_end_tension(K, QE, QEs, ie, end):
     """Rope force at an element end from its forces without inertia (for the friction capacity)."""
     nd = K.nd
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     if dist <= 0.0:
         return 0.0
     T = 0.0

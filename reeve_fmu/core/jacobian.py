@@ -33,7 +33,7 @@ from ._jit import njit
 from .contact import creep_kappa, creep_terms, creep_wound, static_end_tension
 from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
 from .elements.cubic_jac import cubic_stiffness, gravity_jac
-from .elements.linear import SLACK_STRAIN, linear_element_at
+from .elements.linear import SLACK_STRAIN, chord, linear_element_at, slack_law
 from .elements.linear_jac import linear_inertia
 from .kernel import UE_BRAKE_E, UE_BRAKE_Z, UE_CREEP, UE_MOTOR_Q, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z
 from .sparse import bordered_factor, residual_sparse
@@ -49,15 +49,9 @@ def axial_law_d(EA, nu, eps, epsdot, tonly):
     (N, w, N_d, dN/deps, dN_d/deps, dN_d/depsdot)."""
     if not tonly:
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
+    N, w, taut, r, f, dF = slack_law(EA, nu, eps, epsdot)
     d = SLACK_STRAIN
-    r = math.sqrt(eps * eps + d * d)
-    sp = eps + r if eps >= 0.0 else d * d / (r - eps)
-    N = 0.5 * EA * sp
-    w = 0.25 * EA * (eps * sp + d * d * math.asinh(eps / d))
-    taut = 0.5 * (1.0 + eps / r)
     dtaut = 0.5 * d * d / (r * r * r)
-    f = N + EA * nu * epsdot * taut
-    dF = EA * d
     sq = math.sqrt(f * f + dF * dF)
     F = 0.5 * (f + sq)
     g = 0.5 * (1.0 + f / sq) if sq > 0.0 else 0.5      # dF/df
@@ -81,11 +75,7 @@ def linear_stiffness(nd, rhoA, EA, nu, tonly, G, QE, VE, ie, bq, gv, JE, S):
             JE[a, i2] -= gk
             JE[i1, a] += gk
             JE[i2, a] -= gk
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     if dist <= 0.0:
         return
     ldot = VE[ie, i2] - VE[ie, i1]
@@ -389,7 +379,7 @@ def _refresh(K, c, q, v, W, els, j):
                 if W.el_coef[ie, a, w] != 0.0 and K.el_map[ie, a, w] == j:
                     hit = True
         if hit:
-            element_eval(K, W, c, q, v, ie, W.MEs, W.QEs)
+            element_eval(K, W.el_coef, c, q, v, ie, W.QE, W.VE, W.MEs, W.QEs)
 
 
 @njit(cache=True)

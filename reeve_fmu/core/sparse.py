@@ -463,7 +463,7 @@ def residual_tracked(K, SP, W, c, q, v, qdd, t, u, R, Eb, track):
             for p in range(Eb.shape[1]):
                 Eb[ie, p] = 0.0
     for ie in range(el_map.shape[0]):
-        st, ok = element_eval(K, W, c, q, v, ie, MEs, QEs)
+        st, ok = element_eval(K, el_coef, c, q, v, ie, W.QE, W.VE, MEs, QEs)
         if st < 0:
             status = st
         if not ok:

@@ -155,16 +155,15 @@ def assemble(K, S, c, q, v, t, u, M, Q):
 
 
 @njit(cache=True)
-def element_eval(K, W, c, q, v, ie, MEs, QEs):
-    """Gather element ie into W.QE, W.VE and evaluate its kernel into MEs[ie], QEs[ie] (the element
-    step of assemble_ws, which writes it out for speed). Returns (status, evaluated):
+def element_eval(K, el_coef, c, q, v, ie, QE, VE, MEs, QEs):
+    """Gather element ie (element maps el_coef: a State's, kernel.STATE_FIELDS) into QE, VE and evaluate
+    its kernel into MEs[ie], QEs[ie] (the element step of assemble_ws, which writes it out for speed).
+    Returns (status, evaluated):
     status -1 - ie when the span is shorter than l_min (checked before any 1/l; the element is then
     evaluated only while its material length is positive), else 0."""
     nd = K.nd
     ne = K.el_idx.shape[1]
-    QE = W.QE
-    VE = W.VE
-    gather(K, W.el_coef, c, q, v, ie, QE, VE)
+    gather(K, el_coef, c, q, v, ie, QE, VE)
     status = 0
     if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
         status = -1 - ie
@@ -419,12 +418,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
     ae = np.empty(ne)
     if fresh:
         assemble_ws(K, W, c, q, v, t, u)
-    M = W.M
-    Q = W.Q
-    QE = W.QE
-    VE = W.VE
-    MEs = W.MEs
-    QEs = W.QEs
+    M, Q, QE, VE, MEs, QEs = W.M, W.Q, W.QE, W.VE, W.MEs, W.QEs
     n = K.out_kind.shape[0]
     if fresh:
         for k in range(K.crp_s.shape[0]):

@@ -1,5 +1,5 @@
 """Compiled kernels of the Lagrangian baseline (lagrangian.py): residual, analytic Newton matrix
-(band + border), banded LU with Schur complement, outputs and the generalized-alpha loop. Kept apart
+(band + border; its LU: lagrangian_band.py), outputs and the generalized-alpha loop. Kept apart
 from the builder so that editing the builder does not invalidate the numba cache."""
 from __future__ import annotations
 
@@ -11,10 +11,8 @@ import numpy as np
 from ..core._jit import njit
 from ..core.elements.linear import end_tension, linear_element_at
 from ..core.profiles import profile_eval
-from ..core.solver.genalpha import newmark_factors, newmark_update, newton_correct
-from ..core.solver.lu import lu_factor, lu_solve
-
-KB = 3   # half-bandwidth of the node block: two coordinates per node, nearest-neighbour coupling
+from ..core.solver.genalpha import method_params, newmark_factors, newmark_update, newton_correct, step_buffers
+from .lagrangian_band import KB, bb_factor, bb_solve
 
 LK = namedtuple("LK", [
     "nb", "m",
@@ -198,6 +196,19 @@ def _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn, xo, co
     return -LK.sh_kt[k] * zs, zs, dzs, dzm
 
 
+@njit(cache=True, inline="always")
+def _node_contact(LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static):
+    """Contact of node i with sheave k (_contact) and, in contact, its feed factor and groove friction
+    (_friction): (act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm)."""
+    act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+    if not act:
+        return act, nx, nz, ux, uz, rho, Fn, kn, cn, 1.0, 0.0, 0.0, 0.0, 0.0
+    kap = _node_feed(LK, lam, i, R)
+    Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
+                                 xo, co, tho, zo, static)
+    return act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm
+
+
 @njit(cache=True)
 def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, static,
              xo, co, tho, zo, zn):
@@ -276,12 +287,10 @@ def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, s
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
                 continue    # cheap test first: a call that receives LK pays the tuple's refcounts
-            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+            act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm = _node_contact(
+                LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static)
             if not act:
                 continue
-            kap = _node_feed(LK, lam, i, R)
-            Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
-                                         xo, co, tho, zo, static)
             zn[i] = zs
             fx = Fn * nx + Ft * ux
             fz = Fn * nz + Ft * uz
@@ -399,12 +408,10 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
                 continue    # cheap test first: a call that receives LK pays the tuple's refcounts
-            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+            act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm = _node_contact(
+                LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static)
             if not act:
                 continue
-            kap = _node_feed(LK, lam, i, R)
-            Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
-                                         xo, co, tho, zo, static)
             nv = (nx, nz)
             uv = (ux, uz)
             ktu = kt * dzs if static else kt * dzs * kap   # static: spring to the layout
@@ -450,77 +457,6 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
     for jb in range(m):
         if lock[nb + jb]:
             E[jb, jb] = 1.0
-
-
-@njit(cache=True)
-def bb_factor(J, C, D, E, X, S, piv):
-    """Factor [[band J, C], [D, E]]: banded LU of J in place (no pivoting: the Newton matrix is
-    dominated by its diagonal), X = J^-1 C, S = E - D X factored with pivoting. False if singular."""
-    nb = J.shape[0]
-    for k in range(nb):
-        pv = J[k, KB]
-        if pv == 0.0 or not (pv == pv):
-            return False
-        for i in range(k + 1, min(nb, k + KB + 1)):
-            f = J[i, KB + k - i] / pv
-            J[i, KB + k - i] = f
-            if f != 0.0:
-                for j in range(k + 1, min(nb, k + KB + 1)):
-                    J[i, KB + j - i] -= f * J[k, KB + j - k]
-    m = E.shape[0]
-    if m == 0:
-        return True
-    for c in range(m):
-        for i in range(nb):
-            X[i, c] = C[i, c]
-        _band_solve(J, X[:, c])
-    for a in range(m):
-        for b in range(m):
-            s = E[a, b]
-            for i in range(nb):
-                s -= D[a, i] * X[i, b]
-            S[a, b] = s
-    return lu_factor(S, piv)
-
-
-@njit(cache=True, inline="always")
-def _band_solve(J, b):
-    nb = J.shape[0]
-    for i in range(nb):
-        s = b[i]
-        for k in range(max(0, i - KB), i):
-            s -= J[i, KB + k - i] * b[k]
-        b[i] = s
-    for i in range(nb - 1, -1, -1):
-        s = b[i]
-        for j in range(i + 1, min(nb, i + KB + 1)):
-            s -= J[i, KB + j - i] * b[j]
-        b[i] = s / J[i, KB]
-
-
-@njit(cache=True)
-def bb_solve(J, X, D, S, piv, r):
-    """Solve in place with the factors of bb_factor."""
-    nb = J.shape[0]
-    m = S.shape[0]
-    rb = r[:nb]
-    _band_solve(J, rb)
-    if m == 0:
-        return
-    z = np.empty(m)
-    for a in range(m):
-        s = r[nb + a]
-        for i in range(nb):
-            s -= D[a, i] * rb[i]
-        z[a] = s
-    lu_solve(S, piv, z)
-    for a in range(m):
-        r[nb + a] = z[a]
-    for i in range(nb):
-        s = 0.0
-        for a in range(m):
-            s += X[i, a] * z[a]
-        rb[i] -= s
 
 
 @njit(cache=True)
@@ -640,12 +576,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     rebuilt every `jac_every` steps and whenever a step needs more than 3 iterations. A step that
     fails is retried as 4 and 16 substeps. z: stick deflection per node (updated). info = [steps,
     iterations, jacobian builds, residuals, status]. Returns (status, t)."""
-    am = params[0]
-    af = params[1]
-    beta = params[2]
-    gamma = params[3]
-    tol = params[4]
-    maxit = int(params[5])
+    am, af, beta, gamma, tol, maxit = method_params(params)
     jac_every = int(params[6])
     n = q.shape[0]
     every = np.arange(n)     # the coordinates the Newmark relations update: all of them
@@ -679,14 +610,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     lock = np.zeros(n, np.bool_)
     r = np.empty(n)
     y = np.empty(LK.out_kind.shape[0])
-    qo = np.empty(n)
-    vo = np.empty(n)
-    ao = np.empty(n)
-    qddo = np.empty(n)
-    q1 = np.empty(n)
-    v1 = np.empty(n)
-    a1 = np.empty(n)
-    qdd1 = np.empty(n)
+    qo, vo, ao, qddo, q1, v1, a1, qdd1 = step_buffers(n)
     z1 = np.empty(nn)
     t = t0
     row = 0

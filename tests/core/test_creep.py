@@ -20,7 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
 import numpy as np
 import pytest
 
-from reeve_fmu.core.contact import UE_CREEP
+from reeve_fmu.core.kernel import UE_CREEP
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import parse_scene
 from reeve_fmu.core.solver import Simulator

@@ -81,13 +81,12 @@ def test_element_jacobians(name):
     st, qdd, _ = _random_state(m, sim)
     n_el, ne = m.K.el_idx.shape
     nd = m.K.nd
-    W = workspace(KJ, st.arrays())
-    QE, VE, MEs, QEs = W.QE, W.VE, np.empty((n_el, ne, ne)), np.empty((n_el, ne))
+    QE, VE, MEs, QEs = np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne))
     X, XD, MEt, QEt = np.empty((1, ne)), np.empty((1, ne)), np.empty((1, ne, ne)), np.empty((1, ne))
     r0, r1, S, JE = np.empty(ne), np.empty(ne), element_scratch(nd, ne), np.empty((ne, ne))
     worst = (0.0, -1, "")
     for ie in range(n_el):
-        element_eval(KJ, W, st.c, st.q, st.v, ie, MEs, QEs)
+        element_eval(KJ, st.el_coef, st.c, st.q, st.v, ie, QE, VE, MEs, QEs)
         ae = np.einsum("aw,aw->a", st.el_coef[ie], qdd[m.K.el_map[ie]])
         parts = []
         for gv in (0.0, 1.0):        # stiffness (bq = 1, gv = 0), then stiffness + damping

@@ -9,6 +9,7 @@ from scipy.optimize import brentq
 
 from reeve_fmu.studies import bench
 from reeve_fmu.studies import lagrangian as lag
+from reeve_fmu.studies.lagrangian_kernels import dense_matrices
 from reeve_fmu.core.scene import load_scene
 from tests.support import ROOT
 from tests.support.checks import check_png
@@ -49,7 +50,7 @@ def test_hanging_first_axial_frequency_beta_tan_beta():
     sim = lag.LagrangianSimulator(m)
     st = sim.initial_state()
     n = m.n_dof
-    M, K, _ = lag.dense_matrices(m.LK, st.q, st.v, 0.0, st.z, np.zeros(n, bool), False)
+    M, K, _ = dense_matrices(m.LK, st.q, st.v, 0.0, st.z, np.zeros(n, bool), False)
     w2, vec = eigh(K, M)
     zrow = np.array([nm.endswith(".z") for nm in m.q_names])
     axial = [i for i in range(n) if np.sum(vec[zrow, i] ** 2) > 0.99 * np.sum(vec[:, i] ** 2)]

@@ -268,6 +268,18 @@ def _frame_force(K, q, b, v, g, Q):
         Q[bq[b, 3]] -= K.nl_bax[b, 0] * m0 + K.nl_bax[b, 1] * m1 + K.nl_bax[b, 2] * m2
 
 
+@njit(cache=True, inline="always")
+def _span_ends(K, W, q, k, vA, vB):
+    """Torsion span k's end frames (vA, vB) and twist coordinates: (jA, jB) (-1: fixed) and their
+    angles."""
+    _frame(K, W, k, 0, vA)
+    _frame(K, W, k, 1, vB)
+    jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
+    phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
+    phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+    return jA, jB, phiA, phiB
+
+
 @njit(cache=True)
 def torsion_terms(K, W, QE, q, Q):
     """Add the torsion part of every torsion span (torsion_extra) to Q: its node and material
@@ -283,11 +295,7 @@ def torsion_terms(K, W, QE, q, Q):
     nw = el_map.shape[2]
     for k in range(K.tq_el.shape[0]):
         ie = K.tq_el[k]
-        _frame(K, W, k, 0, vA)
-        _frame(K, W, k, 1, vB)
-        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
-        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
-        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        jA, jB, phiA, phiB = _span_ends(K, W, q, k, vA, vB)
         p = K.tq_p[k]
         M, kap, delta = torsion_extra(int(p[0]), p[1], p[2], p[3], p[4], p[5], QE[ie, 0:3], QE[ie, 3:6],
                                       QE[ie, 6], QE[ie, 7], phiA, phiB, vA, vB, W.tq_dref[k], g, wk)
@@ -319,11 +327,7 @@ def torsion_energy(K, W, QE, q):
     U = 0.0
     for k in range(K.tq_el.shape[0]):
         ie = K.tq_el[k]
-        _frame(K, W, k, 0, vA)
-        _frame(K, W, k, 1, vB)
-        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
-        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
-        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        jA, jB, phiA, phiB = _span_ends(K, W, q, k, vA, vB)
         p = K.tq_p[k]
         l = QE[ie, 7] - QE[ie, 6]
         D0, D1, D2 = QE[ie, 3] - QE[ie, 0], QE[ie, 4] - QE[ie, 1], QE[ie, 5] - QE[ie, 2]

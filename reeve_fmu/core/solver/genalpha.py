@@ -4,6 +4,10 @@ test. One place for both integrators: the ALE engine (newton.py, stepping.py) an
 baseline (studies/lagrangian_kernels.py)."""
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from .._jit import njit
 
 REFRESH_AFTER = 2   # Newton iterations after which the (finite-difference) matrix is rebuilt
@@ -23,6 +27,20 @@ def gen_alpha_params(rho_inf: float):
     return am, af, beta, gamma
 
 
+def step_grid(span: float, h_max: float, out_dt: float | None = None):
+    """(steps, step, steps per output, outputs) of a fixed-step run over span with steps <= h_max;
+    with out_dt the steps divide out_dt, which must divide span (ValueError)."""
+    if out_dt is None:
+        n = max(1, math.ceil(span / h_max - 1e-9))
+        return n, span / n, 0, 0
+    n_out = int(round(span / out_dt))
+    if n_out < 1 or abs(n_out * out_dt - span) > 1e-9 * max(1.0, span):
+        raise ValueError(f"t_end - t = {span} s is not a multiple of out_dt = {out_dt} s")
+    every = max(1, math.ceil(out_dt / h_max - 1e-9))
+    n = n_out * every
+    return n, span / n, every, n_out
+
+
 @njit(cache=True, inline="always")
 def converged(dmax, dprev, amax, qmax, bq, tol, last):
     """Newton exit test on the last correction dmax (the one before: dprev)."""
@@ -31,6 +49,21 @@ def converged(dmax, dprev, amax, qmax, bq, tol, last):
     if dmax * bq > 1e-14 * (1.0 + qmax):
         return False
     return tol > TOL_ROUNDOFF or dmax > 0.5 * dprev or last
+
+
+@njit(cache=True, inline="always")
+def method_params(params):
+    """(alpha_m, alpha_f, beta, gamma, Newton tolerance, Newton iterations) of a parameter row
+    [gen_alpha_params..., tol, max_iter, ...]."""
+    return params[0], params[1], params[2], params[3], params[4], int(params[5])
+
+
+@njit(cache=True, inline="always")
+def step_buffers(n):
+    """(qo, vo, ao, qddo, q1, v1, a1, qdd1): a Newton step's start and an outer step's start (kept
+    for a retry with substeps), n coordinates each."""
+    return (np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+            np.empty(n))
 
 
 @njit(cache=True, inline="always")

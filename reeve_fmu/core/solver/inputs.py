@@ -22,7 +22,7 @@ def kernel_inputs(m: Model, st: State) -> np.ndarray:
     ue[UE_TRAC_Z] = st.info[IN_TRAC_Z]
     ue[UE_SLIP] = st.info[IN_SLIP]
     if K.crp_s.shape[0]:
-        creep_inputs(m.KJ, workspace(m.KJ, st.arrays(), False), st.c, st.q, st.v, st.info, ue, 0.0, False)
+        creep_inputs(m.KJ, workspace(m.KJ, st.arrays()), st.c, st.q, st.v, st.info, ue, 0.0, False)
     return ue
 
 

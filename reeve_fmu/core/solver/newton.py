@@ -110,7 +110,7 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     return 1 if lu_factor(jac, piv) else 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic):
     """The factorised Newton matrix: dense by finite differences (SP None: build_jacobian) or banded,
     from element Jacobians (core/jacobian.py) or coloured differences (core/sparse.py). Returns -1

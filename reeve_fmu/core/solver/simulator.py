@@ -12,7 +12,7 @@ from ..kernel import IN_JAC_H, IN_WHERE, U_BRAKE_CMD, U_TORQUE
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, jac_shape, pattern_leaks
 from ..system import energy_u, workspace
-from .genalpha import gen_alpha_params
+from .genalpha import gen_alpha_params, step_grid
 from .inputs import kernel_inputs, kernel_inputs_at, outputs_at
 from .newton import SPARSE_MIN_FREE
 from .result import STATUS_TEXT, Result, SolverError
@@ -138,17 +138,7 @@ class Simulator:
             return None
         if self.method != "gen-alpha":
             return advance_scipy(self.model, st, t_end, out_dt, self.method, self.rtol, self.atol)
-        if out_dt is None:
-            n = max(1, math.ceil(span / self.h - 1e-9))
-            h = span / n
-            every, n_out = 0, 0
-        else:
-            n_out = int(round(span / out_dt))
-            if n_out < 1 or abs(n_out * out_dt - span) > 1e-9 * max(1.0, span):
-                raise ValueError(f"t_end - t = {span} s is not a multiple of out_dt = {out_dt} s")
-            every = max(1, math.ceil(out_dt / self.h - 1e-9))
-            n = n_out * every
-            h = span / n
+        n, h, every, n_out = step_grid(span, self.h, out_dt)
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
         status, t, done = self._integrate(st, t0, h, n, ybuf, every)

@@ -14,6 +14,7 @@ from ..kernel import (CREEP, CR_KAPPA_END, CR_RATE_END, CT_IR, CT_KIND, CT_S, IN
                       UE_MOTOR_Q, UE_SLIP, UE_STRIDE, UE_TORQUE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z, U_BRAKE_CMD,
                       U_TORQUE)
 from ..system import creep_inputs, outputs_ws, workspace
+from .genalpha import method_params, step_buffers
 from .newton import newton_step
 
 # the creep sheaves' part of a step (the call sites test for creep sheaves at run time)
@@ -52,6 +53,22 @@ def _copy4(dq, dv, da, dd, sq, sv, sa, sd):
         dd[i] = sd[i]
 
 
+_KEPT = (IN_BRAKE_E, IN_BRAKE_Z, IN_TRAC_Z, IN_SLIP)   # then the creep angles from INFO_CREEP
+
+
+@njit(cache=True, inline="always")
+def _slots(dst, src, ncrp, save):
+    """The step start's brake, friction and creep-angle slots of info (a retry or a failed step
+    restores them; the counters keep counting): save copies them from info src into dst, else from
+    src into info dst."""
+    for j in range(4 + ncrp):
+        i = _KEPT[j] if j < 4 else INFO_CREEP + j - 4
+        if save:
+            dst[j] = src[i]
+        else:
+            dst[i] = src[j]
+
+
 @njit(cache=True)
 def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
@@ -84,12 +101,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     jac = S.jac
     piv = S.piv
     info = S.info
-    am = params[0]
-    af = params[1]
-    beta = params[2]
-    gamma = params[3]
-    tol = params[4]
-    maxit = int(params[5])
+    am, af, beta, gamma, tol, maxit = method_params(params)
     analytic = params.shape[0] > 6 and params[6] != 0.0
     nq = K.nq
     nf = K.free.shape[0]
@@ -103,20 +115,14 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         r = np.empty(nq)
         r0 = np.empty(nq)
         rb = np.empty(max(nf, 1))
-    qo = np.empty(nq)
-    vo = np.empty(nq)
-    ao = np.empty(nq)
-    qddo = np.empty(nq)
-    q1 = np.empty(nq)
-    v1 = np.empty(nq)
-    a1 = np.empty(nq)
-    qdd1 = np.empty(nq)
+    qo, vo, ao, qddo, q1, v1, a1, qdd1 = step_buffers(nq)
     y = np.empty(K.out_kind.shape[0])
     # kernel inputs: [motor torque, brake engagement, brake deflection, brake angle at step start];
     # the engagement follows the command (u[1] = 1: release) with a first-order lag, exact per step
     ncrp = K.crp_s.shape[0]
     ue = np.empty(UE_CREEP + UE_STRIDE * ncrp)
-    th1 = np.empty(ncrp)      # creep sheave angles at the step start (retry)
+    sv = np.empty(4 + ncrp)   # info's slots at the step start (_slots): th1 the creep sheave angles
+    th1 = sv[4:]
     kr = np.empty((2, ncrp))  # creep sheaves' (kappa, rate) at the last converged step end
     ue[UE_TORQUE] = u[U_TORQUE]
     target = 0.0 if u[U_BRAKE_CMD] >= 0.5 else 1.0
@@ -131,12 +137,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
         t1 = t0 + (step + 1) * h
         # start of the step (kept for a retry with substeps)
         _copy4(q1, v1, a1, qdd1, q, v, a, qdd)
-        e1 = info[IN_BRAKE_E]
-        z1 = info[IN_BRAKE_Z]
-        zt1 = info[IN_TRAC_Z]
-        sl1 = info[IN_SLIP]
-        for k in range(ncrp):
-            th1[k] = info[INFO_CREEP + k]
+        _slots(sv, info, ncrp, True)
         status = 1
         for level in range(4):
             nsub = 1 if level == 0 else 4 ** level
@@ -144,12 +145,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
             decay = math.exp(-hs / K.brake_tau) if K.brake_tau > 0.0 else 0.0
             if level > 0:
                 _copy4(q, v, a, qdd, q1, v1, a1, qdd1)
-                info[IN_BRAKE_E] = e1
-                info[IN_BRAKE_Z] = z1
-                info[IN_TRAC_Z] = zt1
-                info[IN_SLIP] = sl1
-                for k in range(ncrp):
-                    info[INFO_CREEP + k] = th1[k]
+                _slots(info, sv, ncrp, False)
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 info[IN_BRAKE_E] = target + (info[IN_BRAKE_E] - target) * decay
@@ -197,12 +193,7 @@ def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
             # span "vanished" in one Newton update, slack ropes snapping) does not
         if status != 0:
             _copy4(q, v, a, qdd, q1, v1, a1, qdd1)
-            info[IN_BRAKE_E] = e1
-            info[IN_BRAKE_Z] = z1
-            info[IN_TRAC_Z] = zt1
-            info[IN_SLIP] = sl1
-            for k in range(ncrp):
-                info[INFO_CREEP + k] = th1[k]
+            _slots(info, sv, ncrp, False)
             if status == 1:
                 for i in range(nq):
                     if not (q[i] == q[i]) or not (qdd[i] == qdd[i]):
