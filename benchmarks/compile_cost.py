@@ -68,9 +68,8 @@ d.step(0.0, 1e-3, 0.0, 0.0)
     "Lagrangian baseline (hanging rope)": """
 from reeve_fmu.core.scene import load_scene
 from reeve_fmu.studies import lagrangian as lag
-from reeve_fmu.studies.lagrangian_build import build_lagrangian
 sc = load_scene('scenes/hanging_rope.toml')
-lag.LagrangianSimulator(build_lagrangian(sc, element_length=2.5, coarse_length=2.5)).run(0.01)
+lag.LagrangianSimulator(lag.build_lagrangian(sc, element_length=2.5, coarse_length=2.5)).run(0.01)
 """,
 }
 

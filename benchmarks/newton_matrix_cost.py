@@ -38,7 +38,7 @@ def measure(repeat=20):
         v = 0.1 * rng.standard_normal(m.nq)
         a = rng.standard_normal(m.nq)
         J = np.zeros(jac_shape(SP))
-        W = workspace(m.KJ, False)
+        W = workspace(m.KJ, st.arrays(), False)
         u = np.zeros(7)
         args = (m.KJ, SP, W, st.c, q, v, a, 0.0, u)
 

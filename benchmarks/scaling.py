@@ -89,7 +89,7 @@ def lu_comparison(eps=64, repeat=20):
     SP = build_sparse(m.K)
     st = new_state(m)
     J = np.zeros(jac_shape(SP))
-    newton_matrix_sparse(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(), 0.0,
+    newton_matrix_sparse(m.KJ, SP, workspace(m.KJ, st.arrays(), False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(), 0.0,
                          np.zeros(7), J, np.empty(m.nq), np.empty(m.nq), np.empty(SP.n), 1.0, 2.5e-7, 5e-4, 1e-10)
     A = unpack_sparse(J, SP).tocsc()
     b = np.ones(SP.n)

@@ -17,6 +17,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from ..core.kernel import UE_TORQUE, U_TORQUE
 from ..core.model import State, build_model
 from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
@@ -71,20 +72,22 @@ def with_joint_input(scene: Scene, body: str, kind: str) -> Scene:
 
 class JointInput:
     """One joint driven by a Plant input. speed: each step writes a one-segment profile into the
-    kernel's prescribed-joint table (the rate ramps linearly from its value at the step start to
+    State's prescribed-joint table (the rate ramps linearly from its value at the step start to
     the input at the step end: continuous rate, bounded acceleration, the angle its exact
-    integral); torque: the joint's torque table becomes the constant input."""
+    integral); torque: the joint's torque table in the State becomes the constant input."""
 
     def __init__(self, model, body):
         self.body, self.kind = body.name, body.motion.kind.split("-")[0]
         self.j = model.q_names.index(f"{body.name}.{'angle' if body.joint == 'revolute' else 'travel'}")
         K = model.K
-        dofs = list(K.jp_dof if self.kind == "speed" else K.jt_dof)
-        # views: the compiled kernel shares these arrays (kernel.compiled_kernel does not copy)
-        self.row = (K.jp_prof if self.kind == "speed" else K.jt_tab)[dofs.index(self.j)]
+        self.k = list(K.jp_dof if self.kind == "speed" else K.jt_dof).index(self.j)
+
+    def row(self, st: State) -> np.ndarray:
+        """The joint's table in st (a view: writing it sets the input)."""
+        return (st.jp_prof if self.kind == "speed" else st.jt_tab)[self.k]
 
     def set(self, st: State, dt: float, value: float) -> None:
-        r = self.row
+        r = self.row(st)
         if self.kind == "torque":
             r[1, :] = value
             return
@@ -200,16 +203,16 @@ class Plant:
         the torque that holds the load)."""
         m, st = self.model, self.state
         ue = kernel_inputs_at(m, st)
-        ue[0] = 0.0
+        ue[UE_TORQUE] = 0.0
         M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
-        assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
+        assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, ue, M, Q)
         return float(-Q[m.K.mot_dof] / m.K.mot_gain)
 
     def start_with_torque(self, torque: float) -> None:
         """Before the first step: the motor torque acts from t0 on (accelerations and outputs made
         consistent with it), e.g. the holding torque, so that a held load starts at rest."""
         st = self.state
-        st.u[0] = float(torque)
+        st.u[U_TORQUE] = float(torque)
         consistent_acceleration(self.model, st)
         self._y = self.sim.outputs(st).copy()
 
@@ -234,14 +237,11 @@ class Plant:
 
     # FMU state: builtin types, bit-exact
     def get_state(self) -> dict:
-        return {"state": self.state.to_dict(), "y": self._y.tolist(),
-                "joints": [ji.row.tolist() for ji in self._joints]}
+        return {"state": self.state.to_dict(), "y": self._y.tolist()}   # the joint inputs are in the State
 
     def set_state(self, d: dict):
         self.state = State.from_dict(d["state"])
         self._y = np.array(d["y"], float)
-        for ji, row in zip(self._joints, d.get("joints", ())):
-            ji.row[...] = row
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -260,7 +260,7 @@ def njit(*args, **kwargs):
 
 def entry_point(dispatcher, first=None):
     """The compiled specialization's entry point: calling it skips numba's per-call argument typing
-    (about 0.4 us for a call with five arrays). The caller must pass arguments of exactly that
+    (a cost per array argument on every call). The caller must pass arguments of exactly that
     signature's types. With `first` (the first argument the caller passes, e.g. a compiled kernel)
     the one signature whose first type is that argument's; else the only signature. Otherwise
     (several candidates, no numba) the dispatcher itself."""

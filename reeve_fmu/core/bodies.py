@@ -713,17 +713,18 @@ def rows_accel_fd(q, v, G, cols, f0, fp, fm, qs, acc):
 
 
 @njit(cache=True)
-def nl_update(K, c, q, v):
-    """Nonlinear rows at (q, v): element maps el_coef <- B(q), c <- f(q) - B(q) q, K.nl_acc <- dB/dt v
-    for every element coordinate that is a nonlinear row."""
-    f0, fp, fm, J = K.nl_f0, K.nl_fp, K.nl_fm, K.nl_J
-    qs = K.nl_qs
+def nl_update(K, W, c, q, v):
+    """Nonlinear rows at (q, v): element maps W.el_coef <- B(q), c <- f(q) - B(q) q, W.nl_acc <- dB/dt v
+    for every element coordinate that is a nonlinear row (W: the rows' scratch and the State's maps
+    and contact angles, kernel.WORK_FIELDS)."""
+    f0, fp, fm, J = W.nl_f0, W.nl_fp, W.nl_fm, W.nl_J
+    qs = W.nl_qs
     G = (K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_pb, K.nl_po, K.nl_sp, K.nl_sg, K.nl_sa, K.nl_rk, K.nl_rf,
-         K.nl_P, K.nl_TW, K.nl_BR, K.nl_ANG, K.nl_AX)
+         W.nl_P, W.nl_TW, W.nl_BR, W.nl_ang, W.nl_AX)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
-    acc = K.nl_racc
+    acc = W.nl_racc
     rows_accel(q, v, G, acc)
-    el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, K.el_coef, K.nl_ent, K.nl_rw
+    el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, W.el_coef, K.nl_ent, K.nl_rw
     for ie in range(ent.shape[0]):
         for a in range(ent.shape[1]):
             r = ent[ie, a]
@@ -732,22 +733,22 @@ def nl_update(K, c, q, v):
             x = f0[r]
             for w in range(el_map.shape[2]):
                 k = rw[r, w]
-                b = 0.0 if k == -1 else (extra_coef(K.nl_rk, K.nl_TW, r) if k == -2 else J[r, k])
+                b = 0.0 if k == -1 else (extra_coef(K.nl_rk, W.nl_TW, r) if k == -2 else J[r, k])
                 el_coef[ie, a, w] = b
                 x -= b * q[el_map[ie, a, w]]
             c[el_idx[ie, a]] = x
-            K.nl_acc[ie, a] = acc[r]
+            W.nl_acc[ie, a] = acc[r]
 
 
 @njit(cache=True)
-def wrap_weight(K, Q, q, energy):
+def wrap_weight(K, W, Q, q, energy):
     """The weight of the rope a W1 wrap gains or loses as its angle changes: V = -(l_w(q) - lw) rhoA g.c
     per wrap (l_w = s_out - sigma, c the sheave centre, lw the lumped part). Without it the span
     elements' gravity potential, which counts material leaving a span at the span's mid-height, makes a
     spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q -= dV/dq = rhoA g.c d l_w/dq (the rope
     moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope). energy: return V
-    instead (after nl_update)."""
-    rk, rf, P, J, cols, f0, pb = K.nl_rk, K.nl_rf, K.nl_P, K.nl_J, K.nl_cols, K.nl_f0, K.nl_pb
+    instead (after nl_update on W)."""
+    rk, rf, P, J, cols, f0, pb = K.nl_rk, K.nl_rf, W.nl_P, W.nl_J, K.nl_cols, W.nl_f0, K.nl_pb
     V = 0.0
     for r in range(rk.shape[0]):
         if rk[r, 0] != ROW_WRAP:
@@ -762,7 +763,7 @@ def wrap_weight(K, Q, q, energy):
             Q[cols[k]] += gc * J[r, k]
             b = K.nl_colbody[k]
             if pb[ip] == b:
-                v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_BR, b,
+                v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, W.nl_BR, b,
                                                             cols[k])
                 c0, c1, c2 = _moved(P, ip, True, v0, v1, v2, w0, w1, w2, O0, O1, O2)
                 Q[cols[k]] += dl * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
@@ -770,10 +771,10 @@ def wrap_weight(K, Q, q, energy):
 
 
 @njit(cache=True, inline="always")
-def nl_convect(K, MEs, QEs, ie):
+def nl_convect(W, MEs, QEs, ie):
     """QEs[ie] -= MEs[ie] (dB/dt qdot) for element ie: the part of the nodes' acceleration that is
     not B qddot (centripetal terms of rotating bodies, turning tangent points)."""
-    acc = K.nl_acc
+    acc = W.nl_acc
     ne = QEs.shape[1]
     for a in range(ne):
         s = 0.0
@@ -782,5 +783,16 @@ def nl_convect(K, MEs, QEs, ie):
         QEs[ie, a] -= s
 
 
+# The kernel fields of the geometry rows_eval reads (the first 11 of its tuple G); the last five are
+# scratch and warm start: points, span tangents, body rotations, contact angles, axes (geometry()).
 GEOMETRY_FIELDS = ("nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa", "nl_rk",
-                   "nl_rf", "nl_P", "nl_TW", "nl_BR", "nl_ANG", "nl_AX")
+                   "nl_rf")
+
+
+def geometry(K, ang=None):
+    """rows_eval's tuple G for kernel fields K (a Kernel or any object with them) with fresh scratch;
+    ang: the contact angles' warm start (default: K.nl_ang0's copy; NaN: from the coplanar formula)."""
+    nsp = K.nl_sp.shape[0]
+    return tuple(getattr(K, f) for f in GEOMETRY_FIELDS) + (
+        np.zeros((K.nl_pb.shape[0], 3)), np.zeros((nsp, 6)), np.zeros((K.nl_bq.shape[0], 5)),
+        K.nl_ang0.copy() if ang is None else ang, np.zeros((2, 3)))

@@ -7,12 +7,10 @@ from __future__ import annotations
 import math
 
 from ._jit import gated, njit
-from .elements.linear import SLACK_STRAIN
-from .kernel import CT_EA, CT_IN, CT_IR, CT_OUT, CT_S, CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, CUBIC, MULTI_D
-
-INFO_CREEP = 10   # State.info index of the first creep sheave angle (model.INFO_SIZE)
-UE_CREEP = 8      # kernel inputs of creep sheave k from UE_CREEP + UE_STRIDE k (system.creep_inputs)
-UE_STRIDE = 8     # per creep sheave: creep_inputs' six, then the last residual's (kappa, rate) (creep_forces)
+from .elements.linear import SLACK_STRAIN, chord
+from .kernel import (CR_ANGLE, CR_KAPPA_MID, CR_RATE, CR_SIGMA, CR_WOUND, CT_EA, CT_IN, CT_IR, CT_OUT, CT_S,
+                     CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, CUBIC, INFO_CREEP, MULTI_D, UE_BRAKE_E, UE_BRAKE_Z,
+                     UE_CREEP, UE_MOTOR_Q, UE_SLIP, UE_STRIDE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z)
 
 
 @njit(cache=True, inline="always")
@@ -208,12 +206,12 @@ def creep_input_set(K, q, info, ue, h, kr):
         i = UE_CREEP + UE_STRIDE * k
         kap = kr[0, k]
         ue[i] = kap
-        ue[i + 1] = info[INFO_CREEP + k]
-        ue[i + 2] = q[int(T[k, CT_S])]
-        ue[i + 3] = kr[1, k]
-        ue[i + 4] = kap + 0.5 * h * kr[1, k]
+        ue[i + CR_ANGLE] = info[INFO_CREEP + k]
+        ue[i + CR_SIGMA] = q[int(T[k, CT_S])]
+        ue[i + CR_RATE] = kr[1, k]
+        ue[i + CR_KAPPA_MID] = kap + 0.5 * h * kr[1, k]
         # started by the first step; only drums keep a record (model._info_with_wound_records)
-        ue[i + 5] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if T[k, CT_IN] < 0.0 else 0.0
+        ue[i + CR_WOUND] = wound_kappa(K, info, q, k, kap if h > 0.0 else 0.0) if T[k, CT_IN] < 0.0 else 0.0
 
 
 @njit(cache=True)
@@ -293,8 +291,8 @@ def creep_angle(K, q, u, k, kap):
 def creep_angle_at(u, k, kap, sigma, ir, driven):
     """creep_angle from sheave k's sigma and 1 / R; driven: speed-driven (the predicted kappa)."""
     i = UE_CREEP + UE_STRIDE * k
-    kb = u[i + 4] if driven else 0.5 * (u[i] + kap)
-    return u[i + 1] - kb * (sigma - u[i + 2]) * ir
+    kb = u[i + CR_KAPPA_MID] if driven else 0.5 * (u[i] + kap)
+    return u[i + CR_ANGLE] - kb * (sigma - u[i + CR_SIGMA]) * ir
 
 @njit(cache=True)
 def traction_kappa(K, u):
@@ -310,7 +308,7 @@ def brake_deflection(K, q, u):
     the step's start. Kernel inputs u = [motor torque, brake engagement e, brake z at step start,
     motor coordinate at step start, traction z at step start, rope s at the slipping sheave and its
     angle at step start]."""
-    z = u[2] + K.mot_gain * creep_kappa(K, u, K.mot_crp) * (q[K.mot_dof] - u[3])
+    z = u[UE_BRAKE_Z] + K.mot_gain * creep_kappa(K, u, K.mot_crp) * (q[K.mot_dof] - u[UE_MOTOR_Q])
     return _elastoplastic(z, K.brake_wreg)
 
 
@@ -318,18 +316,14 @@ def brake_deflection(K, q, u):
 def brake_torque(K, q, v, u):
     """Brake torque on the motor angle (positive = drives the rope along the route). Stiffness and
     capacity both scale with the engagement e (lining pressure): -e (T/zmax) z."""
-    return -u[1] * (K.brake_T / K.brake_wreg) * brake_deflection(K, q, u)
+    return -u[UE_BRAKE_E] * (K.brake_T / K.brake_wreg) * brake_deflection(K, q, u)
 
 
 @njit(cache=True)
 def static_end_tension(K, QE, QEs, ie, end):
     """Rope force at an element end from its forces without inertia (for the friction capacity)."""
     nd = K.nd
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     if dist <= 0.0:
         return 0.0
     T = 0.0
@@ -347,7 +341,8 @@ def traction_deflection(K, q, u):
     """Rope-groove friction deflection z [m]: relative displacement of the rope along the route
     against the rim since the step's start, elasto-plastic with band zmax = creep."""
     # the rope's displacement along the route at the strain it arrives with (creep sheave)
-    z = u[4] - traction_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+    z = (u[UE_TRAC_Z] - traction_kappa(K, u) * (q[K.trac_s] - u[UE_TRAC_S])
+         - K.trac_R * (q[K.trac_th] - u[UE_TRAC_TH]))
     return _elastoplastic(z, K.trac_zmax)
 
 
@@ -355,7 +350,8 @@ def traction_deflection(K, q, u):
 def traction_slip(K, q, u):
     """Cumulative slip [m] of the rope against the rim (rope minus rim along the route): u[7] at the
     step start plus the step's relative displacement, the rope's at the strain it arrives with."""
-    return u[7] - traction_kappa(K, u) * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+    return (u[UE_SLIP] - traction_kappa(K, u) * (q[K.trac_s] - u[UE_TRAC_S])
+            - K.trac_R * (q[K.trac_th] - u[UE_TRAC_TH]))
 
 
 @njit(cache=True)

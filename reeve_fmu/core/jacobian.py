@@ -30,12 +30,13 @@ import math
 import numpy as np
 
 from ._jit import njit
+from .contact import creep_kappa, creep_terms, creep_wound, static_end_tension
 from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
 from .elements.cubic_jac import cubic_stiffness, gravity_jac
-from .elements.linear import SLACK_STRAIN, linear_element_at
+from .elements.linear import SLACK_STRAIN, chord, linear_element_at, slack_law
 from .elements.linear_jac import linear_inertia
+from .kernel import UE_BRAKE_E, UE_BRAKE_Z, UE_CREEP, UE_MOTOR_Q, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z
 from .sparse import bordered_factor, residual_sparse
-from .contact import UE_CREEP, creep_kappa, creep_terms, creep_wound, static_end_tension
 from .system import element_eval, q_terms
 
 FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
@@ -48,15 +49,9 @@ def axial_law_d(EA, nu, eps, epsdot, tonly):
     (N, w, N_d, dN/deps, dN_d/deps, dN_d/depsdot)."""
     if not tonly:
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
+    N, w, taut, r, f, dF = slack_law(EA, nu, eps, epsdot)
     d = SLACK_STRAIN
-    r = math.sqrt(eps * eps + d * d)
-    sp = eps + r if eps >= 0.0 else d * d / (r - eps)
-    N = 0.5 * EA * sp
-    w = 0.25 * EA * (eps * sp + d * d * math.asinh(eps / d))
-    taut = 0.5 * (1.0 + eps / r)
     dtaut = 0.5 * d * d / (r * r * r)
-    f = N + EA * nu * epsdot * taut
-    dF = EA * d
     sq = math.sqrt(f * f + dF * dF)
     F = 0.5 * (f + sq)
     g = 0.5 * (1.0 + f / sq) if sq > 0.0 else 0.5      # dF/df
@@ -80,11 +75,7 @@ def linear_stiffness(nd, rhoA, EA, nu, tonly, G, QE, VE, ie, bq, gv, JE, S):
             JE[a, i2] -= gk
             JE[i1, a] += gk
             JE[i2, a] -= gk
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     if dist <= 0.0:
         return
     ldot = VE[ie, i2] - VE[ie, i1]
@@ -248,7 +239,7 @@ def elements_pass(K, SP, W, qdd, pos, J, ba, bq, gv):
     ae = np.empty(ne)
     S = np.empty((9 + 4 * nd + 2 * ne, ne))
     el_map = K.el_map
-    el_coef = K.el_coef
+    el_coef = W.el_coef
     for ie in range(el_map.shape[0]):
         for a in range(ne):
             x = 0.0
@@ -343,8 +334,8 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         if K.mot_crp >= 0 and K.crp_kind[K.mot_crp] == 0 and u.shape[0] > UE_CREEP:
             gain *= creep_terms(K, W.QE, W.VE, v, K.mot_crp, creep_wound(u, K.mot_crp))[0]
         kz = K.mot_gain * creep_kappa(K, u, K.mot_crp)          # dz/dq
-        z = u[2] + kz * (q[j] - u[3])
-        kb = u[1] * K.brake_T / K.brake_wreg * _elastoplastic_d(z, K.brake_wreg)
+        z = u[UE_BRAKE_Z] + kz * (q[j] - u[UE_MOTOR_Q])
+        kb = u[UE_BRAKE_E] * K.brake_T / K.brake_wreg * _elastoplastic_d(z, K.brake_wreg)
         _add(J, pos[j], pos[j], bq * kb * kz * gain, n1, kl, ku, wb, nb)
     if K.trac_s >= 0:
         kap = 1.0
@@ -354,7 +345,7 @@ def qlevel_closed(K, SP, W, q, v, qdd, u, pos, mark, J, ba, bq, gv):
         T_in = static_end_tension(K, W.QE, W.QEs, K.trac_el_in, 1)
         T_out = static_end_tension(K, W.QE, W.QEs, K.trac_el_out, 0)
         T_slack = max(min(T_in, T_out), 0.0)
-        z = u[4] - kap * (q[K.trac_s] - u[5]) - K.trac_R * (q[K.trac_th] - u[6])
+        z = u[UE_TRAC_Z] - kap * (q[K.trac_s] - u[UE_TRAC_S]) - K.trac_R * (q[K.trac_th] - u[UE_TRAC_TH])
         kf = T_slack * K.trac_efa / K.trac_zmax * _elastoplastic_d(z, K.trac_zmax)   # -df/dz
         s, th = K.trac_s, K.trac_th
         R = K.trac_R
@@ -385,10 +376,10 @@ def _refresh(K, c, q, v, W, els, j):
         hit = False
         for a in range(K.el_map.shape[1]):
             for w in range(K.el_map.shape[2]):
-                if K.el_coef[ie, a, w] != 0.0 and K.el_map[ie, a, w] == j:
+                if W.el_coef[ie, a, w] != 0.0 and K.el_map[ie, a, w] == j:
                     hit = True
         if hit:
-            element_eval(K, c, q, v, ie, W.QE, W.VE, W.MEs, W.QEs)
+            element_eval(K, W.el_coef, c, q, v, ie, W.QE, W.VE, W.MEs, W.QEs)
 
 
 @njit(cache=True)

@@ -1,10 +1,12 @@
 """The compiled kernels' view of a Model's arrays.
 
-`Kernel` (a namedtuple, filled by model.build_model) is what Python code reads. Passing a namedtuple of ~40 arrays into a
-compiled function that is not inlined costs an atomic incref and decref per array (measured
-0.6 us per call, about a quarter of a step). The compiled code therefore receives the same fields in a
-numba StructRef, which is one reference-counted object. Its constructor is written out (not
-generated) so numba can cache it. Without numba the namedtuple itself is used.
+`Kernel` (a namedtuple, filled by model.build_model) is what Python code reads. Passing a namedtuple
+of ~100 arrays into a compiled function that is not inlined costs an atomic incref and decref per
+array, a sizeable part of a step. The compiled code therefore receives the same fields in a numba
+StructRef, which is one reference-counted object. The fields are declared once (KERNEL_FIELDS); the
+namedtuple, the StructRef type and its constructor are made from that table. The constructor's
+source is compiled as if it stood in this file, so that numba caches it like the other kernels.
+Without numba the namedtuple itself is used.
 """
 from __future__ import annotations
 
@@ -14,43 +16,52 @@ from collections import namedtuple
 
 from ._jit import JIT
 
-# The model's arrays as Python code reads them (model.build_model fills it).
-Kernel = namedtuple("Kernel", [
-    "nd", "nq",
-    "B_ptr", "B_idx", "B_val",
-    "el_idx", "el_map", "el_coef", "el_rhoA", "el_EA", "el_nu", "el_tonly", "el_g", "el_C",
-    "M0", "F0",
-    "spr_dof", "spr_k", "spr_c",
-    "drum_dof", "drum_rhoA", "drum_sign",
-    "mot_dof", "mot_R", "drive_kind", "torque_table",
-    "brake_T", "brake_wreg", "brake_tau",
-    "free", "presc", "presc_gain", "profile",
-    "out_kind", "out_i", "out_j", "out_scale",
-    "l_min", "buf_dof", "buf_z", "buf_sign", "buf_k", "buf_c",
-    "mot_gain", "trac_s", "trac_th", "trac_R", "trac_efa", "trac_zmax", "trac_el_in", "trac_el_out",
-    "el_type", "el_EI",
-    "crp_s", "crp_el_in", "crp_el_out", "crp_R", "crp_J", "crp_kind", "mot_crp", "crp_vreg",
+# The model's arrays, (name, type): "int" / "float" scalars, "int[]" / "float[,]" ... C-contiguous
+# int64 / float64 arrays of one, two, ... dimensions (model.build_model fills them). Nothing writes
+# them after the build: what a step changes is in the State (STATE_FIELDS) or its Work. el_coef holds
+# the element maps at q0 (State.el_coef follows the nonlinear rows).
+KERNEL_FIELDS = (
+    ("nd", "int"), ("nq", "int"), ("B_ptr", "int[]"), ("B_idx", "int[]"), ("B_val", "float[]"),
+    ("el_idx", "int[,]"), ("el_map", "int[,,]"), ("el_coef", "float[,,]"), ("el_rhoA", "float[]"),
+    ("el_EA", "float[]"), ("el_nu", "float[]"), ("el_tonly", "int[]"), ("el_g", "float[,]"),
+    ("el_C", "float[]"), ("M0", "float[,]"), ("F0", "float[]"), ("spr_dof", "int[]"), ("spr_k", "float[]"),
+    ("spr_c", "float[]"), ("drum_dof", "int[]"), ("drum_rhoA", "float[]"), ("drum_sign", "float[]"),
+    ("mot_dof", "int"), ("mot_R", "float"), ("drive_kind", "int"), ("torque_table", "float[,]"),
+    ("brake_T", "float"), ("brake_wreg", "float"), ("brake_tau", "float"), ("free", "int[]"),
+    ("presc", "int[]"), ("presc_gain", "float[]"), ("profile", "float[,]"), ("out_kind", "int[]"),
+    ("out_i", "int[]"), ("out_j", "int[]"), ("out_scale", "float[]"), ("l_min", "float"), ("buf_dof", "int[]"),
+    ("buf_z", "float[]"), ("buf_sign", "float[]"), ("buf_k", "float[]"), ("buf_c", "float[]"),
+    ("mot_gain", "float"), ("trac_s", "int"), ("trac_th", "int"), ("trac_R", "float"), ("trac_efa", "float"),
+    ("trac_zmax", "float"), ("trac_el_in", "int"), ("trac_el_out", "int"), ("el_type", "int"),
+    ("el_EI", "float[]"), ("crp_s", "int[]"), ("crp_el_in", "int[]"), ("crp_el_out", "int[]"),
+    ("crp_R", "float[]"), ("crp_J", "float[]"), ("crp_kind", "int[]"), ("mot_crp", "int"),
+    ("crp_vreg", "float"),
     # the creep sheaves' constants as one table (columns CT_* below): what the residual reads per sheave
-    "crp_tab",
+    ("crp_tab", "float[,]"),
     # nonlinear rows (core/bodies.py): rotating bodies, exact tangent points; nl_on bit 1: nonlinear
-    # rows, bit 2: joints or spatial rigid bodies; 0: none of them
-    "nl_on", "nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_BR", "nl_ANG", "nl_AX", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa",
-    "nl_rk", "nl_rf", "nl_P", "nl_TW", "nl_cols", "nl_colbody", "nl_f0", "nl_fp", "nl_fm",
-    "nl_J", "nl_qs", "nl_racc", "nl_rw", "nl_ent", "nl_acc",
-    # nl_frz[0] = 1: the rows keep B(q), c and dB/dt qdot of the last update (solver, Newton matrix)
-    "nl_frz",
+    # rows, bit 2: joints or spatial rigid bodies; 0: none of them. nl_ang0: the contact angles at q0,
+    # where a State's warm start (State.nl_ang) begins
+    ("nl_on", "int"), ("nl_bq", "int[,]"), ("nl_b0", "float[,]"), ("nl_bk", "int[]"), ("nl_bax", "float[,]"),
+    ("nl_ang0", "float[,]"), ("nl_pb", "int[]"), ("nl_po", "float[,]"), ("nl_sp", "int[,]"), ("nl_sg", "float[,]"),
+    ("nl_sa", "float[,]"), ("nl_rk", "int[,]"), ("nl_rf", "float[,]"), ("nl_cols", "int[]"),
+    ("nl_colbody", "int[]"), ("nl_rw", "int[,]"), ("nl_ent", "int[,]"),
     # column groups of the dense Newton matrix of a model with nonlinear rows (sparse.dense_groups):
     # [groups G, G + 1 group pointers, free columns by group, nf + 1 reach pointers, reached free rows];
     # G = 0: column by column
-    "nl_grp",
-    # joints to the ground (model._joint_tables): prescribed profiles, torque tables, gravity moments
-    "jp_dof", "jp_prof", "jt_dof", "jt_tab", "jg_dof", "jg_A", "jg_B",
+    ("nl_grp", "int[]"),
+    # joints to the ground (model._joint_tables): prescribed profiles, torque tables (the scene's: a
+    # State's copies take a plant's joint inputs), gravity moments
+    ("jp_dof", "int[]"), ("jp_prof", "float[,,]"), ("jt_dof", "int[]"), ("jt_tab", "float[,,]"),
+    ("jg_dof", "int[]"), ("jg_A", "float[]"), ("jg_B", "float[]"),
     # spatial rigid bodies (rigid.rigid_terms): rotation-vector indices, inertia tensors in body axes
-    "rb_q", "rb_J",
+    ("rb_q", "int[,]"), ("rb_J", "float[,,]"),
     # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
-    # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch, (M, kappa) outputs
-    "tq_el", "tq_phi", "tq_phic", "tq_vb", "tq_v0", "tq_p", "tq_dref", "tq_out",
-])
+    # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch at q0 (State.tq_dref
+    # follows it)
+    ("tq_el", "int[]"), ("tq_phi", "int[,]"), ("tq_phic", "float[,]"), ("tq_vb", "int[,]"),
+    ("tq_v0", "float[,]"), ("tq_p", "float[,]"), ("tq_dref", "float[]"),
+)
+Kernel = namedtuple("Kernel", [name for name, _ in KERNEL_FIELDS])
 
 # Features the compiled code of a kernel is specialised for: the compiled kernel's numba type carries
 # them (compiled_kernel), and code a scene cannot reach is not compiled for it (_jit.gated). Bits 1, 2
@@ -87,14 +98,75 @@ def compiled_features(K) -> int:
 CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_TIN, CT_TOUT, CT_IR, CT_WIN, CT_WOUT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12
 CT_SIZE = 15
 
+# State.info slots (model.State): the step size the Newton matrix was built for (0: rebuild it), steps,
+# Newton iterations, Newton matrix builds, status, brake engagement, brake deflection, the element of a
+# vanishing span (or the drum that ran empty), rope-groove friction deflection, cumulative slip; from
+# INFO_CREEP one angle per creep sheave, then the creep drums' wound-rope records (model.new_state).
+(IN_JAC_H, IN_STEPS, IN_ITERS, IN_JACS, IN_STATUS, IN_BRAKE_E, IN_BRAKE_Z, IN_WHERE, IN_TRAC_Z,
+ IN_SLIP) = range(10)
+INFO_CREEP = 10
+# State.u, the inputs held over a step: motor torque, brake command (1: release)
+U_TORQUE, U_BRAKE_CMD = 0, 1
+# Kernel inputs ue of a step: motor torque, brake engagement, and at the step start the brake deflection,
+# the motor coordinate, the rope-groove friction deflection, the slipping sheave's rope s and angle and
+# the cumulative slip; then UE_STRIDE per creep sheave k from UE_CREEP + UE_STRIDE k (system.creep_inputs)
+(UE_TORQUE, UE_BRAKE_E, UE_BRAKE_Z, UE_MOTOR_Q, UE_TRAC_Z, UE_TRAC_S, UE_TRAC_TH,
+ UE_SLIP) = range(8)
+UE_CREEP = 8
+UE_STRIDE = 8
+# a creep sheave's kernel inputs at the step start: kappa, angle, sigma, kappa rate, kappa predicted to
+# the step's middle (speed-driven sigma), the kappa a drum pays out at; then the last residual's kappa
+# and rate (system.creep_forces)
+CR_KAPPA, CR_ANGLE, CR_SIGMA, CR_RATE, CR_KAPPA_MID, CR_WOUND, CR_KAPPA_END, CR_RATE_END = range(8)
+
 # Work arrays of one assembly: the q-space M and Q, every element's coordinates, velocities,
-# mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as the kernel (one refcount per call).
-Work = namedtuple("Work", ["M", "Q", "QE", "VE", "MEs", "QEs", "Md"])
+# mass matrix and force vector, and the diagonal q-level mass (drums). Bundled for the same reason as
+# the kernel (one refcount per call).
+WORK_FIELDS = (("M", "float[,]"), ("Q", "float[]"), ("QE", "float[,]"), ("VE", "float[,]"), ("MEs", "float[,,]"),
+               ("QEs", "float[,]"), ("Md", "float[]"),
+               # the State's arrays an assembly updates (the same buffers: STATE_FIELDS)
+               ("el_coef", "float[,,]"), ("nl_ang", "float[,]"), ("tq_dref", "float[]"), ("jp_prof", "float[,,]"),
+               ("jt_tab", "float[,,]"),
+               # the nonlinear rows at the last update (bodies.nl_update): row values f(q), the
+               # differences' scratch, the Jacobian B(q), convective accelerations per row and per
+               # element coordinate, points, span tangents, body rotations, axes; frz[0] = 1: the
+               # assembly keeps them (the Newton matrix's differences, solver/newton.py)
+               ("nl_f0", "float[]"), ("nl_fp", "float[]"), ("nl_fm", "float[]"), ("nl_qs", "float[]"),
+               ("nl_J", "float[,]"), ("nl_racc", "float[]"), ("nl_acc", "float[,]"), ("nl_P", "float[,]"),
+               ("nl_TW", "float[,]"), ("nl_BR", "float[,]"), ("nl_AX", "float[,]"), ("frz", "int[]"),
+               # the torsion spans' (M, kappa) at the last assembly (outputs)
+               ("tq_out", "float[,]"))
+Work = namedtuple("Work", [name for name, _ in WORK_FIELDS])
+
+# A State's arrays (model.State) in one object, the same buffers: the step call then passes 8
+# arguments instead of 17 (numba's dispatcher types every argument on every call).
+STATE_FIELDS = (("c", "float[]"), ("q_ref", "float[]"), ("q", "float[]"), ("v", "float[]"), ("a", "float[]"),
+                ("qdd", "float[]"), ("u", "float[]"), ("jac", "float[,]"), ("piv", "int[]"), ("info", "float[]"),
+                ("el_coef", "float[,,]"), ("nl_ang", "float[,]"), ("tq_dref", "float[]"), ("jp_prof", "float[,,]"),
+                ("jt_tab", "float[,,]"))
+StateArrays = namedtuple("StateArrays", [name for name, _ in STATE_FIELDS])
 
 if JIT:
     from numba import njit
     from numba.core import types
     from numba.experimental import structref
+
+    def _numba_type(kind):
+        """The numba type of a field type of the tables above."""
+        base = types.int64 if kind.startswith("int") else types.float64
+        if "[" not in kind:
+            return base
+        return types.Array(base, kind.count(",") + 1, "C")
+
+    def _constructor(name, type_name, fields):
+        """name(*fields) -> a StructRef of the type type_name (a global of this module), generated from a
+        field table and defined in this module with this file as its source (numba's cache needs one,
+        and keys it by the file's contents)."""
+        names = [n for n, _ in fields]
+        src = (f"def {name}({', '.join(names)}):\n    s = structref.new({type_name})\n"
+               + "".join(f"    s.{n} = {n}\n" for n in names) + "    return s\n")
+        exec(compile(src, __file__, "exec"), globals())
+        return njit(cache=True)(globals()[name])
 
     @structref.register
     class KernelType(types.StructRef):
@@ -111,120 +183,6 @@ if JIT:
     class KernelRef(structref.StructRefProxy):
         """Python handle of the StructRef (opaque: read fields from the namedtuple)."""
 
-    structref.define_boxing(KernelType, KernelRef)
-
-    KERNEL_TYPE = KernelType([
-        ("nd", types.int64),
-        ("nq", types.int64),
-        ("B_ptr", types.int64[::1]),
-        ("B_idx", types.int64[::1]),
-        ("B_val", types.float64[::1]),
-        ("el_idx", types.int64[:, ::1]),
-        ("el_map", types.int64[:, :, ::1]),
-        ("el_coef", types.float64[:, :, ::1]),
-        ("el_rhoA", types.float64[::1]),
-        ("el_EA", types.float64[::1]),
-        ("el_nu", types.float64[::1]),
-        ("el_tonly", types.int64[::1]),
-        ("el_g", types.float64[:, ::1]),
-        ("el_C", types.float64[::1]),
-        ("M0", types.float64[:, ::1]),
-        ("F0", types.float64[::1]),
-        ("spr_dof", types.int64[::1]),
-        ("spr_k", types.float64[::1]),
-        ("spr_c", types.float64[::1]),
-        ("drum_dof", types.int64[::1]),
-        ("drum_rhoA", types.float64[::1]),
-        ("drum_sign", types.float64[::1]),
-        ("mot_dof", types.int64),
-        ("mot_R", types.float64),
-        ("drive_kind", types.int64),
-        ("torque_table", types.float64[:, ::1]),
-        ("brake_T", types.float64),
-        ("brake_wreg", types.float64),
-        ("brake_tau", types.float64),
-        ("free", types.int64[::1]),
-        ("presc", types.int64[::1]),
-        ("presc_gain", types.float64[::1]),
-        ("profile", types.float64[:, ::1]),
-        ("out_kind", types.int64[::1]),
-        ("out_i", types.int64[::1]),
-        ("out_j", types.int64[::1]),
-        ("out_scale", types.float64[::1]),
-        ("l_min", types.float64),
-        ("buf_dof", types.int64[::1]),
-        ("buf_z", types.float64[::1]),
-        ("buf_sign", types.float64[::1]),
-        ("buf_k", types.float64[::1]),
-        ("buf_c", types.float64[::1]),
-        ("mot_gain", types.float64),
-        ("trac_s", types.int64),
-        ("trac_th", types.int64),
-        ("trac_R", types.float64),
-        ("trac_efa", types.float64),
-        ("trac_zmax", types.float64),
-        ("trac_el_in", types.int64),
-        ("trac_el_out", types.int64),
-        ("el_type", types.int64),
-        ("el_EI", types.float64[::1]),
-        ("crp_s", types.int64[::1]),
-        ("crp_el_in", types.int64[::1]),
-        ("crp_el_out", types.int64[::1]),
-        ("crp_R", types.float64[::1]),
-        ("crp_J", types.float64[::1]),
-        ("crp_kind", types.int64[::1]),
-        ("mot_crp", types.int64),
-        ("crp_vreg", types.float64),
-        ("crp_tab", types.float64[:, ::1]),
-        ("nl_on", types.int64),
-        ("nl_bq", types.int64[:, ::1]),
-        ("nl_b0", types.float64[:, ::1]),
-        ("nl_bk", types.int64[::1]),
-        ("nl_bax", types.float64[:, ::1]),
-        ("nl_BR", types.float64[:, ::1]),
-        ("nl_ANG", types.float64[:, ::1]),
-        ("nl_AX", types.float64[:, ::1]),
-        ("nl_pb", types.int64[::1]),
-        ("nl_po", types.float64[:, ::1]),
-        ("nl_sp", types.int64[:, ::1]),
-        ("nl_sg", types.float64[:, ::1]),
-        ("nl_sa", types.float64[:, ::1]),
-        ("nl_rk", types.int64[:, ::1]),
-        ("nl_rf", types.float64[:, ::1]),
-        ("nl_P", types.float64[:, ::1]),
-        ("nl_TW", types.float64[:, ::1]),
-        ("nl_cols", types.int64[::1]),
-        ("nl_colbody", types.int64[::1]),
-        ("nl_f0", types.float64[::1]),
-        ("nl_fp", types.float64[::1]),
-        ("nl_fm", types.float64[::1]),
-        ("nl_J", types.float64[:, ::1]),
-        ("nl_qs", types.float64[::1]),
-        ("nl_racc", types.float64[::1]),
-        ("nl_rw", types.int64[:, ::1]),
-        ("nl_ent", types.int64[:, ::1]),
-        ("nl_acc", types.float64[:, ::1]),
-        ("nl_frz", types.int64[::1]),
-        ("nl_grp", types.int64[::1]),
-        ("jp_dof", types.int64[::1]),
-        ("jp_prof", types.float64[:, :, ::1]),
-        ("jt_dof", types.int64[::1]),
-        ("jt_tab", types.float64[:, :, ::1]),
-        ("jg_dof", types.int64[::1]),
-        ("jg_A", types.float64[::1]),
-        ("jg_B", types.float64[::1]),
-        ("rb_q", types.int64[:, ::1]),
-        ("rb_J", types.float64[:, :, ::1]),
-        ("tq_el", types.int64[::1]),
-        ("tq_phi", types.int64[:, ::1]),
-        ("tq_phic", types.float64[:, ::1]),
-        ("tq_vb", types.int64[:, ::1]),
-        ("tq_v0", types.float64[:, ::1]),
-        ("tq_p", types.float64[:, ::1]),
-        ("tq_dref", types.float64[::1]),
-        ("tq_out", types.float64[:, ::1]),
-    ])
-
     @structref.register
     class WorkType(types.StructRef):
         def preprocess_fields(self, fields):
@@ -232,18 +190,6 @@ if JIT:
 
     class WorkRef(structref.StructRefProxy):
         """Python handle of a Work StructRef."""
-
-    structref.define_boxing(WorkType, WorkRef)
-
-    WORK_TYPE = WorkType([
-        ("M", types.float64[:, ::1]),
-        ("Q", types.float64[::1]),
-        ("QE", types.float64[:, ::1]),
-        ("VE", types.float64[:, ::1]),
-        ("MEs", types.float64[:, :, ::1]),
-        ("QEs", types.float64[:, ::1]),
-        ("Md", types.float64[::1]),
-    ])
 
     @structref.register
     class StateArraysType(types.StructRef):
@@ -253,166 +199,18 @@ if JIT:
     class StateArraysRef(structref.StructRefProxy):
         """Python handle of a State's arrays bundle."""
 
+    structref.define_boxing(KernelType, KernelRef)
+    structref.define_boxing(WorkType, WorkRef)
     structref.define_boxing(StateArraysType, StateArraysRef)
-
-    STATE_TYPE = StateArraysType([
-        ("c", types.float64[::1]), ("q_ref", types.float64[::1]), ("q", types.float64[::1]),
-        ("v", types.float64[::1]), ("a", types.float64[::1]), ("qdd", types.float64[::1]),
-        ("u", types.float64[::1]), ("jac", types.float64[:, ::1]), ("piv", types.int64[::1]),
-        ("info", types.float64[::1]),
-    ])
-
-    @njit(cache=True)
-    def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
-        """The State's arrays (same buffers) in one object: the step call then passes 8 arguments
-        instead of 17 (numba's dispatcher types every argument on every call)."""
-        s = structref.new(STATE_TYPE)
-        s.c = c
-        s.q_ref = q_ref
-        s.q = q
-        s.v = v
-        s.a = a
-        s.qdd = qdd
-        s.u = u
-        s.jac = jac
-        s.piv = piv
-        s.info = info
-        return s
-
-    @njit(cache=True)
-    def new_work(M, Q, QE, VE, MEs, QEs, Md):
-        w = structref.new(WORK_TYPE)
-        w.M = M
-        w.Q = Q
-        w.QE = QE
-        w.VE = VE
-        w.MEs = MEs
-        w.QEs = QEs
-        w.Md = Md
-        return w
+    KERNEL_TYPE = KernelType([(name, _numba_type(kind)) for name, kind in KERNEL_FIELDS])
+    WORK_TYPE = WorkType([(name, _numba_type(kind)) for name, kind in WORK_FIELDS])
+    STATE_TYPE = StateArraysType([(name, _numba_type(kind)) for name, kind in STATE_FIELDS])
+    _new_kernel = _constructor("_new_kernel", "KERNEL_TYPE", KERNEL_FIELDS)
+    new_work = _constructor("new_work", "WORK_TYPE", WORK_FIELDS)
+    new_state_arrays = _constructor("new_state_arrays", "STATE_TYPE", STATE_FIELDS)
 else:
-    StateArrays = namedtuple("StateArrays", ["c", "q_ref", "q", "v", "a", "qdd", "u", "jac", "piv", "info"])
-
-    def new_work(M, Q, QE, VE, MEs, QEs, Md):
-        return Work(M, Q, QE, VE, MEs, QEs, Md)
-
-    def new_state_arrays(c, q_ref, q, v, a, qdd, u, jac, piv, info):
-        return StateArrays(c, q_ref, q, v, a, qdd, u, jac, piv, info)
-
-if JIT:
-    @njit(cache=True)
-    def _new_kernel(nd, nq, B_ptr, B_idx, B_val, el_idx, el_map, el_coef, el_rhoA, el_EA, el_nu, el_tonly, el_g, el_C, M0, F0, spr_dof, spr_k, spr_c, drum_dof, drum_rhoA, drum_sign, mot_dof, mot_R, drive_kind, torque_table, brake_T, brake_wreg, brake_tau, free, presc, presc_gain, profile, out_kind, out_i, out_j, out_scale, l_min, buf_dof, buf_z, buf_sign, buf_k, buf_c, mot_gain, trac_s, trac_th, trac_R, trac_efa, trac_zmax, trac_el_in, trac_el_out, el_type, el_EI, crp_s, crp_el_in, crp_el_out, crp_R, crp_J, crp_kind, mot_crp, crp_vreg, crp_tab, nl_on, nl_bq, nl_b0, nl_bk, nl_bax, nl_BR, nl_ANG, nl_AX, nl_pb, nl_po, nl_sp, nl_sg, nl_sa, nl_rk, nl_rf, nl_P, nl_TW, nl_cols, nl_colbody, nl_f0, nl_fp, nl_fm, nl_J, nl_qs, nl_racc, nl_rw, nl_ent, nl_acc, nl_frz, nl_grp, jp_dof, jp_prof, jt_dof, jt_tab, jg_dof, jg_A, jg_B, rb_q, rb_J, tq_el, tq_phi, tq_phic, tq_vb, tq_v0, tq_p, tq_dref, tq_out):
-        k = structref.new(KERNEL_TYPE)
-        k.nd = nd
-        k.nq = nq
-        k.B_ptr = B_ptr
-        k.B_idx = B_idx
-        k.B_val = B_val
-        k.el_idx = el_idx
-        k.el_map = el_map
-        k.el_coef = el_coef
-        k.el_rhoA = el_rhoA
-        k.el_EA = el_EA
-        k.el_nu = el_nu
-        k.el_tonly = el_tonly
-        k.el_g = el_g
-        k.el_C = el_C
-        k.M0 = M0
-        k.F0 = F0
-        k.spr_dof = spr_dof
-        k.spr_k = spr_k
-        k.spr_c = spr_c
-        k.drum_dof = drum_dof
-        k.drum_rhoA = drum_rhoA
-        k.drum_sign = drum_sign
-        k.mot_dof = mot_dof
-        k.mot_R = mot_R
-        k.drive_kind = drive_kind
-        k.torque_table = torque_table
-        k.brake_T = brake_T
-        k.brake_wreg = brake_wreg
-        k.brake_tau = brake_tau
-        k.free = free
-        k.presc = presc
-        k.presc_gain = presc_gain
-        k.profile = profile
-        k.out_kind = out_kind
-        k.out_i = out_i
-        k.out_j = out_j
-        k.out_scale = out_scale
-        k.l_min = l_min
-        k.buf_dof = buf_dof
-        k.buf_z = buf_z
-        k.buf_sign = buf_sign
-        k.buf_k = buf_k
-        k.buf_c = buf_c
-        k.mot_gain = mot_gain
-        k.trac_s = trac_s
-        k.trac_th = trac_th
-        k.trac_R = trac_R
-        k.trac_efa = trac_efa
-        k.trac_zmax = trac_zmax
-        k.trac_el_in = trac_el_in
-        k.trac_el_out = trac_el_out
-        k.el_type = el_type
-        k.el_EI = el_EI
-        k.crp_s = crp_s
-        k.crp_el_in = crp_el_in
-        k.crp_el_out = crp_el_out
-        k.crp_R = crp_R
-        k.crp_J = crp_J
-        k.crp_kind = crp_kind
-        k.mot_crp = mot_crp
-        k.crp_vreg = crp_vreg
-        k.crp_tab = crp_tab
-        k.nl_on = nl_on
-        k.nl_bq = nl_bq
-        k.nl_b0 = nl_b0
-        k.nl_bk = nl_bk
-        k.nl_bax = nl_bax
-        k.nl_BR = nl_BR
-        k.nl_ANG = nl_ANG
-        k.nl_AX = nl_AX
-        k.nl_pb = nl_pb
-        k.nl_po = nl_po
-        k.nl_sp = nl_sp
-        k.nl_sg = nl_sg
-        k.nl_sa = nl_sa
-        k.nl_rk = nl_rk
-        k.nl_rf = nl_rf
-        k.nl_P = nl_P
-        k.nl_TW = nl_TW
-        k.nl_cols = nl_cols
-        k.nl_colbody = nl_colbody
-        k.nl_f0 = nl_f0
-        k.nl_fp = nl_fp
-        k.nl_fm = nl_fm
-        k.nl_J = nl_J
-        k.nl_qs = nl_qs
-        k.nl_racc = nl_racc
-        k.nl_rw = nl_rw
-        k.nl_ent = nl_ent
-        k.nl_acc = nl_acc
-        k.nl_frz = nl_frz
-        k.nl_grp = nl_grp
-        k.jp_dof = jp_dof
-        k.jp_prof = jp_prof
-        k.jt_dof = jt_dof
-        k.jt_tab = jt_tab
-        k.jg_dof = jg_dof
-        k.jg_A = jg_A
-        k.jg_B = jg_B
-        k.rb_q = rb_q
-        k.rb_J = rb_J
-        k.tq_el = tq_el
-        k.tq_phi = tq_phi
-        k.tq_phic = tq_phic
-        k.tq_vb = tq_vb
-        k.tq_v0 = tq_v0
-        k.tq_p = tq_p
-        k.tq_dref = tq_dref
-        k.tq_out = tq_out
-        return k
+    new_work = Work
+    new_state_arrays = StateArrays
 
 
 _KERNEL_TYPES = {}
@@ -439,13 +237,15 @@ def compiled_kernel(K: Kernel, features: int | None = None):
     return KernelRef._numba_box_(_kernel_type(f), ref._meminfo)
 
 
+_KINDS = dict(KERNEL_FIELDS)
+
+
 def _compiled_kernel_all(K: Kernel):
     args = []
     for name, value in zip(K._fields, K):
         if isinstance(value, np.ndarray):
             value = np.ascontiguousarray(value)
-        elif name in ("nd", "nq", "mot_dof", "drive_kind", "trac_s", "trac_th", "trac_el_in", "trac_el_out",
-                      "el_type", "mot_crp", "nl_on"):
+        elif _KINDS[name] == "int":
             value = int(value)
         else:
             value = float(value)

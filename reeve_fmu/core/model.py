@@ -33,7 +33,7 @@ import numpy as np
 
 from .geometry import GeometryError
 from .scene import Scene, SceneError
-from .kernel import Kernel, compiled_kernel, new_state_arrays
+from .kernel import IN_BRAKE_E, INFO_CREEP, STATE_FIELDS, Kernel, U_BRAKE_CMD, compiled_kernel, new_state_arrays
 from .builder.assemble import kernel_arrays, motor_creep_index
 from .builder.bodies import add_body_coordinates, add_body_inertia
 from .builder.coordinates import node_arrays
@@ -43,15 +43,19 @@ from .builder.spans import add_rope
 from .builder.state import start
 from .builder.torsion import add_torsion
 
-INFO_SIZE = 10  # State.info: [h of jac, steps, iterations, jac builds, status, brake engagement, brake z,
-#                element of a vanishing span, traction friction deflection z, cumulative slip], then one sheave angle
-#                per creep sheave (sheave_contact = "creep": the angle is integrated, not a function of s);
-#                with creep drums then their wound-rope records (_info_with_wound_records)
+INFO_SIZE = INFO_CREEP  # State.info: the fixed slots (kernel.IN_*), then one sheave angle per creep sheave
+#                        (sheave_contact = "creep": the angle is integrated, not a function of s); with creep
+#                        drums then their wound-rope records (_info_with_wound_records)
+
+
+_STATE_ARRAYS = ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info", "el_coef", "nl_ang", "tq_dref",
+                 "jp_prof", "jt_tab")
 
 
 @dataclass
 class State:
-    """Everything that evolves: saving/restoring FMU state is copying this (arrays are copied)."""
+    """Everything that evolves: saving/restoring FMU state is copying this (arrays are copied). The
+    Model is not written by a step: two States of one Model evolve independently."""
     t: float
     q: np.ndarray        # generalized coordinates
     v: np.ndarray        # velocities
@@ -59,37 +63,41 @@ class State:
     qdd: np.ndarray      # accelerations
     c: np.ndarray        # constant part of p = B q + c (holds the rope lengths)
     q_ref: np.ndarray    # q at t0 (angle zero, prescribed-motion offsets)
-    u: np.ndarray        # inputs held over the step: [motor torque, brake command (1 = release)]
+    u: np.ndarray        # inputs held over the step: kernel.U_* (motor torque, brake command)
     jac: np.ndarray      # LU factors of the Newton matrix (reused across steps)
     piv: np.ndarray      # LU pivots
-    info: np.ndarray     # see INFO_SIZE: solver counters, status and the brake engagement
+    info: np.ndarray     # kernel.IN_*: solver counters, status, brake and friction states, creep angles
+    el_coef: np.ndarray  # element maps B of p = B q + c (nonlinear rows: B(q) of the last update)
+    nl_ang: np.ndarray   # contact angles of the exact tangents (the warm start of the next evaluation)
+    tq_dref: np.ndarray  # torsion spans' transport-angle branch
+    jp_prof: np.ndarray  # prescribed joints' profiles (a plant's speed inputs write them)
+    jt_tab: np.ndarray   # joint torque tables (a plant's torque inputs write them)
 
     def arrays(self):
         """The arrays bundled for the compiled step (kernel.new_state_arrays), built once per State:
         the bundle references these same buffers, so in-place updates are shared."""
         ref = self.__dict__.get("_arrays")
         if ref is None:
-            ref = new_state_arrays(self.c, self.q_ref, self.q, self.v, self.a, self.qdd, self.u,
-                                   self.jac, self.piv, self.info)
+            ref = new_state_arrays(*(getattr(self, f) for f, _ in STATE_FIELDS))
             self.__dict__["_arrays"] = ref
         return ref
 
     def copy(self) -> "State":
-        return State(self.t, *(getattr(self, f).copy() for f in
-                               ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info")))
+        return State(self.t, *(getattr(self, f).copy() for f in _STATE_ARRAYS))
 
     def to_dict(self) -> dict:
         """Builtin-typed snapshot (JSON-safe, bit-exact floats)."""
         d = {"t": float(self.t)}
-        for f in ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv", "info"):
+        for f in _STATE_ARRAYS:
             d[f] = getattr(self, f).tolist()
+        d["shapes"] = {f: list(getattr(self, f).shape) for f in _STATE_ARRAYS}
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "State":
-        return cls(float(d["t"]), *(np.array(d[f], dtype=np.int64 if f == "piv" else float)
-                                    for f in ("q", "v", "a", "qdd", "c", "q_ref", "u", "jac", "piv",
-                                              "info")))
+        shapes = d["shapes"]
+        return cls(float(d["t"]), *(np.array(d[f], dtype=np.int64 if f == "piv" else float).reshape(shapes[f])
+                                    for f in _STATE_ARRAYS))
 
 
 @dataclass(frozen=True)
@@ -193,8 +201,11 @@ def new_state(model: Model, q=None, par=None, t=0.0) -> State:
     nf = len(model.K.free)
     info = _info_with_wound_records(model, q, c)
     brake = model.scene.brake
-    info[5] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
+    info[IN_BRAKE_E] = 1.0 if (model.K.brake_T > 0 and brake.initially_applied) else 0.0
     u = np.zeros(2)
-    u[1] = 0.0 if info[5] > 0 else 1.0
+    u[U_BRAKE_CMD] = 0.0 if info[IN_BRAKE_E] > 0 else 1.0
+    K = model.K
     return State(t=float(t), q=q, v=np.zeros(nq), a=np.zeros(nq), qdd=np.zeros(nq), c=c,
-                 q_ref=q.copy(), u=u, jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=info)
+                 q_ref=q.copy(), u=u, jac=np.zeros((nf, nf)), piv=np.zeros(nf, np.int64), info=info,
+                 el_coef=K.el_coef.copy(), nl_ang=K.nl_ang0.copy(), tq_dref=K.tq_dref.copy(),
+                 jp_prof=K.jp_prof.copy(), jt_tab=K.jt_tab.copy())

@@ -15,6 +15,34 @@ RB_H = 1e-6   # rad: central-difference step of the rotational mass matrix M(phi
 
 
 @njit(cache=True, inline="always")
+def _rot_maps(p0, p1, p2, a, b, s1, T, R):
+    """T = I + a P + b P^2 (the map phi_dot -> world angular velocity) and R = I + s1 P + a P^2 (the
+    orientation, Rodrigues) of the rotation vector phi, P = phi^, P^2 = phi phi^T - th2 I; a, b, s1
+    are (1 - cos)/th^2, (th - sin)/th^3, sin/th."""
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
+    ph = (p0, p1, p2)
+    for i in range(3):
+        for k in range(3):
+            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
+            e = 1.0 if i == k else 0.0
+            T[i, k] = e + a * P[i][k] + b * p2ik
+            R[i, k] = e + s1 * P[i][k] + a * p2ik
+
+
+@njit(cache=True, inline="always")
+def _congruence(X, J, out):
+    """out = X^T J X (3 x 3), summed in a fixed order."""
+    for i in range(3):
+        for k in range(3):
+            acc = 0.0
+            for r in range(3):
+                for c in range(3):
+                    acc += X[r, i] * J[r, c] * X[c, k]
+            out[i, k] = acc
+
+
+@njit(cache=True, inline="always")
 def _rot_mass(p0, p1, p2, J, out):
     """out = T^T R J R^T T: the mass matrix of the rotation vector phi, with R = exp(phi^) (the
     orientation from the scene's) and T(phi) the map phi_dot -> world angular velocity. Written out
@@ -29,29 +57,15 @@ def _rot_mass(p0, p1, p2, J, out):
         a = (1.0 - math.cos(th)) / th2
         b = (th - math.sin(th)) / (th2 * th)
         s1 = math.sin(th) / th
-    # P = phi^, P2 = P P = phi phi^T - th2 I
-    P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
-    ph = (p0, p1, p2)
     T = np.empty((3, 3))
     R = np.empty((3, 3))
-    for i in range(3):
-        for k in range(3):
-            p2ik = ph[i] * ph[k] - (th2 if i == k else 0.0)
-            e = 1.0 if i == k else 0.0
-            T[i, k] = e + a * P[i][k] + b * p2ik
-            R[i, k] = e + s1 * P[i][k] + a * p2ik          # Rodrigues
+    _rot_maps(p0, p1, p2, a, b, s1, T, R)
     # W = R^T T (body angular velocity map); out = W^T J W
     W = np.empty((3, 3))
     for i in range(3):
         for k in range(3):
             W[i, k] = R[0, i] * T[0, k] + R[1, i] * T[1, k] + R[2, i] * T[2, k]
-    for i in range(3):
-        for k in range(3):
-            acc = 0.0
-            for r in range(3):
-                for c in range(3):
-                    acc += W[r, i] * J[r, c] * W[c, k]
-            out[i, k] = acc
+    _congruence(W, J, out)
 
 
 @njit(cache=True)
@@ -110,23 +124,9 @@ def rigid_terms(K, q, v, M, Q):
         i0, i1, i2 = K.rb_q[k, 0], K.rb_q[k, 1], K.rb_q[k, 2]
         p0, p1, p2 = q[i0], q[i1], q[i2]
         a, b, s1, ca, cb = rot_coefs(p0, p1, p2)
-        ph = (p0, p1, p2)
-        P = ((0.0, -p2, p1), (p2, 0.0, -p0), (-p1, p0, 0.0))
-        th2 = p0 * p0 + p1 * p1 + p2 * p2
-        for i in range(3):
-            for m in range(3):
-                p2im = ph[i] * ph[m] - (th2 if i == m else 0.0)
-                e = 1.0 if i == m else 0.0
-                T[i, m] = e + a * P[i][m] + b * p2im
-                R[i, m] = e + s1 * P[i][m] + a * p2im
+        _rot_maps(p0, p1, p2, a, b, s1, T, R)
         J = K.rb_J[k]
-        for i in range(3):
-            for m in range(3):
-                acc = 0.0
-                for r in range(3):
-                    for c in range(3):
-                        acc += R[i, r] * J[r, c] * R[m, c]
-                Jw[i, m] = acc
+        _congruence(R.T, J, Jw)       # J_w = R J R^T
         d0, d1, d2 = v[i0], v[i1], v[i2]
         w0 = T[0, 0] * d0 + T[0, 1] * d1 + T[0, 2] * d2
         w1 = T[1, 0] * d0 + T[1, 1] * d1 + T[1, 2] * d2

@@ -449,7 +449,7 @@ def residual_tracked(K, SP, W, c, q, v, qdd, t, u, R, Eb, track):
     QEs = W.QEs
     Md = W.Md
     el_map = K.el_map
-    el_coef = K.el_coef
+    el_coef = W.el_coef
     nw = el_map.shape[2]
     F0 = K.F0
     for i in range(nq):
@@ -463,7 +463,7 @@ def residual_tracked(K, SP, W, c, q, v, qdd, t, u, R, Eb, track):
             for p in range(Eb.shape[1]):
                 Eb[ie, p] = 0.0
     for ie in range(el_map.shape[0]):
-        st, ok = element_eval(K, c, q, v, ie, W.QE, W.VE, MEs, QEs)
+        st, ok = element_eval(K, el_coef, c, q, v, ie, W.QE, W.VE, MEs, QEs)
         if st < 0:
             status = st
         if not ok:

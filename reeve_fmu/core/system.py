@@ -15,10 +15,12 @@ from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element_1d_at, linear_element_at, reported_tension
 from .bodies import nl_convect, nl_update, wrap_weight
-from .contact import (UE_CREEP, UE_STRIDE, brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at,
-                      creep_wound, sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
+from .contact import (brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at, creep_wound,
+                      sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
 from .elements.torsion import torsion_energy, torsion_terms
-from .kernel import CREEP, CT_JR2, CT_KIND, CT_S, CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, new_work
+from .kernel import (CREEP, CR_KAPPA_END, CR_KAPPA_MID, CR_RATE_END, CR_SIGMA, CR_WOUND, CT_JR2, CT_KIND, CT_S,
+                     CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, UE_BRAKE_E, UE_CREEP, UE_STRIDE, UE_TORQUE,
+                     new_work)
 from .profiles import profile_eval
 from .rigid import rigid_terms
 
@@ -42,21 +44,23 @@ def _interp(table, t):
 
 
 @njit(cache=True)
-def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
+def creep_inputs(K, W, c, q, v, info, ue, h, fresh):
     """Kernel inputs of the creep sheaves at the start of a step of size h:
     ue[UE_CREEP + UE_STRIDE k ...] = (kappa, angle, sigma, kappa rate, kappa over the step predicted
     to its middle, for a speed-driven sigma, the kappa a drum pays out at (wound_kappa)); the
-    residuals then keep (kappa, rate) in the last two (creep_forces). QE, VE: element work arrays;
-    with fresh = True they hold (q, v) already (the last residual of the step that ended here: its
-    kappa closed that step's angle), else they are gathered."""
+    residuals then keep (kappa, rate) in the last two (creep_forces). W: a workspace (kernel.Work);
+    with fresh = True its element arrays hold (q, v) already (the last residual of the step that ended
+    here: its kappa closed that step's angle), else they are gathered."""
     n = K.crp_s.shape[0]
     kr = np.empty((2, n))
+    QE = W.QE
+    VE = W.VE
     for k in range(n):
         if not fresh:
             if K.crp_el_in[k] >= 0:
-                gather(K, c, q, v, K.crp_el_in[k], QE, VE)
+                gather(K, W.el_coef, c, q, v, K.crp_el_in[k], QE, VE)
             if K.crp_el_out[k] >= 0:
-                gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+                gather(K, W.el_coef, c, q, v, K.crp_el_out[k], QE, VE)
         kr[0, k], kr[1, k], _ = creep_terms_at(K, QE, VE, v, k, wound_kappa(K, info, q, k, 0.0))
     creep_input_set(K, q, info, ue, h, kr)
 
@@ -69,15 +73,16 @@ def creep_inputs(K, c, q, v, info, ue, h, QE, VE, fresh):
 # stays smooth and the FMU state is the State's arrays as before.
 
 @njit(cache=True)
-def creep_power(K, c, q, v):
-    """Creep dissipation [W] of all sheaves at (q, v) (>= 0; a drum's exit arc is not included)."""
+def creep_power(K, S, c, q, v):
+    """Creep dissipation [W] of all sheaves at (q, v) (>= 0; a drum's exit arc is not included);
+    S: the State's arrays (kernel.STATE_FIELDS: its element maps)."""
     n_el, ne = K.el_idx.shape[0], K.el_idx.shape[1]
     QE, VE = np.empty((n_el, ne)), np.empty((n_el, ne))
     P = 0.0
     for k in range(K.crp_s.shape[0]):
         if K.crp_el_in[k] >= 0 and K.crp_el_out[k] >= 0:
-            gather(K, c, q, v, K.crp_el_in[k], QE, VE)
-            gather(K, c, q, v, K.crp_el_out[k], QE, VE)
+            gather(K, S.el_coef, c, q, v, K.crp_el_in[k], QE, VE)
+            gather(K, S.el_coef, c, q, v, K.crp_el_out[k], QE, VE)
             P -= creep_terms_at(K, QE, VE, v, k, 0.0)[2] * v[K.crp_s[k]]
     return P
 
@@ -87,15 +92,15 @@ def drive_torque(K, t, u):
     if K.drive_kind == 2:
         return _interp(K.torque_table, t)
     if K.drive_kind == 3:
-        return u[0]
+        return u[UE_TORQUE]
     return 0.0
 
 
 @njit(cache=True, inline="always")
-def gather(K, c, q, v, ie, QE, VE):
-    """Element coordinates QE[ie] and velocities VE[ie] from q, v (p = B q + c)."""
+def gather(K, el_coef, c, q, v, ie, QE, VE):
+    """Element coordinates QE[ie] and velocities VE[ie] from q, v (p = B q + c; B: the element maps
+    el_coef of a State, kernel.STATE_FIELDS)."""
     el_map = K.el_map
-    el_coef = K.el_coef
     el_idx = K.el_idx
     W = el_map.shape[2]
     for a in range(el_idx.shape[1]):
@@ -120,34 +125,45 @@ _torsion_terms = gated(TORSION, torsion_terms)
 
 
 @njit(cache=True)
-def workspace(K, dense=True):
-    """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work). dense=False: no q-space
-    matrix (the sparse residual, core/sparse.py, never forms it)."""
+def _work(K, S, M, Q):
+    """kernel.Work with M and Q, fresh element arrays and nonlinear-row scratch, and the State's arrays
+    an assembly updates (S: kernel.STATE_FIELDS; the same buffers)."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
-    return new_work(np.empty((K.nq, K.nq if dense else 0)), np.empty(K.nq), np.empty((n_el, ne)),
-                    np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)), np.empty(K.nq))
+    nr = K.nl_rk.shape[0]
+    return new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
+                    np.empty(K.nq), S.el_coef, S.nl_ang, S.tq_dref, S.jp_prof, S.jt_tab, np.zeros(nr), np.zeros(nr),
+                    np.zeros(nr), np.zeros(K.nq), np.zeros((nr, K.nl_cols.shape[0])), np.zeros(nr),
+                    np.zeros(K.nl_ent.shape), np.zeros((K.nl_pb.shape[0], 3)), np.zeros((K.nl_sp.shape[0], 6)),
+                    np.zeros((K.nl_bq.shape[0], 5)), np.zeros((2, 3)), np.zeros(1, np.int64),
+                    np.zeros((K.tq_el.shape[0], 2)))
 
 
 @njit(cache=True)
-def assemble(K, c, q, v, t, u, M, Q):
-    """M (nq x nq) and Q (nq) at (q, v, t); see assemble_ws."""
-    n_el = K.el_idx.shape[0]
-    ne = K.el_idx.shape[1]
-    W = new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)),
-                 np.empty((n_el, ne)), np.empty(K.nq))
-    return assemble_ws(K, W, c, q, v, t, u)
+def workspace(K, S, dense=True):
+    """Preallocated work arrays for assemble_ws / outputs_ws (kernel.Work) with the State S's arrays
+    (kernel.STATE_FIELDS). dense=False: no q-space matrix (the sparse residual, core/sparse.py, never
+    forms it)."""
+    return _work(K, S, np.empty((K.nq, K.nq if dense else 0)), np.empty(K.nq))
 
 
 @njit(cache=True)
-def element_eval(K, c, q, v, ie, QE, VE, MEs, QEs):
-    """Gather element ie and evaluate its kernel into MEs[ie], QEs[ie] (the element step of
-    assemble_ws, which writes it out for speed). Returns (status, evaluated):
+def assemble(K, S, c, q, v, t, u, M, Q):
+    """M (nq x nq) and Q (nq) at (q, v, t) with the State S's arrays (kernel.STATE_FIELDS: element
+    maps, contact angles, joint inputs); see assemble_ws."""
+    return assemble_ws(K, _work(K, S, M, Q), c, q, v, t, u)
+
+
+@njit(cache=True)
+def element_eval(K, el_coef, c, q, v, ie, QE, VE, MEs, QEs):
+    """Gather element ie (element maps el_coef: a State's, kernel.STATE_FIELDS) into QE, VE and evaluate
+    its kernel into MEs[ie], QEs[ie] (the element step of assemble_ws, which writes it out for speed).
+    Returns (status, evaluated):
     status -1 - ie when the span is shorter than l_min (checked before any 1/l; the element is then
     evaluated only while its material length is positive), else 0."""
     nd = K.nd
     ne = K.el_idx.shape[1]
-    gather(K, c, q, v, ie, QE, VE)
+    gather(K, el_coef, c, q, v, ie, QE, VE)
     status = 0
     if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
         status = -1 - ie
@@ -172,7 +188,7 @@ def creep_forces(K, W, v, u, gain):
     sheave's (kappa, rate) there (u[UE_CREEP + UE_STRIDE k + 6, 7]): the last residual of a converged
     step is at its end, so the step's close reads them instead of computing them again.
     A function of its own, not inlined, so that its code stays out of the residual of models without
-    creep sheaves (inlined, the rigid rim's 1D trip ran ~9 % slower). It reads the creep table and the
+    creep sheaves (inlined, it slows the rigid rim's 1D trip). It reads the creep table and the
     element arrays, computes on scalars (groove_strains) and is called per residual."""
     Q = W.Q
     Md = W.Md
@@ -187,11 +203,11 @@ def creep_forces(K, W, v, u, gain):
     for k in range(T.shape[0]):
         j = int(T[k, CT_S])
         i = UE_CREEP + UE_STRIDE * k
-        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + 5] if full else 0.0, vreg, nd, cubic)
+        kap, rate, fc = sheave_terms(K, T, QE, VE, v, k, u[i + CR_WOUND] if full else 0.0, vreg, nd, cubic)
         Q[j] += fc
         if full:
-            u[i + 6] = kap
-            u[i + 7] = rate
+            u[i + CR_KAPPA_END] = kap
+            u[i + CR_RATE_END] = rate
             if T[k, CT_KIND] == 0.0:
                 dm, f = _rim_terms(T[k, CT_JR2], kap, rate, v[j])
                 Md[j] += dm
@@ -236,7 +252,7 @@ def q_terms(K, W, q, v, t, u):
         gain = _creep_forces(K, K, W, v, u, gain)
     if K.nl_on & 2:   # joints: torque (force) tables, gravity moments of revolute bodies
         for k in range(K.jt_dof.shape[0]):
-            Q[K.jt_dof[k]] += _interp(K.jt_tab[k], t)
+            Q[K.jt_dof[k]] += _interp(W.jt_tab[k], t)
         for k in range(K.jg_dof.shape[0]):
             x = q[K.jg_dof[k]]
             Q[K.jg_dof[k]] += K.jg_A[k] * math.cos(x) + K.jg_B[k] * math.sin(x)
@@ -269,7 +285,7 @@ def assemble_ws(K, W, c, q, v, t, u):
     F0 = K.F0
     M0 = K.M0
     el_map = K.el_map
-    el_coef = K.el_coef
+    el_coef = W.el_coef
     rhoA = K.el_rhoA
     EA = K.el_EA
     nu = K.el_nu
@@ -284,12 +300,12 @@ def assemble_ws(K, W, c, q, v, t, u):
     status = 0
     flags = K.nl_on     # bit 1: nonlinear rows, bit 2: joints or spatial rigid bodies (one read)
     nl = (flags & 1) != 0
-    if nl and K.nl_frz[0] == 0:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the
-        _nl_update(K, K, c, q, v)   # nonlinear rows (nl_frz: kept from the last update, solver)
+    if nl and W.frz[0] == 0:   # rotating bodies / exact tangents: B(q), c and dB/dt qdot of the
+        _nl_update(K, K, W, c, q, v)   # nonlinear rows (frz: kept from the last update, solver)
     for ie in range(el_map.shape[0]):
         # element_eval written out with the kernel fields hoisted: StructRef attribute reads inside
-        # this loop cost ~30 % of the 1D step
-        gather(K, c, q, v, ie, QE, VE)
+        # this loop are a large part of the 1D step
+        gather(K, el_coef, c, q, v, ie, QE, VE)
         if QE[ie, ne - 1] - QE[ie, 2 * nd] < K.l_min:
             status = -1 - ie   # vanishing span: the event names the element (checked before any 1/l)
             if not QE[ie, ne - 1] - QE[ie, 2 * nd] > 0.0:
@@ -315,12 +331,12 @@ def assemble_ws(K, W, c, q, v, t, u):
                     for wb in range(nw):
                         M[ia, el_map[ie, b, wb]] += el_coef[ie, b, wb] * mab
     if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
-        _nl_convect(K, K, MEs, QEs, Q, q)
+        _nl_convect(K, K, W, MEs, QEs, Q, q)
     q_terms(K, W, q, v, t, u)
     if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
         _rigid_terms(K, K, q, v, M, Q)
     if flags & 4:   # axial-torsion coupling of torsion ropes (after nl_update: the frames' rotations)
-        _torsion_terms(K, K, QE, q, Q)
+        _torsion_terms(K, K, W, QE, q, Q)
     Md = W.Md
     for j in range(nq):
         M[j, j] += Md[j]
@@ -328,31 +344,31 @@ def assemble_ws(K, W, c, q, v, t, u):
 
 
 @njit(cache=True)
-def _nl_convect_all(K, MEs, QEs, Q, q):
+def _nl_convect_all(K, W, MEs, QEs, Q, q):
     """Convective terms of the nonlinear rows (bodies.nl_convect) for every element: QEs[ie] gets
     them as before, and Q the change, scattered like the element forces; then the W1 wraps' rope
     weight (bodies.wrap_weight). Called here, not from assemble_ws, so that the residual of models
-    without nonlinear rows compiles as before (the call in assemble_ws cost the 1D trip ~10 %)."""
+    without nonlinear rows compiles as before (the call in assemble_ws slows the 1D trip)."""
     el_map = K.el_map
-    el_coef = K.el_coef
+    el_coef = W.el_coef
     ne = QEs.shape[1]
     nw = el_map.shape[2]
     old = np.empty(ne)
     for ie in range(el_map.shape[0]):
         for a in range(ne):
             old[a] = QEs[ie, a]
-        nl_convect(K, MEs, QEs, ie)
+        nl_convect(W, MEs, QEs, ie)
         for a in range(ne):
             d = QEs[ie, a] - old[a]
             for wa in range(nw):
                 ba = el_coef[ie, a, wa]
                 if ba != 0.0:
                     Q[el_map[ie, a, wa]] += ba * d
-    wrap_weight(K, Q, q, False)
+    wrap_weight(K, W, Q, q, False)
 
 
 _nl_convect = gated(NL_ROWS, _nl_convect_all)
-_wrap_weight = gated(NL_ROWS, wrap_weight, lambda K, Q, q, total: 0.0)
+_wrap_weight = gated(NL_ROWS, wrap_weight, lambda K, W, Q, q, total: 0.0)
 
 
 @njit(cache=True)
@@ -381,13 +397,13 @@ _creep_angle = gated(CREEP, creep_angle, lambda K, q, u, k, kap: 0.0)
 
 
 @njit(cache=True)
-def outputs(K, c, q, v, qdd, q_ref, t, u, y):
-    """Fill y with the outputs listed in K.out_* (see model.py)."""
+def outputs(K, S, c, q, v, qdd, q_ref, t, u, y):
+    """Fill y with the outputs listed in K.out_* (see model.py); S: the State's arrays."""
     n_el = K.el_idx.shape[0]
     ne = K.el_idx.shape[1]
     # fresh = True as a runtime bool, not a literal: numba compiles outputs_ws once for this and the
     # stepping loop's call (a literal argument is a signature of its own)
-    outputs_ws(K, workspace(K), c, q, v, qdd, q_ref, t, u, y, n_el >= 0, np.empty(K.crp_s.shape[0]))
+    outputs_ws(K, workspace(K, S), c, q, v, qdd, q_ref, t, u, y, n_el >= 0, np.empty(K.crp_s.shape[0]))
 
 
 @njit(cache=True)
@@ -402,12 +418,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
     ae = np.empty(ne)
     if fresh:
         assemble_ws(K, W, c, q, v, t, u)
-    M = W.M
-    Q = W.Q
-    QE = W.QE
-    VE = W.VE
-    MEs = W.MEs
-    QEs = W.QEs
+    M, Q, QE, VE, MEs, QEs = W.M, W.Q, W.QE, W.VE, W.MEs, W.QEs
     n = K.out_kind.shape[0]
     if fresh:
         for k in range(K.crp_s.shape[0]):
@@ -431,7 +442,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             for a in range(ne):   # element accelerations B qdd
                 x = 0.0
                 for w in range(K.el_map.shape[2]):
-                    x += K.el_coef[i, a, w] * qdd[K.el_map[i, a, w]]
+                    x += W.el_coef[i, a, w] * qdd[K.el_map[i, a, w]]
                 ae[a] = x
             T = end_tension(nd, K.el_rhoA[i], QE, VE, ae, MEs, QEs, i, K.out_j[k])
             # a slack span carries nothing: its weight/inertia share would otherwise show as a
@@ -459,7 +470,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             else:
                 y[k] = drive_torque(K, t, u)
         elif kind == 7:
-            y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[1]
+            y[k] = brake_torque(K, q, v, u) if K.out_j[k] == 0 else u[UE_BRAKE_E]
         elif kind == 8:
             y[k] = buffer_force(K, q, v, K.out_i[k])
         elif kind == 9:   # slip speed (scale R > 0) or cumulative slip (scale -R)
@@ -485,10 +496,10 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
                 r += M[j, m] * qdd[m]
             for m in range(K.jt_dof.shape[0]):
                 if K.jt_dof[m] == j:
-                    r += _interp(K.jt_tab[m], t)
+                    r += _interp(W.jt_tab[m], t)
             y[k] = r
         elif kind == 14:   # torsion span: rope torque [N m] (j = 0) or twist [rad/m] (j = 1)
-            y[k] = K.tq_out[K.out_i[k], K.out_j[k]]
+            y[k] = W.tq_out[K.out_i[k], K.out_j[k]]
 
 
 @njit(cache=True)
@@ -498,24 +509,26 @@ def cubic_strain_energy(nd, EA, EI, tonly, qe, ve, qs):
 
 _cubic_gravity = gated(CUBIC, cubic_gravity, lambda nd, rhoA, g, qe, qs: 0.0)
 _cubic_strain_energy = gated(CUBIC, cubic_strain_energy, lambda nd, EA, EI, tonly, qe, ve, qs: 0.0)
-_torsion_energy = gated(TORSION, torsion_energy, lambda K, QE, q: 0.0)
+_torsion_energy = gated(TORSION, torsion_energy, lambda K, W, QE, q: 0.0)
 
 
 @njit(cache=True)
-def energy(K, c, q, v):
-    """(kinetic, gravity potential, strain energy) of the whole system (rigid-rim kinetic energy)."""
-    return energy_u(K, c, q, v, np.zeros(UE_CREEP))   # no creep part: rigid-rim inertia
+def energy(K, S, c, q, v):
+    """(kinetic, gravity potential, strain energy) of the whole system (rigid-rim kinetic energy); S:
+    the State's arrays."""
+    return energy_u(K, S, c, q, v, np.zeros(UE_CREEP))   # no creep part: rigid-rim inertia
 
 
 @njit(cache=True)
-def energy_u(K, c, q, v, u):
+def energy_u(K, S, c, q, v, u):
     """energy() with the kernel inputs u (a creep sheave's rim kinetic energy uses its kappa)."""
     nq = K.nq
     nd = K.nd
     ne = K.el_idx.shape[1]
     M = np.empty((nq, nq))
     Q = np.empty(nq)
-    assemble(K, c, q, v, 0.0, u, M, Q)
+    W = _work(K, S, M, Q)
+    assemble_ws(K, W, c, q, v, 0.0, u)
     T = 0.0
     for i in range(nq):
         for j in range(nq):
@@ -534,7 +547,7 @@ def energy_u(K, c, q, v, u):
     QEs = np.empty((n_el, ne))
     zero = np.zeros(nq)
     for ie in range(n_el):
-        gather(K, c, q, zero, ie, QE, VE)
+        gather(K, W.el_coef, c, q, zero, ie, QE, VE)
         if K.el_type == 1:
             Vg += _cubic_gravity(K, nd, K.el_rhoA[ie], K.el_g[ie], QE[ie], QEs[ie])
             U += _cubic_strain_energy(K, nd, K.el_EA[ie], K.el_EI[ie], K.el_tonly[ie] != 0, QE[ie], VE[ie],
@@ -549,31 +562,31 @@ def energy_u(K, c, q, v, u):
         j = K.spr_dof[k]
         U += 0.5 * K.spr_k[k] * q[j] * q[j]
     if K.nl_on & 1:
-        Vg += _wrap_weight(K, K, Q, q, True)
+        Vg += _wrap_weight(K, K, W, Q, q, True)
     if K.nl_on & 4:
-        U += _torsion_energy(K, K, QE, q)
+        U += _torsion_energy(K, K, W, QE, q)
     return T, Vg, U
 
 
 @njit(cache=True)
-def set_joints(K, t, q, v, qdd):
-    """Joint coordinates prescribed by their S-curve profiles (the coordinate is 0 in the scene's
-    pose, as the profile at its start): q = x(t)."""
+def set_joints(K, jp_prof, t, q, v, qdd):
+    """Joint coordinates prescribed by their S-curve profiles jp_prof (a State's, kernel.STATE_FIELDS;
+    the coordinate is 0 in the scene's pose, as the profile at its start): q = x(t)."""
     if (K.nl_on & 2) == 0:
         return
     for k in range(K.jp_dof.shape[0]):
         j = K.jp_dof[k]
-        x, xd, xdd = profile_eval(K.jp_prof[k], t)
+        x, xd, xdd = profile_eval(jp_prof[k], t)
         q[j] = x
         v[j] = xd
         qdd[j] = xdd
 
 
 @njit(cache=True)
-def set_prescribed(K, q_ref, t, q, v, qdd):
+def set_prescribed(K, jp_prof, q_ref, t, q, v, qdd):
     """Prescribed coordinates from the drive profile: q = q_ref + gain (x(t) - x(t0 of profile)),
     and the prescribed joints."""
-    set_joints(K, t, q, v, qdd)
+    set_joints(K, jp_prof, t, q, v, qdd)
     if K.presc.shape[0] == 0:
         return
     x, xd, xdd = profile_eval(K.profile, t)
@@ -587,18 +600,18 @@ def set_prescribed(K, q_ref, t, q, v, qdd):
 
 
 @njit(cache=True)
-def set_prescribed_creep(K, u, t0, t1, q, v, qdd):
+def set_prescribed_creep(K, jp_prof, u, t0, t1, q, v, qdd):
     """set_prescribed for a speed-driven creep sheave over the step t0 -> t1 (q holds the step start):
     the profile prescribes the rim, so sigma follows it at the arriving strain,
     d sigma = gain dx / kappa."""
-    set_joints(K, t1, q, v, qdd)
+    set_joints(K, jp_prof, t1, q, v, qdd)
     x, xd, xdd = profile_eval(K.profile, t1)
     x0 = profile_eval(K.profile, t0)[0]
     m = K.mot_crp
-    kap = u[UE_CREEP + UE_STRIDE * m + 4]
+    kap = u[UE_CREEP + UE_STRIDE * m + CR_KAPPA_MID]
     for k in range(K.presc.shape[0]):
         j = K.presc[k]
         gsc = K.presc_gain[k] / kap
-        q[j] = u[UE_CREEP + UE_STRIDE * m + 2] + gsc * (x - x0)
+        q[j] = u[UE_CREEP + UE_STRIDE * m + CR_SIGMA] + gsc * (x - x0)
         v[j] = gsc * xd
         qdd[j] = gsc * xdd

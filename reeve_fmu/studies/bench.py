@@ -134,7 +134,7 @@ def _lag_run(scene, t_end, out_dt, element_length, step=1e-3, rho_inf=None, newt
     friction above the plain mu) the stick/slip transitions of the finer meshes need more than the
     simulator's default 12 Newton iterations in a few steps (l = 0.05 m failed at t = 2.739 s)."""
     from .lagrangian import LagrangianSimulator
-    from .lagrangian_build import build_lagrangian
+    from .lagrangian import build_lagrangian
     t0 = time.perf_counter()
     model = build_lagrangian(scene, element_length=element_length, t_end=t_end, **build_kw)
     sim = LagrangianSimulator(model, step=step, rho_inf=rho_inf, newton_tol=newton_tol, max_iter=max_iter)

@@ -248,7 +248,7 @@ class Statics:
     def residual(self, q, mode, value):
         """Scaled forces of the statics equations, then the constraint (height row, m) for mode 'height';
         None if a span vanishes."""
-        if assemble(self.crane.model.KJ, self.st.c, q, self.zero, 0.0, self.u, self.M, self.Q) < 0:
+        if assemble(self.crane.model.KJ, self.st.arrays(), self.st.c, q, self.zero, 0.0, self.u, self.M, self.Q) < 0:
             return None
         r = self.Q[self.eqs] / self.fscale
         return np.append(r, self.crane.height(q) - value) if mode == "height" else r
@@ -270,8 +270,7 @@ class Statics:
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
         the tangent solver's warm start is restored on failure or when it jumped (_branch_jump)."""
-        m = self.crane.model
-        ang = m.K.nl_ANG.copy()
+        ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
         if mode == "yaw":
@@ -284,7 +283,7 @@ class Statics:
                 break
             err = float(np.max(np.abs(r)))
             if err < tol:
-                if _branch_jump(ang, m.K.nl_ANG):
+                if _branch_jump(ang, self.st.nl_ang):
                     break
                 return q, self.jacobian(q, unk, mode, value, r)
             if J is None or (it > 0 and err > 0.25 * err_prev and not fresh):
@@ -302,7 +301,7 @@ class Statics:
                 break
             q[unk] += dx
             self.stats[0] += 1
-        m.K.nl_ANG[:] = ang
+        self.st.nl_ang[:] = ang
         return None, None
 
 

@@ -33,7 +33,7 @@ for the claim that ALE needs far fewer elements (docs/performance.md, "Speed aga
     with the linear tension of the rope weight, arcs on the sheaves); the mesh is laid out on it
     (material lengths scaled to the continuum's rope length) and relaxed dynamically with the drive
     held (`LagrangianSimulator.static_state`); without sheaves, Newton statics.
-  * Compiled kernels in lagrangian_kernels.py; the model is built by lagrangian_build.py.
+  * Compiled kernels in lagrangian_kernels.py.
 
 Outputs carry the engine's names: `<body>.position/.velocity/.acceleration` (no axis suffix for a
 body with one free axis), `<sheave>.tension_in/.tension_out` (the rope force in the free span next to
@@ -49,10 +49,13 @@ import math
 
 import numpy as np
 
-from .lagrangian_kernels import LK, eval_state, integrate, newton_system  # noqa: F401 (LK: an annotation)
+from .lagrangian_builder import LagrangianBuilder, check_supported
+from .lagrangian_kernels import LK, eval_state, integrate, newton_system
 from ..core.scene import Scene
 from ..core.solver import Result, SolverError, gen_alpha_params
+from ..core.solver.genalpha import step_grid
 
+# ============================================================================ building
 @dataclass
 class LagrangianState:
     t: float
@@ -83,6 +86,50 @@ class LagrangianModel:
     @property
     def n_dof(self):
         return len(self.q_names)
+
+
+def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: float = 1.0,
+                     t_end: float | None = None, fine_everywhere: bool = False, penalty: float = 1.0,
+                     contact_damping: float = 1.0, stick: float = 1.0, contact_onset: float = 0.5,
+                     probe: float = 1.5,
+                     margin: float = 0.25, statics: str | None = None) -> LagrangianModel:
+    """Lagrangian planar model of a scene (see the module docstring).
+
+    element_length: elements on every stretch of rope that touches a sheave during [0, t_end]
+    (default t_end: the scene's); coarse_length: elsewhere. fine_everywhere meshes the whole rope
+    finely. penalty: normal contact stiffness in units of EA/element_length (per node);
+    contact_damping: normal (Hunt-Crossley) damping as a fraction of the critical damping of a node
+    at the static wrap force; stick: tangential (stick) stiffness in units of the normal one;
+    contact_onset: width of the C1 onset of the penalty in units of the static penetration of a
+    wrap node (wider: smoother arrivals, fewer Newton iterations); probe: distance of the tension
+    taps from the tangent point in element lengths; margin [m]: added on both sides of the
+    touched material intervals; statics: the scene's [initial] statics mode for the configuration the
+    mesh is laid out on (default: the scene's; 'none' = the unloaded geometry).
+
+    The steps, in order (each a method of `lagrangian_builder.LagrangianBuilder`): the ALE static configuration and
+    the material intervals that touch the sheaves; the border unknowns (bodies, idler angles); per
+    rope the static path and the marched mesh on it, and its ends; the numbering of the unknowns;
+    the element and sheave arrays; the mesh corrected onto straight free spans and into the
+    sheaves by the static penetration; hitches, drive, outputs; the kernel's parameter record."""
+    check_supported(scene)
+    b = LagrangianBuilder(scene, element_length, coarse_length, fine_everywhere, penalty,
+                           contact_damping, stick, probe, margin, statics)
+    b.static_configuration(scene.t_end if t_end is None else t_end)
+    b.border_unknowns()
+    for ir, rope in enumerate(scene.ropes):
+        b.layout_rope(ir, rope)
+    b.number_unknowns()
+    b.element_arrays()
+    b.sheave_arrays()
+    b.straighten_free_spans()
+    b.seat_wrap_nodes()
+    # the dynamics get the requested onset width (the layout above is made with half the static
+    # penetration: a relaxation from a layout with a wide onset fails in its first step)
+    b.sh_w *= contact_onset / 0.5
+    b.hitch_arrays()
+    b.drive_profile()
+    b.outputs()
+    return LagrangianModel(**b.model())
 
 
 # ============================================================================ simulator
@@ -179,15 +226,7 @@ class LagrangianSimulator:
         span = t_end - st.t
         if span <= 1e-12:
             return None
-        if out_dt is None:
-            nsteps = max(1, math.ceil(span / self.h - 1e-9))
-            h = span / nsteps
-            every, n_out = 0, 0
-        else:
-            n_out = int(round(span / out_dt))
-            every = max(1, math.ceil(out_dt / self.h - 1e-9))
-            nsteps = n_out * every
-            h = span / nsteps
+        nsteps, h, every, n_out = step_grid(span, self.h, out_dt)
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
         status, t = integrate(self.model.LK, st.q, st.v, st.a, st.qdd, st.z, t0, h, nsteps, self.params,

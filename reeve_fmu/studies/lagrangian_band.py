@@ -1,7 +1,6 @@
-"""The bordered band of the Lagrangian baseline's Newton matrix (lagrangian_kernels.py): the node block
-is a band of half-bandwidth KB (two coordinates per node, nearest-neighbour coupling), the bodies and
-sheave angles a dense border. Banded LU of the node block, Schur complement of the border: O(n) per
-solve."""
+"""The Lagrangian baseline's Newton matrix solve (compiled): the node block is banded (half-bandwidth
+KB), the bodies' and sheaves' coordinates border it; banded LU of the block, dense LU of the Schur
+complement of the border (core/solver/lu.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,5 +1,5 @@
 """Compiled kernels of the Lagrangian baseline (lagrangian.py): residual, analytic Newton matrix
-(band + border; its LU in lagrangian_band.py), outputs and the generalized-alpha loop. Kept apart
+(band + border; its LU: lagrangian_band.py), outputs and the generalized-alpha loop. Kept apart
 from the builder so that editing the builder does not invalidate the numba cache."""
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import numpy as np
 from ..core._jit import njit
 from ..core.elements.linear import end_tension, linear_element_at
 from ..core.profiles import profile_eval
+from ..core.solver.genalpha import method_params, newmark_factors, newmark_update, newton_correct, step_buffers
 from .lagrangian_band import KB, bb_factor, bb_solve
 
 LK = namedtuple("LK", [
@@ -195,6 +196,19 @@ def _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn, xo, co
     return -LK.sh_kt[k] * zs, zs, dzs, dzm
 
 
+@njit(cache=True, inline="always")
+def _node_contact(LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static):
+    """Contact of node i with sheave k (_contact) and, in contact, its feed factor and groove friction
+    (_friction): (act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm)."""
+    act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+    if not act:
+        return act, nx, nz, ux, uz, rho, Fn, kn, cn, 1.0, 0.0, 0.0, 0.0, 0.0
+    kap = _node_feed(LK, lam, i, R)
+    Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
+                                 xo, co, tho, zo, static)
+    return act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm
+
+
 @njit(cache=True)
 def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, static,
              xo, co, tho, zo, zn):
@@ -272,13 +286,11 @@ def residual(LK, q, v, qdd, t, r, X, V, A, QE, VE, MEs, QEs, Nel, lam, torque, s
         R = LK.sh_R[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
-                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
-            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+                continue    # cheap test first: a call that receives LK pays the tuple's refcounts
+            act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm = _node_contact(
+                LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static)
             if not act:
                 continue
-            kap = _node_feed(LK, lam, i, R)
-            Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
-                                         xo, co, tho, zo, static)
             zn[i] = zs
             fx = Fn * nx + Ft * ux
             fz = Fn * nz + Ft * uz
@@ -395,13 +407,11 @@ def jacobian(LK, q, v, t, cm, bq, gv, X, V, MEs, Nel, lam, J, C, D, E, lock, sta
         kt = LK.sh_kt[k]
         for i in range(LK.sh_lo[k], LK.sh_hi[k]):
             if abs(X[i, 0] - cx) > R or abs(X[i, 1] - cz) > R:
-                continue    # cheap test first: a call that receives LK costs ~1 us (tuple refcounts)
-            act, nx, nz, ux, uz, rho, Fn, kn, cn = _contact(LK, k, i, X, V, cx, cz, vcx, vcz)
+                continue    # cheap test first: a call that receives LK pays the tuple's refcounts
+            act, nx, nz, ux, uz, rho, Fn, kn, cn, kap, Ft, zs, dzs, dzm = _node_contact(
+                LK, k, i, X, V, cx, cz, vcx, vcz, R, th, thd, lam, xo, co, tho, zo, static)
             if not act:
                 continue
-            kap = _node_feed(LK, lam, i, R)
-            Ft, zs, dzs, dzm = _friction(LK, k, i, X, V, cx, cz, vcx, vcz, th, thd, kap, ux, uz, Fn,
-                                         xo, co, tho, zo, static)
             nv = (nx, nz)
             uv = (ux, uz)
             ktu = kt * dzs if static else kt * dzs * kap   # static: spring to the layout
@@ -545,15 +555,6 @@ def outputs(LK, q, v, qdd, t, X, V, A, QE, VE, MEs, QEs, Nel, torque, y):
             y[k] = hi_ / lo_ if lo_ > 0.0 else math.inf
 
 
-@njit(cache=True, inline="always")
-def _update(n, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma):
-    for i in range(n):
-        a1 = ((1.0 - af) * qdd[i] + af * qddo[i] - am * ao[i]) / (1.0 - am)
-        a[i] = a1
-        q[i] = qo[i] + h * vo[i] + h * h * ((0.5 - beta) * ao[i] + beta * a1)
-        v[i] = vo[i] + h * ((1.0 - gamma) * ao[i] + gamma * a1)
-
-
 @njit(cache=True)
 def _step_start(LK, q, v, t, X, V, A, xo, co, tho):
     """Node positions, sheave centres and angles at the start of a step (friction reference)."""
@@ -575,14 +576,10 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     rebuilt every `jac_every` steps and whenever a step needs more than 3 iterations. A step that
     fails is retried as 4 and 16 substeps. z: stick deflection per node (updated). info = [steps,
     iterations, jacobian builds, residuals, status]. Returns (status, t)."""
-    am = params[0]
-    af = params[1]
-    beta = params[2]
-    gamma = params[3]
-    tol = params[4]
-    maxit = int(params[5])
+    am, af, beta, gamma, tol, maxit = method_params(params)
     jac_every = int(params[6])
     n = q.shape[0]
+    every = np.arange(n)     # the coordinates the Newmark relations update: all of them
     # static = False typed bool, not Literal[False]: residual and jacobian then share the
     # specialization eval_state and newton_system compile (a literal would compile both again)
     static = n < 0
@@ -616,14 +613,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
     lock = np.zeros(n, np.bool_)
     r = np.empty(n)
     y = np.empty(LK.out_kind.shape[0])
-    qo = np.empty(n)
-    vo = np.empty(n)
-    ao = np.empty(n)
-    qddo = np.empty(n)
-    q1 = np.empty(n)
-    v1 = np.empty(n)
-    a1 = np.empty(n)
-    qdd1 = np.empty(n)
+    qo, vo, ao, qddo, q1, v1, a1, qdd1 = step_buffers(n)
     z1 = np.empty(nn)
     t = t0
     row = 0
@@ -650,8 +640,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                 qdd[:] = qdd1
                 z[:] = z1
                 have_jac = False
-            bq = hs * hs * beta * (1.0 - af) / (1.0 - am)
-            gv = hs * gamma * (1.0 - af) / (1.0 - am)
+            bq, gv = newmark_factors(hs, am, af, beta, gamma)
             for sub in range(nsub):
                 ts = t + (sub + 1) * hs
                 _step_start(LK, q, v, ts - hs, X, V, A, xo, co, tho)
@@ -660,7 +649,7 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                 vo[:] = v
                 ao[:] = a
                 qddo[:] = qdd
-                _update(n, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
+                newmark_update(every, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
                 if jac_h != hs or since >= jac_every:
                     have_jac = False
                 status = 1
@@ -678,15 +667,8 @@ def integrate(LK, q, v, a, qdd, z, t0, h, nsteps, params, ybuf, out_every, info)
                         jac_h = hs
                         since = 0
                     bb_solve(J, Xs, D, S, piv, r)
-                    dmax = 0.0
-                    amax = 0.0
-                    for i in range(n):
-                        qdd[i] -= r[i]
-                        if abs(r[i]) > dmax:
-                            dmax = abs(r[i])
-                        if abs(qdd[i]) > amax:
-                            amax = abs(qdd[i])
-                    _update(n, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
+                    dmax, amax, _ = newton_correct(every, n, r, qdd, q)
+                    newmark_update(every, qo, vo, ao, qddo, qdd, q, v, a, hs, am, af, beta, gamma)
                     info[1] += 1
                     if not (dmax == dmax) or dmax > 1e300:
                         break

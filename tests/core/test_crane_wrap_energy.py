@@ -55,7 +55,7 @@ def test_wrap_and_tangent_forces_are_the_elastic_energy_gradient():
     nel = m.K.el_idx.shape[0]
     QE, VE = np.empty((nel, ne)), np.empty((nel, ne))
     for ie in range(nel):
-        gather(m.KJ, st.c, st.q, np.zeros(nq), ie, QE, VE)
+        gather(m.KJ, st.el_coef, st.c, st.q, np.zeros(nq), ie, QE, VE)
     nd = 3
     stops, _, wraps = _path(sc, m, st.q)
     nsp = len(stops) - 1
@@ -87,7 +87,7 @@ def test_wrap_and_tangent_forces_are_the_elastic_energy_gradient():
         q[pose] += rng.normal(0.0, [0.05, 0.05, 0.05, 0.02, 0.02, 0.2])
         q[sig] += rng.normal(0.0, 0.02, len(sig))
         Q = np.zeros(nq)
-        assemble(m.KJ, st.c, q, np.zeros(nq), 0.0, np.zeros(2), np.zeros((nq, nq)), Q)
+        assemble(m.KJ, st.arrays(), st.c, q, np.zeros(nq), 0.0, np.zeros(2), np.zeros((nq, nq)), Q)
         g = np.zeros(nq)
         for j in pose + sig:
             dx = 1e-6

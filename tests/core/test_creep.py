@@ -20,7 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
 import numpy as np
 import pytest
 
-from reeve_fmu.core.contact import UE_CREEP
+from reeve_fmu.core.kernel import UE_CREEP
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import parse_scene
 from reeve_fmu.core.solver import Simulator
@@ -286,10 +286,10 @@ def test_energy_balance_with_drive_work_and_creep_dissipation():
     st = sim.initial_state()
     E0 = sum(sim.energy(st))
     ith = m.output_names.index("motor.angle")
-    P0, D, err, Tmax = creep_power(m.KJ, st.c, st.q, st.v), 0.0, 0.0, 0.0
+    P0, D, err, Tmax = creep_power(m.KJ, st.arrays(), st.c, st.q, st.v), 0.0, 0.0, 0.0
     for k in range(int(round(t_end / h))):
         sim.advance(st, (k + 1) * h)
-        P1 = creep_power(m.KJ, st.c, st.q, st.v)
+        P1 = creep_power(m.KJ, st.arrays(), st.c, st.q, st.v)
         D += 0.5 * h * (P0 + P1)
         P0 = P1
         T, Vg, U = sim.energy(st)

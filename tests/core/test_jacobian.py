@@ -86,8 +86,8 @@ def test_element_jacobians(name):
     r0, r1, S, JE = np.empty(ne), np.empty(ne), element_scratch(nd, ne), np.empty((ne, ne))
     worst = (0.0, -1, "")
     for ie in range(n_el):
-        element_eval(KJ, st.c, st.q, st.v, ie, QE, VE, MEs, QEs)
-        ae = np.einsum("aw,aw->a", m.K.el_coef[ie], qdd[m.K.el_map[ie]])
+        element_eval(KJ, st.el_coef, st.c, st.q, st.v, ie, QE, VE, MEs, QEs)
+        ae = np.einsum("aw,aw->a", st.el_coef[ie], qdd[m.K.el_map[ie]])
         parts = []
         for gv in (0.0, 1.0):        # stiffness (bq = 1, gv = 0), then stiffness + damping
             element_block(KJ, ie, QE, VE, MEs, QEs, ae, 0.0, 1.0, gv, JE, X, XD, np.zeros((1, nd)), MEt, QEt, r0, r1,
@@ -134,12 +134,12 @@ def test_newton_matrix_equals_differences(name, contact):
     SP = build_sparse(m.K)
     bq, gv = 2.5e-7, 5e-4
     J = np.zeros(jac_shape(SP))
-    assert newton_matrix_analytic(KJ, SP, workspace(KJ, False), st.c, st.q.copy(), st.v.copy(), qdd.copy(), 0.0,
+    assert newton_matrix_analytic(KJ, SP, workspace(KJ, st.arrays(), False), st.c, st.q.copy(), st.v.copy(), qdd.copy(), 0.0,
                                   ue, J, np.empty(m.nq), 1.0, bq, gv) == 1
     M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
 
     def r(qq, vv, aa):
-        assemble(KJ, st.c, qq, vv, 0.0, ue, M, Q)
+        assemble(KJ, st.arrays(), st.c, qq, vv, 0.0, ue, M, Q)
         return (M @ aa - Q)[SP.perm]
     ref = []
     for rel in (1e-7, 1e-9):       # two steps: their difference is the reference's own uncertainty

@@ -45,14 +45,14 @@ MODELS = {
 }
 
 
-def _dense_matrix(m, SP, c, q, v, qdd, ue, bq, gv):
+def _dense_matrix(m, SP, S, c, q, v, qdd, ue, bq, gv):
     """d r / d qdd_free with one forward difference per coordinate through the dense assembly."""
     M = np.empty((m.nq, m.nq))
     Q = np.empty(m.nq)
     free = SP.perm
 
     def r(qq, vv, aa):
-        assemble(m.KJ, c, qq, vv, 0.0, ue, M, Q)
+        assemble(m.KJ, S, c, qq, vv, 0.0, ue, M, Q)
         return (M @ aa - Q)[free]
     r0 = r(q, v, qdd)
     A = np.empty((SP.n, SP.n))
@@ -88,13 +88,13 @@ def test_coloured_matrix_equals_per_coordinate_differences(name, contact):
     bq, gv = 2.5e-7, 5e-4          # h = 1 ms, rho_inf = 1
     J = np.zeros(jac_shape(SP))
     R, R0, dxs = np.empty(m.nq), np.empty(m.nq), np.empty(SP.n)
-    assert newton_matrix_sparse(m.KJ, SP, workspace(m.KJ, False), st.c, q.copy(), v.copy(), qdd.copy(), 0.0,
+    assert newton_matrix_sparse(m.KJ, SP, workspace(m.KJ, st.arrays(), False), st.c, q.copy(), v.copy(), qdd.copy(), 0.0,
                                 ue, J, R, R0, dxs, 1.0, bq, gv, 1e-10) == 1
-    A = _dense_matrix(m, SP, st.c, q, v, qdd, ue, bq, gv)
+    A = _dense_matrix(m, SP, st.arrays(), st.c, q, v, qdd, ue, bq, gv)
     err = np.max(np.abs(unpack_dense(J, SP) - A)) / np.max(np.abs(A))
     check('err', err, 3.3e-10, reason=SPREAD)
     # and the structure is the whole of it: no residual row outside the pattern moves
-    assert pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, q, v, qdd, 0.0, ue, bq, gv) == 0
+    assert pattern_leaks(m.KJ, SP, workspace(m.KJ, st.arrays(), False), st.c, q, v, qdd, 0.0, ue, bq, gv) == 0
 
 
 def test_pattern_check_finds_a_missing_coupling():
@@ -106,7 +106,7 @@ def test_pattern_check_finds_a_missing_coupling():
     lo, hi = SP.col_ptr[jb], SP.col_ptr[jb + 1]
     rows[lo:hi] = rows[lo]
     st = new_state(m)
-    leaks = pattern_leaks(m.KJ, SP._replace(col_rows=rows), workspace(m.KJ, False), st.c, st.q.copy(),
+    leaks = pattern_leaks(m.KJ, SP._replace(col_rows=rows), workspace(m.KJ, st.arrays(), False), st.c, st.q.copy(),
                           st.v.copy(), st.qdd.copy(), 0.0, np.zeros(7), 2.5e-7, 5e-4)
     assert leaks > 0
 

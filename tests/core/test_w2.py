@@ -202,10 +202,10 @@ route = [ { anchor = "A", at = [0, 0, 0] }, { sheave = "top", wrap = "cw" },
     st = sim.initial_state()
     E0 = sum(sim.energy(st))
     s0 = st.q[m.sheave_dof["top"]]
-    dE, Tmax, D, P0, h = 0.0, 0.0, 0.0, creep_power(m.KJ, st.c, st.q, st.v), 5e-4
+    dE, Tmax, D, P0, h = 0.0, 0.0, 0.0, creep_power(m.KJ, st.arrays(), st.c, st.q, st.v), 5e-4
     for k in range(1, 2001):     # every step: the creep dissipation D by the trapezoid rule
         sim.advance(st, h * k)
-        P1 = creep_power(m.KJ, st.c, st.q, st.v)
+        P1 = creep_power(m.KJ, st.arrays(), st.c, st.q, st.v)
         D, P0 = D + 0.5 * h * (P0 + P1), P1
         T, V, U = sim.energy(st)
         dE, Tmax = max(dE, abs(T + V + U + D - E0)), max(Tmax, T)

@@ -89,10 +89,10 @@ def test_torsion_forces_are_the_energy_gradient():
     q[tw] += rng.normal(0.0, 0.1, len(tw))
     nq = m.nq
     Q = np.zeros(nq)
-    assemble(m.KJ, st.c, q, np.zeros(nq), 0.0, np.zeros(2), np.zeros((nq, nq)), Q)
+    assemble(m.KJ, st.arrays(), st.c, q, np.zeros(nq), 0.0, np.zeros(2), np.zeros((nq, nq)), Q)
 
     def V(x):
-        _, Vg, U = energy(m.KJ, st.c, x, np.zeros(nq))
+        _, Vg, U = energy(m.KJ, st.arrays(), st.c, x, np.zeros(nq))
         return Vg + U
     g = np.zeros(nq)
     for j in range(nq):

@@ -51,7 +51,7 @@ def set_consistent_acceleration(model, st):
     """qdd = M^-1 Q at (q, v) of a model without prescribed coordinates (after editing st.v)."""
     nq = model.nq
     M, Q = np.empty((nq, nq)), np.empty(nq)
-    assert assemble(model.KJ, st.c, st.q, st.v, st.t, np.zeros(4), M, Q) == 0
+    assert assemble(model.KJ, st.arrays(), st.c, st.q, st.v, st.t, np.zeros(4), M, Q) == 0
     st.qdd[:] = np.linalg.solve(M, Q)
     st.a[:] = st.qdd
 
@@ -188,10 +188,10 @@ def run_energy(m, method: str, h: float | None, t_end: float = 10.0, n_samples: 
     sim = Simulator(m, method=method, step=h, rho_inf=1.0)
     st = sim.initial_state()
     E0 = sum(sim.energy(st))
-    dE, Tmax, D, P0 = 0.0, 0.0, 0.0, creep_power(m.KJ, st.c, st.q, st.v)
+    dE, Tmax, D, P0 = 0.0, 0.0, 0.0, creep_power(m.KJ, st.arrays(), st.c, st.q, st.v)
     for k in range(1, n_samples + 1):
         sim.advance(st, t_end * k / n_samples)
-        P1 = creep_power(m.KJ, st.c, st.q, st.v)
+        P1 = creep_power(m.KJ, st.arrays(), st.c, st.q, st.v)
         D += 0.5 * t_end / n_samples * (P0 + P1)
         P0 = P1
         T, Vg, U = sim.energy(st)
@@ -288,7 +288,7 @@ def test_steady_axial_flow_closed_loop():
     st.v[m.sheave_dof["S1"]] = v
     st.v[m.sheave_dof["S2"]] = v
     M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
-    assemble(m.KJ, st.c, st.q, st.v, 0.0, np.zeros(4), M, Q)
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, 0.0, np.zeros(4), M, Q)
     check('Q', Q, 2.4e-12 * N0)
     set_consistent_acceleration(m, st)
     q0, v0 = st.q.copy(), st.v.copy()

@@ -46,7 +46,7 @@ def test_axial_and_pendulum_frequencies(crane):
     # axial: the free spans from the reel to the payload carrying M; their material length (the W1
     # wraps hold R x wrap angle of rope that does not stretch: with them L would be 1.7 % longer)
     K = m.K
-    s = [st.c[K.el_idx[ie, a]] + K.el_coef[ie, a] @ st.q[K.el_map[ie, a]] for ie in range(3) for a in (-2, -1)]
+    s = [st.c[K.el_idx[ie, a]] + st.el_coef[ie, a] @ st.q[K.el_map[ie, a]] for ie in range(3) for a in (-2, -1)]
     L = sum(s[2 * ie + 1] - s[2 * ie] for ie in range(3))
     rhoA, EA = 1.1, 30e6
     ratio = rhoA * L / M

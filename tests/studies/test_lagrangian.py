@@ -9,7 +9,6 @@ from scipy.optimize import brentq
 
 from reeve_fmu.studies import bench
 from reeve_fmu.studies import lagrangian as lag
-from reeve_fmu.studies.lagrangian_build import build_lagrangian
 from reeve_fmu.studies.lagrangian_kernels import dense_matrices
 from reeve_fmu.core.scene import load_scene
 from tests.support import ROOT
@@ -29,7 +28,7 @@ def _hanging(statics=None):
 def test_hanging_static_elongation_exact():
     """docs/theory.md §7 item 1: linear elements with consistent gravity give the exact elongation."""
     sc = _hanging()
-    m = build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
+    m = lag.build_lagrangian(sc, element_length=10.0, coarse_length=10.0)
     sim = lag.LagrangianSimulator(m)
     st = sim.initial_state()
     y = dict(zip(m.output_names, sim.outputs(st)))
@@ -47,7 +46,7 @@ def test_hanging_first_axial_frequency_beta_tan_beta():
     the baseline at the static state; the planar mesh also has transverse string modes, the axial
     one is picked by its motion)."""
     sc = _hanging()
-    m = build_lagrangian(sc, element_length=2.5, coarse_length=2.5)
+    m = lag.build_lagrangian(sc, element_length=2.5, coarse_length=2.5)
     sim = lag.LagrangianSimulator(m)
     st = sim.initial_state()
     n = m.n_dof
@@ -79,7 +78,7 @@ def test_modal_series_reference_meets_its_initial_condition():
 def test_lagrangian_release_follows_the_modal_series():
     sc = _hanging("none").with_overrides(ropes=tuple(
         r.__class__(**{**r.__dict__, "damping": 0.0}) for r in _hanging().ropes))
-    m = build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
+    m = lag.build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
     sim = lag.LagrangianSimulator(m, step=2.5e-4, rho_inf=1.0, newton_tol=1e-8)
     res = sim.run(0.6, 1e-3)
     z, _ = bench.hanging_release_exact(sc, res.time)
@@ -116,5 +115,5 @@ def test_bench_records_schema(tmp_path):
 def test_bad_scene_for_the_baseline_names_the_problem():
     sc = load_scene(ROOT / "scenes" / "elevator_2to1.toml").with_overrides(model="spatial")
     with pytest.raises(Exception, match="planar"):
-        build_lagrangian(sc)
+        lag.build_lagrangian(sc)
 

@@ -66,7 +66,7 @@ def nodes(m, st):
     X = np.empty(K.el_idx.shape)
     for ie in range(K.el_idx.shape[0]):
         for a in range(K.el_idx.shape[1]):
-            X[ie, a] = st.c[K.el_idx[ie, a]] + K.el_coef[ie, a] @ st.q[K.el_map[ie, a]]
+            X[ie, a] = st.c[K.el_idx[ie, a]] + st.el_coef[ie, a] @ st.q[K.el_map[ie, a]]
     return X
 
 

@@ -11,7 +11,7 @@ def linearised(sim, st, dq=1e-5):
     f = m.K.free
     M, Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
     u = sim.kernel_inputs(st)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, u, M, Q)
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, u, M, Q)
     Mf = M[np.ix_(f, f)].copy()
     Kf = np.empty((len(f), len(f)))
     for k, j in enumerate(f):
@@ -19,8 +19,8 @@ def linearised(sim, st, dq=1e-5):
         for sgn in (1.0, -1.0):
             q = st.q.copy()
             q[j] += sgn * dq
-            assemble(m.KJ, st.c, q, st.v, st.t, u, M, Q)
+            assemble(m.KJ, st.arrays(), st.c, q, st.v, st.t, u, M, Q)
             cols.append(Q[f].copy())
         Kf[:, k] = -(cols[0] - cols[1]) / (2 * dq)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, u, M, Q)
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, u, M, Q)
     return Mf, Kf

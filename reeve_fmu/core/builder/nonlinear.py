@@ -3,9 +3,11 @@ span of an exact-tangent model is registered here; `finalize` turns the rows tha
 into the kernel fields the compiled core/bodies.py evaluates in every residual."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
-from ..bodies import GEOMETRY_FIELDS, ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef, rows_jacobian
+from ..bodies import ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef, geometry, rows_jacobian
 
 
 def body_frame(b):
@@ -25,15 +27,10 @@ def empty_fields() -> dict:
     """Kernel fields of a model without nonlinear rows (nl_on = 0; nothing is evaluated)."""
     i2, f2 = np.zeros((0, 4), np.int64), np.zeros((0, 4))
     return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
-                nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
+                nl_ang0=np.zeros((0, 2)), nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
                 nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
-                nl_rf=np.zeros((0, 8)), nl_P=np.zeros((0, 3)), nl_TW=np.zeros((0, 6)), nl_BR=np.zeros((0, 5)),
-                nl_ANG=np.zeros((0, 2)), nl_AX=np.zeros((2, 3)), nl_cols=np.zeros(0, np.int64),
-                nl_colbody=np.zeros(0, np.int64),
-                nl_f0=np.zeros(0), nl_fp=np.zeros(0), nl_fm=np.zeros(0), nl_J=np.zeros((0, 0)),
-                nl_qs=np.zeros(0), nl_racc=np.zeros(0), nl_rw=np.zeros((0, 1), np.int64),
-                nl_ent=np.zeros((0, 0), np.int64), nl_acc=np.zeros((0, 0)), nl_frz=np.zeros(1, np.int64),
-                nl_grp=np.zeros(1, np.int64))
+                nl_rf=np.zeros((0, 8)), nl_cols=np.zeros(0, np.int64), nl_colbody=np.zeros(0, np.int64),
+                nl_rw=np.zeros((0, 1), np.int64), nl_ent=np.zeros((0, 0), np.int64), nl_grp=np.zeros(1, np.int64))
 
 
 class NonlinearRows:
@@ -164,24 +161,22 @@ class NonlinearRows:
         sp = np.array([s[:2] for s in self.spans], np.int64).reshape(-1, 2)
         sg = np.array([s[2:6] for s in self.spans], float).reshape(-1, 4)
         sa = np.array([s[6] for s in self.spans], float).reshape(-1, 6)
-        nc = len(cols)
-        f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_pb=pb, nl_po=po, nl_sp=sp,
-                 nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf, nl_P=np.zeros((len(pb), 3)), nl_TW=np.zeros((len(sp), 6)),
-                 nl_BR=np.zeros((len(bq), 5)), nl_ANG=np.full((len(sp), 2), np.nan), nl_AX=np.zeros((2, 3)),
-                 nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_f0=np.zeros(nr), nl_fp=np.zeros(nr), nl_fm=np.zeros(nr),
-                 nl_J=np.zeros((nr, nc)), nl_qs=np.zeros(len(q0)), nl_racc=np.zeros(nr), nl_rw=rw,
-                 nl_ent=ent, nl_acc=np.zeros(el_idx.shape), nl_frz=np.zeros(1, np.int64),
-                 nl_grp=np.zeros(1, np.int64))
+        f = dict(nl_on=1 if nr else 0, nl_bq=bq, nl_b0=b0, nl_bk=bk, nl_bax=bax, nl_ang0=np.full((len(sp), 2), np.nan),
+                 nl_pb=pb, nl_po=po, nl_sp=sp, nl_sg=sg, nl_sa=sa, nl_rk=rk, nl_rf=rf,
+                 nl_cols=np.array(cols, np.int64), nl_colbody=colbody, nl_rw=rw, nl_ent=ent, nl_grp=np.zeros(1, np.int64))
         if nr:
             q0 = np.asarray(q0, float)
-            G = tuple(f[k] for k in GEOMETRY_FIELDS)
-            rows_jacobian(q0, G, f["nl_cols"], colbody, f["nl_f0"], f["nl_fp"], f["nl_fm"], f["nl_qs"], f["nl_J"])
+            K = SimpleNamespace(**f)
+            G = geometry(K, f["nl_ang0"])      # the contact angles at q0 stay in nl_ang0: a State's warm start
+            J = np.zeros((nr, len(cols)))
+            f0 = np.zeros(nr)
+            rows_jacobian(q0, G, f["nl_cols"], colbody, f0, np.zeros(nr), np.zeros(nr), np.zeros(len(q0)), J)
             for key, r in zip(keys, range(nr)):
                 row = row_of(key)
                 B[row, :] = 0.0
                 for k, j in enumerate(cols):
-                    B[row, j] = f["nl_J"][r, k]
+                    B[row, j] = J[r, k]
                 if specs[r][0] in (ROW_WRAP, ROW_SLOPE):
-                    B[row, specs[r][8]] = extra_coef(rk, f["nl_TW"], r)
-                c0[row] = f["nl_f0"][r] - B[row] @ q0
+                    B[row, specs[r][8]] = extra_coef(rk, G[-4], r)   # G[-4]: the span tangents
+                c0[row] = f0[r] - B[row] @ q0
         return new_map, new_coef, f

@@ -96,5 +96,4 @@ def torsion_fields(bs: BuildState) -> dict:
                 tq_vb=np.array([[body_index(b) for b in s["bodies"]] for s in tq], np.int64).reshape(n, 2),
                 tq_v0=np.array([s["v0"] for s in tq], float).reshape(n, 6),
                 tq_p=np.array([s["p"] for s in tq], float).reshape(n, 6),
-                tq_dref=np.array([s["dref"] for s in tq], float),
-                tq_out=np.zeros((n, 2)))
+                tq_dref=np.array([s["dref"] for s in tq], float))

@@ -26,6 +26,16 @@ SLACK_STRAIN = 1e-6   # smoothing width of the tension-only law (strain): ~ N pe
 
 
 @njit(cache=True, inline="always")
+def chord(QE, ie, nd):
+    """|r_2 - r_1| of linear element ie from its coordinates QE[ie] = [r_1, r_2, s_1, s_2]."""
+    dist2 = 0.0
+    for k in range(nd):
+        dk = QE[ie, nd + k] - QE[ie, k]
+        dist2 += dk * dk
+    return math.sqrt(dist2)
+
+
+@njit(cache=True, inline="always")
 def axial_law(EA, nu, eps, epsdot, tonly):
     """Axial force of a rope section: (N elastic, w energy density, N_d damping part).
 
@@ -37,6 +47,15 @@ def axial_law(EA, nu, eps, epsdot, tonly):
     cannot push."""
     if not tonly:
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot
+    N, w, taut, r, f, dF = slack_law(EA, nu, eps, epsdot)
+    F = 0.5 * (f + math.sqrt(f * f + dF * dF))
+    return N, w, F - N
+
+
+@njit(cache=True, inline="always")
+def slack_law(EA, nu, eps, epsdot):
+    """The tension-only branch of axial_law before the clip: (N, w, taut = dsp/deps, r, the unclipped
+    total force f, the clip's width dF)."""
     d = SLACK_STRAIN
     r = math.sqrt(eps * eps + d * d)
     # eps + r without cancellation when slack (eps < 0): (eps + r) = d^2 / (r - eps)
@@ -45,9 +64,7 @@ def axial_law(EA, nu, eps, epsdot, tonly):
     w = 0.25 * EA * (eps * sp + d * d * math.asinh(eps / d))
     taut = 0.5 * (1.0 + eps / r)
     f = N + EA * nu * epsdot * taut
-    dF = EA * d
-    F = 0.5 * (f + math.sqrt(f * f + dF * dF))
-    return N, w, F - N
+    return N, w, taut, r, f, EA * d
 
 
 @njit(cache=True, inline="always")
@@ -67,11 +84,7 @@ def linear_element_at(nd, rhoA, EA, nu, tonly, G, C, QE, VE, MEs, QEs, ie):
     sd1 = VE[ie, i1]
     sd2 = VE[ie, i2]
     ldot = sd2 - sd1
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     lam = dist / l
     inv_l = 1.0 / l
 
@@ -221,11 +234,7 @@ def end_tension(nd, rhoA, QE, VE, ae, MEs, QEs, ie, end):
     i1 = 2 * nd
     i2 = 2 * nd + 1
     l = QE[ie, i2] - QE[ie, i1]
-    dist2 = 0.0
-    for k in range(nd):
-        dk = QE[ie, nd + k] - QE[ie, k]
-        dist2 += dk * dk
-    dist = math.sqrt(dist2)
+    dist = chord(QE, ie, nd)
     if dist <= 0.0 or l <= 0.0:
         return 0.0
     ne = 2 * nd + 2

@@ -222,13 +222,13 @@ def torsion_extra(law, EA, d, k0, k1, GJ0, rA, rB, sA, sB, phiA, phiB, vA, vB, d
 
 
 @njit(cache=True, inline="always")
-def _frame(K, k, e, out):
+def _frame(K, W, k, e, out):
     """Frame vector of end e of torsion span k in world axes: the body-axis vector turned by its
-    body's current rotation (bodies.rows_eval has set K.nl_BR)."""
+    body's current rotation (bodies.nl_update has set W.nl_BR)."""
     v0, v1, v2 = K.tq_v0[k, 3 * e], K.tq_v0[k, 3 * e + 1], K.tq_v0[k, 3 * e + 2]
     b = K.tq_vb[k, e]
     if b >= 0 and K.nl_bk[b] != 1:
-        R = K.nl_BR
+        R = W.nl_BR
         a0, a1, a2, c, s = R[b, 0], R[b, 1], R[b, 2], R[b, 3], R[b, 4]
         dd = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
         v0, v1, v2 = (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * dd, v1 * c + (a2 * v0 - a0 * v2) * s + a1 * dd,
@@ -268,31 +268,40 @@ def _frame_force(K, q, b, v, g, Q):
         Q[bq[b, 3]] -= K.nl_bax[b, 0] * m0 + K.nl_bax[b, 1] * m1 + K.nl_bax[b, 2] * m2
 
 
+@njit(cache=True, inline="always")
+def _span_ends(K, W, q, k, vA, vB):
+    """Torsion span k's end frames (vA, vB) and twist coordinates: (jA, jB) (-1: fixed) and their
+    angles."""
+    _frame(K, W, k, 0, vA)
+    _frame(K, W, k, 1, vB)
+    jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
+    phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
+    phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+    return jA, jB, phiA, phiB
+
+
 @njit(cache=True)
-def torsion_terms(K, QE, q, Q):
+def torsion_terms(K, W, QE, q, Q):
     """Add the torsion part of every torsion span (torsion_extra) to Q: its node and material
     coordinate forces through the element's map (like the element's own forces), the torques on
     the twist coordinates and the moments on the bodies that carry the frames. Call after the
-    element loop (QE holds the element coordinates) and bodies.nl_update (K.nl_BR)."""
+    element loop (QE holds the element coordinates) and bodies.nl_update (W.nl_BR). Keeps the
+    transport-angle branch in W.tq_dref (the State's) and (M, kappa) in W.tq_out."""
     wk = np.empty(12)
     g = np.empty(16)
     vA = np.empty(3)
     vB = np.empty(3)
-    el_map, el_coef = K.el_map, K.el_coef
+    el_map, el_coef = K.el_map, W.el_coef
     nw = el_map.shape[2]
     for k in range(K.tq_el.shape[0]):
         ie = K.tq_el[k]
-        _frame(K, k, 0, vA)
-        _frame(K, k, 1, vB)
-        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
-        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
-        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        jA, jB, phiA, phiB = _span_ends(K, W, q, k, vA, vB)
         p = K.tq_p[k]
         M, kap, delta = torsion_extra(int(p[0]), p[1], p[2], p[3], p[4], p[5], QE[ie, 0:3], QE[ie, 3:6],
-                                      QE[ie, 6], QE[ie, 7], phiA, phiB, vA, vB, K.tq_dref[k], g, wk)
-        K.tq_dref[k] = delta
-        K.tq_out[k, 0] = M
-        K.tq_out[k, 1] = kap
+                                      QE[ie, 6], QE[ie, 7], phiA, phiB, vA, vB, W.tq_dref[k], g, wk)
+        W.tq_dref[k] = delta
+        W.tq_out[k, 0] = M
+        W.tq_out[k, 1] = kap
         for a in range(8):
             for w in range(nw):
                 ba = el_coef[ie, a, w]
@@ -309,26 +318,22 @@ def torsion_terms(K, QE, q, Q):
 
 
 @njit(cache=True)
-def torsion_energy(K, QE, q):
+def torsion_energy(K, W, QE, q):
     """Torsion part of the strain energy, sum of l (w - EA eps^2 / 2) over the torsion spans (the
     energy laws; the torque-factor law has none: its GJ0 kappa^2 / 2 part only). QE: the element
-    coordinates at q, K.nl_BR the rotations at q (after an assembly at q)."""
+    coordinates at q, W.nl_BR the rotations at q (after an assembly on W at q)."""
     vA = np.empty(3)
     vB = np.empty(3)
     U = 0.0
     for k in range(K.tq_el.shape[0]):
         ie = K.tq_el[k]
-        _frame(K, k, 0, vA)
-        _frame(K, k, 1, vB)
-        jA, jB = K.tq_phi[k, 0], K.tq_phi[k, 1]
-        phiA = q[jA] if jA >= 0 else K.tq_phic[k, 0]
-        phiB = q[jB] if jB >= 0 else K.tq_phic[k, 1]
+        jA, jB, phiA, phiB = _span_ends(K, W, q, k, vA, vB)
         p = K.tq_p[k]
         l = QE[ie, 7] - QE[ie, 6]
         D0, D1, D2 = QE[ie, 3] - QE[ie, 0], QE[ie, 4] - QE[ie, 1], QE[ie, 5] - QE[ie, 2]
         dist = math.sqrt(D0 * D0 + D1 * D1 + D2 * D2)
         delta = transport_angle(D0 / dist, D1 / dist, D2 / dist, vA[0], vA[1], vA[2], vB[0], vB[1], vB[2],
-                                K.tq_dref[k])
+                                W.tq_dref[k])
         eps = dist / l - 1.0
         w = coupling_law(int(p[0]), p[1], p[2], p[3], p[4], p[5], eps, (phiB + delta - phiA) / l)[0]
         U += l * (w - 0.5 * p[1] * eps * eps)

@@ -8,10 +8,10 @@ import numpy as np
 
 from .._jit import gated, njit
 from ..jacobian import jacobian_analytic
-from ..kernel import CREEP, NL_ROWS
+from ..kernel import CREEP, IN_ITERS, IN_JACS, IN_JAC_H, IN_WHERE, NL_ROWS
 from ..sparse import bordered_solve, jacobian_sparse, residual_sparse
 from ..system import assemble_ws, set_prescribed, set_prescribed_creep
-from .genalpha import REFRESH_AFTER, converged, newmark_update
+from .genalpha import REFRESH_AFTER, converged, newmark_factors, newmark_update, newton_correct
 from .lu import lu_factor, lu_solve
 
 # From this many free coordinates on the Newton matrix is banded (core/sparse.py); below, the dense
@@ -88,10 +88,10 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     # p = B q + c is then their exact linearisation; what is left out (tension x curvature of the
     # tangent-point map, ~1e-5 of the mass and axial terms) slows the modified Newton contraction
     # at most, it does not change the solution
-    K.nl_frz[0] = 1
+    W.frz[0] = 1
     if K.nl_grp[0] > 0:
         _coloured(K, K, W, c, q, v, qdd, t1, ue, jac, r, r0, bq, gv)
-        K.nl_frz[0] = 0
+        W.frz[0] = 0
         return 1 if lu_factor(jac, piv) else 0
     for fj in range(nf):
         j = K.free[fj]
@@ -106,155 +106,101 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
         qdd[j] -= dx
         q[j] -= bq * dx
         v[j] -= gv * dx
-    K.nl_frz[0] = 0
+    W.frz[0] = 0
     return 1 if lu_factor(jac, piv) else 0
 
 
+@njit(cache=True, inline="always")
+def _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic):
+    """The factorised Newton matrix: dense by finite differences (SP None: build_jacobian) or banded,
+    from element Jacobians (core/jacobian.py) or coloured differences (core/sparse.py). Returns -1
+    (vanishing span), 0 (singular) or 1."""
+    if SP is None:
+        return build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
+    if analytic:
+        return jacobian_analytic(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r0, bq, gv)
+    return jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv)
+
+
+@njit(cache=True, inline="always")
+def _correction(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, rb):
+    """The Newton correction of the free accelerations into rb, in the order of newton_step's `order`
+    (dense: rb is r, the free rows; banded: SP.perm). Returns the residual's status (< 0: a vanishing
+    span)."""
+    if SP is None:
+        st = _residual(K, W, c, q, v, qdd, t1, ue, r)
+        if st < 0:
+            return st
+        lu_solve(jac, piv, r)
+        return st
+    st = residual_sparse(K, SP, W, c, q, v, qdd, t1, ue, r)
+    if st < 0:
+        return st
+    for b in range(SP.n):
+        rb[b] = r[SP.perm[b]]
+    bordered_solve(jac, piv, SP.n, SP.nb, SP.kl, SP.ku, rb)
+    return st
+
+
 @njit(cache=True)
-def newton_step(K, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, r, r0,
-                am, af, beta, gamma, tol, maxit):
-    """One generalized-alpha step from (qo, vo, ao, qddo) to t1 = t0 + h. Modified Newton with the
-    kept matrix first; retries are full Newton from the last iterate (crosses regime changes: brake
-    stick -> slip, slack -> taut), the last one from the predictor. Returns 0 (converged),
-    1 (no convergence), 2 (vanishing span; info[7] = element)."""
-    nf = K.free.shape[0]
-    nq = K.nq
-    bq = h * h * beta * (1.0 - af) / (1.0 - am)
-    gv = h * gamma * (1.0 - af) / (1.0 - am)
+def newton_step(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, r, r0, rb,
+                am, af, beta, gamma, tol, maxit, analytic):
+    """One generalized-alpha step from (qo, vo, ao, qddo) to t1 = t0 + h, with the dense Newton matrix
+    (SP None: r, r0 and rb = r have the free rows) or the banded one SP (core/sparse.py: r, r0 have nq
+    rows, rb SP.n). Modified Newton with the kept matrix first; retries are full Newton from the last
+    iterate (crosses regime changes: brake stick -> slip, slack -> taut), the last one from the
+    predictor. Returns 0 (converged), 1 (no convergence), 2 (vanishing span; info[7] = element)."""
+    if SP is None:
+        order = K.free
+        n = K.free.shape[0]
+    else:
+        order = SP.perm
+        n = SP.n
+    bq, gv = newmark_factors(h, am, af, beta, gamma)
     # (q, v, a, qdd) == (qo, vo, ao, qddo) on entry
     if K.mot_crp >= 0:
-        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
+        _set_prescribed_creep(K, K, W.jp_prof, ue, t1 - h, t1, q, v, qdd)
     else:
-        set_prescribed(K, q_ref, t1, q, v, qdd)
-    for k in range(K.presc.shape[0]):
-        a[K.presc[k]] = qdd[K.presc[k]]
-    for attempt in range(4):
-        if attempt == 0 or attempt == 3:
-            for fi in range(nf):   # predictor: constant acceleration
-                qdd[K.free[fi]] = qddo[K.free[fi]]
-            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-        if info[0] != h or attempt > 0:
-            ok = build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
-            info[3] += 1
-            if ok < 0:
-                info[7] = -ok - 1
-                return 2
-            if ok == 0:
-                info[0] = 0.0
-                continue
-            info[0] = h
-        dprev = 1e300
-        for it in range(maxit):
-            if attempt > 0 and it > 0:
-                ok = build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv)
-                info[3] += 1
-                if ok <= 0:
-                    info[0] = 0.0
-                    break
-            st = _residual(K, W, c, q, v, qdd, t1, ue, r)
-            if st < 0:
-                info[7] = -st - 1
-                return 2
-            lu_solve(jac, piv, r)
-            dmax = 0.0
-            amax = 0.0
-            qmax = 0.0
-            for fi in range(nf):
-                i = K.free[fi]
-                qdd[i] -= r[fi]
-                if abs(r[fi]) > dmax:
-                    dmax = abs(r[fi])
-                if abs(qdd[i]) > amax:
-                    amax = abs(qdd[i])
-                if abs(q[i]) > qmax:
-                    qmax = abs(q[i])
-            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-            info[2] += 1
-            if not (dmax == dmax) or dmax > 1e300:
-                break
-            # converged: relative acceleration change below tol, or the position change it
-            # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
-            if converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
-                if it >= REFRESH_AFTER:
-                    info[0] = 0.0  # slow contraction: refresh the Newton matrix next step
-                return 0
-            dprev = dmax
-    return 1
-
-
-@njit(cache=True)
-def _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic):
-    """The factorised banded Newton matrix: element Jacobians (core/jacobian.py) or coloured
-    differences (core/sparse.py)."""
-    if analytic:
-        return jacobian_analytic(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R0, bq, gv)
-    return jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv)
-
-
-@njit(cache=True)
-def newton_step_sparse(K, SP, W, c, q_ref, q, v, a, qdd, qo, vo, ao, qddo, t1, h, ue, jac, piv, info, R,
-                       R0, rb, am, af, beta, gamma, tol, maxit, analytic):
-    """newton_step with the banded Newton matrix (element Jacobians or coloured differences, band
-    LU) and the element-wise residual; same iteration, retries and return codes."""
-    n = SP.n
-    perm = SP.perm
-    bq = h * h * beta * (1.0 - af) / (1.0 - am)
-    gv = h * gamma * (1.0 - af) / (1.0 - am)
-    if K.mot_crp >= 0:
-        _set_prescribed_creep(K, K, ue, t1 - h, t1, q, v, qdd)
-    else:
-        set_prescribed(K, q_ref, t1, q, v, qdd)
+        set_prescribed(K, W.jp_prof, q_ref, t1, q, v, qdd)
     for k in range(K.presc.shape[0]):
         a[K.presc[k]] = qdd[K.presc[k]]
     for attempt in range(4):
         if attempt == 0 or attempt == 3:
             for fi in range(K.free.shape[0]):   # predictor: constant acceleration
                 qdd[K.free[fi]] = qddo[K.free[fi]]
-            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-        if info[0] != h or attempt > 0:
-            ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
-            info[3] += 1
+            newmark_update(K.free, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+        if info[IN_JAC_H] != h or attempt > 0:
+            ok = _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic)
+            info[IN_JACS] += 1
             if ok < 0:
-                info[7] = -ok - 1
+                info[IN_WHERE] = -ok - 1
                 return 2
             if ok == 0:
-                info[0] = 0.0
+                info[IN_JAC_H] = 0.0
                 continue
-            info[0] = h
+            info[IN_JAC_H] = h
         dprev = 1e300
         for it in range(maxit):
             if attempt > 0 and it > 0:
-                ok = _jacobian_banded(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, R, R0, rb, bq, gv, analytic)
-                info[3] += 1
+                ok = _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic)
+                info[IN_JACS] += 1
                 if ok <= 0:
-                    info[0] = 0.0
+                    info[IN_JAC_H] = 0.0
                     break
-            st = residual_sparse(K, SP, W, c, q, v, qdd, t1, ue, R)
+            st = _correction(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, rb)
             if st < 0:
-                info[7] = -st - 1
+                info[IN_WHERE] = -st - 1
                 return 2
-            for b in range(n):
-                rb[b] = R[perm[b]]
-            bordered_solve(jac, piv, n, SP.nb, SP.kl, SP.ku, rb)
-            dmax = 0.0
-            amax = 0.0
-            qmax = 0.0
-            for b in range(n):
-                i = perm[b]
-                qdd[i] -= rb[b]
-                if abs(rb[b]) > dmax:
-                    dmax = abs(rb[b])
-                if abs(qdd[i]) > amax:
-                    amax = abs(qdd[i])
-                if abs(q[i]) > qmax:
-                    qmax = abs(q[i])
-            newmark_update(K, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
-            info[2] += 1
+            dmax, amax, qmax = newton_correct(order, n, rb, qdd, q)
+            newmark_update(K.free, qo, vo, ao, qddo, qdd, q, v, a, h, am, af, beta, gamma)
+            info[IN_ITERS] += 1
             if not (dmax == dmax) or dmax > 1e300:
                 break
+            # converged: relative acceleration change below tol, or the position change it
+            # causes is at round-off level (the residual has a floor ~ EA * 1e-16)
             if converged(dmax, dprev, amax, qmax, bq, tol, it == maxit - 1):
                 if it >= REFRESH_AFTER:
-                    info[0] = 0.0
+                    info[IN_JAC_H] = 0.0  # slow contraction: refresh the Newton matrix next step
                 return 0
             dprev = dmax
     return 1

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernel import INFO_CREEP, UE_CREEP, UE_STRIDE
 from ..model import Model, State
-from ..contact import INFO_CREEP, UE_CREEP, UE_STRIDE
-from ..system import assemble, creep_inputs, set_prescribed, set_prescribed_creep
-from .inputs import element_buffers, kernel_inputs_at, outputs_at
+from ..system import assemble, creep_inputs, set_prescribed, set_prescribed_creep, workspace
+from .inputs import kernel_inputs_at, outputs_at
 from .result import STATUS_TEXT, Result, SolverError
 from .statics import consistent_acceleration
 
@@ -24,7 +24,8 @@ def rhs_factory(m: Model, st: State):
     Q = np.empty(nq)
     base = kernel_inputs_at(m, st)
     info = st.info.copy()
-    QE, VE = element_buffers(m)
+    S = st.arrays()
+    W = workspace(m.KJ, S, False)
 
     def rhs(t, y):
         q = st.q.copy()
@@ -38,12 +39,12 @@ def rhs_factory(m: Model, st: State):
             info[INFO_CREEP:INFO_CREEP + nc] = y[2 * nf:2 * nf + nc]
             if K.mot_crp >= 0 and len(p):
                 q[p[0]] = y[-1]
-            creep_inputs(m.KJ, st.c, q, v, info, ue, 0.0, QE, VE, False)
+            creep_inputs(m.KJ, W, st.c, q, v, info, ue, 0.0, False)
         if K.mot_crp >= 0:
-            set_prescribed_creep(m.KJ, ue, t, t, q, v, qdd)
+            set_prescribed_creep(m.KJ, st.jp_prof, ue, t, t, q, v, qdd)
         else:
-            set_prescribed(m.KJ, st.q_ref, t, q, v, qdd)
-        if assemble(m.KJ, st.c, q, v, t, ue, M, Q) < 0:
+            set_prescribed(m.KJ, st.jp_prof, st.q_ref, t, q, v, qdd)
+        if assemble(m.KJ, S, st.c, q, v, t, ue, M, Q) < 0:
             raise SolverError(f"t = {t:.6f} s: {STATUS_TEXT[2]}")
         acc = np.linalg.solve(M[np.ix_(f, f)], Q[f] - M[np.ix_(f, p)] @ qdd[p])
         dth = [-ue[UE_CREEP + UE_STRIDE * k] * v[K.crp_s[k]] / K.crp_R[k] for k in range(nc)]

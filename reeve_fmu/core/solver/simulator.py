@@ -8,10 +8,11 @@ import math
 import numpy as np
 
 from .._jit import entry_point
+from ..kernel import IN_JAC_H, IN_WHERE, U_BRAKE_CMD, U_TORQUE
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, jac_shape, pattern_leaks
 from ..system import energy_u, workspace
-from .genalpha import gen_alpha_params
+from .genalpha import gen_alpha_params, step_grid
 from .inputs import kernel_inputs, kernel_inputs_at, outputs_at
 from .newton import SPARSE_MIN_FREE
 from .result import STATUS_TEXT, Result, SolverError
@@ -69,7 +70,7 @@ class Simulator:
         if st.jac.shape != shape:
             st.jac = np.zeros(shape)
             st.piv = np.zeros(shape[0], np.int64)
-            st.info[0] = 0.0          # no valid factors: rebuild on the next step
+            st.info[IN_JAC_H] = 0.0          # no valid factors: rebuild on the next step
             st.__dict__.pop("_arrays", None)
         return SP
 
@@ -86,7 +87,7 @@ class Simulator:
         am, af, beta, gamma = self.params[:4]
         bq = self.h ** 2 * beta * (1.0 - af) / (1.0 - am)
         gv = self.h * gamma * (1.0 - af) / (1.0 - am)
-        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
+        leaks = pattern_leaks(m.KJ, SP, workspace(m.KJ, st.arrays(), False), st.c, st.q.copy(), st.v.copy(), st.qdd.copy(),
                               st.t, kernel_inputs_at(m, st), bq, gv)
         if leaks:
             self.warnings.append(f"{m.scene.source}: {leaks} residual rows depend on coordinates outside the "
@@ -137,17 +138,7 @@ class Simulator:
             return None
         if self.method != "gen-alpha":
             return advance_scipy(self.model, st, t_end, out_dt, self.method, self.rtol, self.atol)
-        if out_dt is None:
-            n = max(1, math.ceil(span / self.h - 1e-9))
-            h = span / n
-            every, n_out = 0, 0
-        else:
-            n_out = int(round(span / out_dt))
-            if n_out < 1 or abs(n_out * out_dt - span) > 1e-9 * max(1.0, span):
-                raise ValueError(f"t_end - t = {span} s is not a multiple of out_dt = {out_dt} s")
-            every = max(1, math.ceil(out_dt / self.h - 1e-9))
-            n = n_out * every
-            h = span / n
+        n, h, every, n_out = step_grid(span, self.h, out_dt)
         ybuf = np.empty((max(n_out, 1), len(self.model.output_names) + 1))
         t0 = st.t
         status, t, done = self._integrate(st, t0, h, n, ybuf, every)
@@ -177,8 +168,8 @@ class Simulator:
             self.advance(st, t_end, u=(torque, brake_command))
             return self.outputs(st)
         u = st.u
-        u[0] = torque
-        u[1] = brake_command
+        u[U_TORQUE] = torque
+        u[U_BRAKE_CMD] = brake_command
         n = math.ceil(span / self.h - 1e-9)
         if n < 1:
             n = 1
@@ -208,10 +199,10 @@ class Simulator:
     def _status_message(self, status: int, st: State) -> str:
         msg = f"t = {st.t:.6f} s: {STATUS_TEXT.get(status, 'solver failure')}"
         if status == 4:
-            j = int(self.model.K.drum_dof[int(st.info[7])])
+            j = int(self.model.K.drum_dof[int(st.info[IN_WHERE])])
             msg += f": drum {self.model.q_names[j].rsplit('.', 1)[0]!r} (its stored length reached 0 m)"
         if status == 2:
-            ie = int(st.info[7])
+            ie = int(st.info[IN_WHERE])
             ir, k = self.model.element_span[ie]
             rope = self.model.scene.ropes[ir]
             stops = rope.route
@@ -235,7 +226,7 @@ class Simulator:
         material rate. The strain energy of rope stored on a creep drum (EA eps^2/2 per unit material,
         eps as wound) depends on its winding history and is not included: its force on the drum's s is
         EA eps^2/2 at the drum."""
-        return energy_u(self.model.KJ, st.c, st.q, st.v, kernel_inputs_at(self.model, st))
+        return energy_u(self.model.KJ, st.arrays(), st.c, st.q, st.v, kernel_inputs_at(self.model, st))
 
     def run(self, t_end: float | None = None, out_dt: float | None = None, state: State | None = None,
             progress=None) -> Result:

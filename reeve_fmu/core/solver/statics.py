@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..builder.assemble import creep_table
-from ..contact import UE_CREEP, UE_STRIDE
-from ..kernel import compiled_kernel
+from ..kernel import IN_BRAKE_E, IN_BRAKE_Z, IN_TRAC_Z, UE_CREEP, UE_STRIDE, UE_TRAC_Z, compiled_kernel
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, colour_columns, jac_shape, newton_matrix_sparse, newton_pattern, unpack_sparse
 from ..system import assemble, set_prescribed, set_prescribed_creep, workspace
@@ -81,7 +80,7 @@ class Statics:
         K = m.K
         if K.trac_s >= 0:
             preload_traction(m, st, self.warnings)
-        if K.brake_T > 0.0 and st.info[5] > 0.0:
+        if K.brake_T > 0.0 and st.info[IN_BRAKE_E] > 0.0:
             preload_brake(m, st)
         consistent_acceleration(m, st)
         return st
@@ -119,6 +118,7 @@ class Statics:
         Q = np.empty(nq)
         zero = np.zeros(nq)
         u = kernel_inputs(m, st)
+        S = st.arrays()     # the State's element maps and contact angles follow the iterates
 
         def resid(x):
             qq, pp = q.copy(), par.copy()
@@ -128,7 +128,7 @@ class Statics:
                 else:
                     pp[i] = xi
             c = m.c0 + m.Bpar @ pp
-            status = assemble(KS, c, qq, zero, st.t, u, M, Q)
+            status = assemble(KS, S, c, qq, zero, st.t, u, M, Q)
             if status < 0:
                 return None, qq, pp, c
             return Q[eqs].copy(), qq, pp, c
@@ -144,7 +144,7 @@ class Statics:
                 raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
                                   f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
-            J = self._jacobian(resid, x, r, unknowns, eqs, KS, u, st.t)
+            J = self._jacobian(resid, x, r, unknowns, eqs, KS, S, u, st.t)
             try:
                 step = _solve(J, -r)
             except np.linalg.LinAlgError:
@@ -195,7 +195,7 @@ class Statics:
                                       f"span {k} would be in compression (a tension-only rope cannot hold)")
         return st
 
-    def _jacobian(self, resid, x, r, unknowns, eqs, KS, u, t):
+    def _jacobian(self, resid, x, r, unknowns, eqs, KS, S, u, t):
         """d r / d x by forward differences. From SPARSE_MIN_FREE unknowns on, unknowns that share no
         equation (structural pattern, core/sparse.py) are perturbed together: every entry is computed
         from the same numbers as with one residual per unknown, with far fewer residuals; the
@@ -206,7 +206,7 @@ class Statics:
         # structural pattern nor the banded differences see: one residual per unknown
         sparse = n >= SPARSE_MIN_FREE and not self.model.K.nl_on
         if sparse:
-            J = self._jacobian_banded(resid, x, r, unknowns, eqs, KS, u, t)
+            J = self._jacobian_banded(resid, x, r, unknowns, eqs, KS, S, u, t)
             if J is not None:
                 return J
         J = np.zeros((len(eqs), n))
@@ -230,7 +230,7 @@ class Statics:
                     J[rows[j], j] = d[rows[j]] / dj
         return J
 
-    def _jacobian_banded(self, resid, x, r, unknowns, eqs, KS, u, t):
+    def _jacobian_banded(self, resid, x, r, unknowns, eqs, KS, S, u, t):
         import scipy.sparse as sp
         nq = self.model.nq
         qcols = [k for k, (kind, _) in enumerate(unknowns) if kind == "q"]
@@ -241,7 +241,7 @@ class Statics:
         SPs = cached[1]
         _, qq, _, c = resid(x)
         Jb = np.zeros(jac_shape(SPs))
-        status = newton_matrix_sparse(KS, SPs, workspace(KS, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
+        status = newton_matrix_sparse(KS, SPs, workspace(KS, S, False), c, qq, np.zeros(nq), np.zeros(nq), t, u, Jb,
                                       np.empty(nq), np.empty(nq), np.empty(SPs.n), 0.0, 1.0, 0.0, 1e-7)
         if status != 1:
             return None
@@ -294,8 +294,8 @@ def preload_traction(m: Model, st: State, warnings: list) -> None:
     M = np.empty((m.nq, m.nq))
     Q = np.empty(m.nq)
     ue = kernel_inputs_at(m, st)
-    ue[4] = 0.0
-    assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)   # friction zero at z = 0
+    ue[UE_TRAC_Z] = 0.0
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, ue, M, Q)   # friction zero at z = 0
     y = dict(zip(m.output_names, outputs_at(m, st)))
     name = m.q_names[K.trac_s].rsplit(".", 1)[0]
     T_in, T_out = y[f"{name}.tension_in"], y[f"{name}.tension_out"]
@@ -313,9 +313,9 @@ def preload_traction(m: Model, st: State, warnings: list) -> None:
             f"t = {st.t:g} s: the rope slips on sheave {name!r} from the start: static tension ratio "
             f"{max(T_in, T_out) / max(min(T_in, T_out), 1e-9):.4f} exceeds the friction limit "
             f"e^(f alpha) = {1 + K.trac_efa:.4f}")
-        st.info[8] = float(-np.sign(f_needed) * K.trac_zmax)
+        st.info[IN_TRAC_Z] = float(-np.sign(f_needed) * K.trac_zmax)
     else:
-        st.info[8] = float(-f_needed / k) if k > 0 else 0.0
+        st.info[IN_TRAC_Z] = float(-f_needed / k) if k > 0 else 0.0
 
 
 def preload_brake(m: Model, st: State) -> None:
@@ -323,11 +323,11 @@ def preload_brake(m: Model, st: State) -> None:
     K = m.K
     M = np.empty((m.nq, m.nq))
     Q = np.empty(m.nq)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, kernel_inputs_at(m, st), M, Q)
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, kernel_inputs_at(m, st), M, Q)
     kap = kernel_inputs_at(m, st)[UE_CREEP + UE_STRIDE * K.mot_crp] if K.mot_crp >= 0 else 1.0
     tau_hold = -Q[K.mot_dof] / (K.mot_gain * kap)   # brake torque needed (Q = tau * gain)
-    k = st.info[5] * K.brake_T / K.brake_wreg
-    st.info[6] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
+    k = st.info[IN_BRAKE_E] * K.brake_T / K.brake_wreg
+    st.info[IN_BRAKE_Z] = float(np.clip(-tau_hold / k, -K.brake_wreg, K.brake_wreg))
 
 
 def consistent_acceleration(m: Model, st: State) -> None:
@@ -337,10 +337,10 @@ def consistent_acceleration(m: Model, st: State) -> None:
     Q = np.empty(m.nq)
     ue = kernel_inputs_at(m, st)
     if K.mot_crp >= 0:
-        set_prescribed_creep(m.KJ, ue, st.t, st.t, st.q, st.v, st.qdd)   # keeps sigma
+        set_prescribed_creep(m.KJ, st.jp_prof, ue, st.t, st.t, st.q, st.v, st.qdd)   # keeps sigma
     else:
-        set_prescribed(m.KJ, st.q_ref, st.t, st.q, st.v, st.qdd)
-    assemble(m.KJ, st.c, st.q, st.v, st.t, ue, M, Q)
+        set_prescribed(m.KJ, st.jp_prof, st.q_ref, st.t, st.q, st.v, st.qdd)
+    assemble(m.KJ, st.arrays(), st.c, st.q, st.v, st.t, ue, M, Q)
     f, p = K.free, K.presc
     rhs = Q[f] - M[np.ix_(f, p)] @ st.qdd[p]
     st.qdd[f] = np.linalg.solve(M[np.ix_(f, f)], rhs)

@@ -1,14 +1,13 @@
-"""Building the Lagrangian finite-element baseline (reeve_fmu.studies.lagrangian) from a scene: the ALE
-statics the mesh is laid out on, the material intervals that touch the sheaves, the mesh, the contact and
-friction arrays, hitches, drive and outputs, and the kernel's parameter record (`build_lagrangian`).
-"""
+"""The Lagrangian baseline's build steps (lagrangian.build_lagrangian runs them in order): the ALE
+static configuration the mesh is laid out on, the touched material intervals, the static path and
+marched mesh of every rope, the numbering of the unknowns, the element, sheave, hitch, drive and
+output arrays of the kernel (lagrangian_kernels.LK)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-from .lagrangian import LagrangianModel
 from .lagrangian_kernels import LK, O_A, O_ANGLE, O_END, O_Q, O_RATIO, O_SPEED, O_TAP, O_TORQUE, O_V
 from ..core.profiles import scurve, speed_table
 from ..core.scene import AXES, Scene, SceneError
@@ -52,51 +51,7 @@ def _material_ranges(scene: Scene, t_end: float):
     return {k: (lo[k], hi[k]) for k in lo}
 
 
-def build_lagrangian(scene: Scene, element_length: float = 0.05, coarse_length: float = 1.0,
-                     t_end: float | None = None, fine_everywhere: bool = False, penalty: float = 1.0,
-                     contact_damping: float = 1.0, stick: float = 1.0, contact_onset: float = 0.5,
-                     probe: float = 1.5,
-                     margin: float = 0.25, statics: str | None = None) -> LagrangianModel:
-    """Lagrangian planar model of a scene (see the module docstring).
-
-    element_length: elements on every stretch of rope that touches a sheave during [0, t_end]
-    (default t_end: the scene's); coarse_length: elsewhere. fine_everywhere meshes the whole rope
-    finely. penalty: normal contact stiffness in units of EA/element_length (per node);
-    contact_damping: normal (Hunt-Crossley) damping as a fraction of the critical damping of a node
-    at the static wrap force; stick: tangential (stick) stiffness in units of the normal one;
-    contact_onset: width of the C1 onset of the penalty in units of the static penetration of a
-    wrap node (wider: smoother arrivals, fewer Newton iterations); probe: distance of the tension
-    taps from the tangent point in element lengths; margin [m]: added on both sides of the
-    touched material intervals; statics: the scene's [initial] statics mode for the configuration the
-    mesh is laid out on (default: the scene's; 'none' = the unloaded geometry).
-
-    The steps, in order (each a method of `_LagrangianBuilder`): the ALE static configuration and
-    the material intervals that touch the sheaves; the border unknowns (bodies, idler angles); per
-    rope the static path and the marched mesh on it, and its ends; the numbering of the unknowns;
-    the element and sheave arrays; the mesh corrected onto straight free spans and into the
-    sheaves by the static penetration; hitches, drive, outputs; the kernel's parameter record."""
-    _check_supported(scene)
-    b = _LagrangianBuilder(scene, element_length, coarse_length, fine_everywhere, penalty,
-                           contact_damping, stick, probe, margin, statics)
-    b.static_configuration(scene.t_end if t_end is None else t_end)
-    b.border_unknowns()
-    for ir, rope in enumerate(scene.ropes):
-        b.layout_rope(ir, rope)
-    b.number_unknowns()
-    b.element_arrays()
-    b.sheave_arrays()
-    b.straighten_free_spans()
-    b.seat_wrap_nodes()
-    # the dynamics get the requested onset width (the layout above is made with half the static
-    # penetration: a relaxation from a layout with a wide onset fails in its first step)
-    b.sh_w *= contact_onset / 0.5
-    b.hitch_arrays()
-    b.drive_profile()
-    b.outputs()
-    return b.model()
-
-
-def _check_supported(scene: Scene):
+def check_supported(scene: Scene):
     """The scene features the Lagrangian baseline cannot model raise a SceneError naming the file."""
     if scene.model == "spatial":
         raise SceneError(f"{scene.source}: the Lagrangian baseline is planar (x-z); model 'spatial' "
@@ -157,7 +112,7 @@ def _on_circle(c, R, P, d, near):
     return p1 if float(np.linalg.norm(p1 - near)) < float(np.linalg.norm(p2 - near)) else p2
 
 
-class _LagrangianBuilder:
+class LagrangianBuilder:
     """State shared by the steps of `build_lagrangian`; each method is one step and documents what
     it adds."""
 
@@ -469,9 +424,17 @@ class _LagrangianBuilder:
         ns = len(sh_names)
         sh_dof = -np.ones((ns, 2), np.int64)
         sh_off = np.zeros((ns, 2))
-        sh_R, sh_mu, sh_kn, sh_cn, sh_w, sh_kt, sh_J = (np.zeros(ns) for _ in range(7))
+        sh_R = np.zeros(ns)
+        sh_mu = np.zeros(ns)
+        sh_kn = np.zeros(ns)
+        sh_cn = np.zeros(ns)
+        sh_w = np.zeros(ns)
+        sh_kt = np.zeros(ns)
         sh_th = -np.ones(ns, np.int64)
-        sh_presc, sh_lo, sh_hi = (np.zeros(ns, np.int64) for _ in range(3))
+        sh_presc = np.zeros(ns, np.int64)
+        sh_lo = np.zeros(ns, np.int64)
+        sh_hi = np.zeros(ns, np.int64)
+        sh_J = np.zeros(ns)
         rope_of_sheave = {st.sheave: ir for ir, rope in enumerate(scene.ropes) for st in rope.route
                           if st.sheave is not None}
         for k, name in enumerate(sh_names):
@@ -692,9 +655,9 @@ class _LagrangianBuilder:
             tap_last=-np.ones(ntap, np.int64))
 
     # ------------------------------------------------------------------------ the model
-    def model(self) -> LagrangianModel:
+    def model(self) -> dict:
         """The kernel's parameter record (with the lumped mass per unknown for the relaxation) and
-        the model."""
+        the rest of the model: lagrangian.LagrangianModel's fields."""
         scene, nb, n, border, node_dof = self.scene, self.nb, self.n, self.border, self.node_dof
         dof_m = np.zeros(n)      # lumped mass per unknown (relaxation damping)
         for (a_, b_, s1_, l_, ir_) in self.el_list:
@@ -723,13 +686,13 @@ class _LagrangianBuilder:
             lock[nb + jb] = True
         layouts, ale, ale_st = self.layouts, self.ale, self.ale_st
         n_fine = sum(lay["n_fine"] for lay in layouts)
-        return LagrangianModel(scene=scene, LK=lk, q_names=self.q_names, output_names=self.output_names,
-                               q_static_guess=self.q0, lock_static=lock, n_elements=self.ne, n_fine=n_fine,
-                               element_length=self.element_length,
-                               info=dict(layouts=layouts, ranges=self.ranges, sheaves=self.sh_names,
-                                         rope_length=[lay["L"] for lay in layouts],
-                                         ale_q=ale_st.q.copy(), ale_outputs=dict(zip(
-                                             ale.output_names, self.ale_sim.outputs(ale_st)))))
+        return dict(scene=scene, LK=lk, q_names=self.q_names, output_names=self.output_names,
+                    q_static_guess=self.q0, lock_static=lock, n_elements=self.ne, n_fine=n_fine,
+                    element_length=self.element_length,
+                    info=dict(layouts=layouts, ranges=self.ranges, sheaves=self.sh_names,
+                              rope_length=[lay["L"] for lay in layouts],
+                              ale_q=ale_st.q.copy(), ale_outputs=dict(zip(
+                                  ale.output_names, self.ale_sim.outputs(ale_st)))))
 
 
 def _sheave_center(sh, bodies, ale, ale_st):
