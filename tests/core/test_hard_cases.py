@@ -146,7 +146,7 @@ def test_free_fall_onto_a_buffer_against_the_closed_form():
     R = np.array([sum(axial_law(1.0e6, 0.0, (10.0 - x) / 12.0 - 1.0, 0.0, True)[::2]) for x in z])
     assert np.all(R < 0.5e6 * 1e-6 * 1.001)                  # R = 0.498 N throughout
     # measured 2.0e-6: what is left is the rope's own weight and inertia share (1.2 g of rope)
-    check("free flight: a + g - R/M [m/s^2]", a[free] + g - R[free] / M, 2e-5)
+    check("free flight: a + g - R/M [m/s^2]", a[free] + g - R[free] / M, 1.5e-5)
     check("free flight: z against 1 - g t^2/2 [m] (R and the step)", z[free] - (1.0 - 0.5 * g * t[free] ** 2), 5e-4)
     t_hit, v0 = math.sqrt(2.0 / g), math.sqrt(2.0 * g)
     w = math.sqrt(k / M)

@@ -35,7 +35,8 @@ def _modes(sim, st):
 def test_static_payload_tension_is_M_g(crane):
     m, sim, st = crane
     y = dict(zip(m.output_names, sim.outputs(st)))
-    check('y["hoist.tension_end"] / (M * G) - 1.0', y["hoist.tension_end"] / (M * G) - 1.0, 1e-7)
+    # measured 4.6e-11 (round-off, with the wrap rope's weight at the sheave centre)
+    check('y["hoist.tension_end"] / (M * G) - 1.0', y["hoist.tension_end"] / (M * G) - 1.0, 1e-9, reason=ROUNDOFF)
     check('max(abs(y[f"payload.rotation.{c}"]) for c in "xy")', max(abs(y[f"payload.rotation.{c}"]) for c in "xy"), 2e-13, reason=ROUNDOFF)  # 8.0e-14
 
 

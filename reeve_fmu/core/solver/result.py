@@ -2,9 +2,9 @@
 compiled step's status codes."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from ..results import TimeSeries
 
 
 class SolverError(RuntimeError):
@@ -23,17 +23,13 @@ STATUS_TEXT = {
 }
 
 
-@dataclass
-class Result:
-    time: np.ndarray
-    values: np.ndarray           # (n_samples, n_outputs)
-    names: tuple
+class Result(TimeSeries):
+    """A Simulator run's outputs: the TimeSeries every master returns (`res["car.position"]`,
+    `to_csv`, `to_pandas`), also held as one array `values` (n_samples, n_outputs) in the order of
+    `names` (the columns are views of it)."""
 
-    def __getitem__(self, name):
-        return self.values[:, self.names.index(name)]
-
-    def as_dict(self):
-        d = {"time": self.time}
-        d.update({n: self.values[:, i] for i, n in enumerate(self.names)})
-        return d
-
+    def __init__(self, time: np.ndarray, values: np.ndarray, names):
+        names = tuple(names)
+        super().__init__(time, {n: values[:, i] for i, n in enumerate(names)})
+        self.values = values
+        self.names = names
