@@ -24,6 +24,8 @@ PARAMETERS = {
     "hoist.a_max": ("m/s2", "hoist acceleration limit of the reference"),
     "hoist.jerk": ("m/s3", "hoist jerk of the reference"),
     "hoist.t_start": ("s", "start time of the hoist reference"),
+    "hoist.lower": ("m", "lowering of the payload after the hoist travel (pick and place; 0: none)"),
+    "hoist.t_lower": ("s", "start time of the lowering (same speed, acceleration and jerk limits)"),
     "hoist.radius": ("m", "reel radius: rope speed = radius * motor speed"),
     "hoist.inertia": ("kg.m2", "inertia the hoist feed-forward assumes (motor side)"),
     "hoist.holding_torque": ("N.m", "pre-torque that holds the payload at rest"),
@@ -51,6 +53,8 @@ class CraneDriveParams:
     hoist_a_max: float = 0.3
     hoist_jerk: float = 0.5
     hoist_t_start: float = 2.0
+    hoist_lower: float = 0.0
+    hoist_t_lower: float = 0.0
     hoist_radius: float = 0.3
     hoist_inertia: float = 245.0       # reel 20 + payload 2500 * 0.3^2
     hoist_holding_torque: float = 0.0
@@ -84,11 +88,23 @@ class CraneDriveParams:
         return {k.replace("_", ".", 1): v for k, v in asdict(self).items()}
 
 
+class _Moves:
+    """The sum of S-curve moves (distance, t_start) with the same limits: position, speed, acceleration."""
+
+    def __init__(self, moves, v_max, a_max, jerk):
+        self.profs = [scurve(d, v_max, a_max, jerk, t_start=t0) for d, t0 in moves]
+
+    def __call__(self, t):
+        if len(self.profs) == 1:
+            return self.profs[0](t)
+        return tuple(sum(c) for c in zip(*(p(t) for p in self.profs)))
+
+
 class _Axis:
     """One speed loop: reference profile of the axis position (unit per motor radian: `ratio`)."""
 
-    def __init__(self, distance, v_max, a_max, jerk, t_start, ratio, inertia, kp, ki, tmax, pre):
-        self.prof = scurve(distance, v_max, a_max, jerk, t_start=t_start)
+    def __init__(self, moves, v_max, a_max, jerk, ratio, inertia, kp, ki, tmax, pre):
+        self.prof = _Moves(moves, v_max, a_max, jerk)
         self.ratio, self.J, self.kp, self.ki, self.tmax = ratio, inertia, kp, ki, tmax
         self.integral = pre          # integrator state, N m
         self.torque = pre
@@ -112,11 +128,10 @@ class CraneDrive:
         P = self.params = params or CraneDriveParams()
         if not P.hoist_radius > 0.0:
             raise ValueError(f"hoist.radius must be > 0, got {P.hoist_radius}")
-        self.hoist = _Axis(P.hoist_distance, P.hoist_v_max, P.hoist_a_max, P.hoist_jerk, P.hoist_t_start,
-                           P.hoist_radius, P.hoist_inertia, P.hoist_kp, P.hoist_ki, P.hoist_torque_max,
+        hoist = [(P.hoist_distance, P.hoist_t_start)] + ([(-P.hoist_lower, P.hoist_t_lower)] if P.hoist_lower else [])
+        self.hoist = _Axis(hoist, P.hoist_v_max, P.hoist_a_max, P.hoist_jerk, P.hoist_radius, P.hoist_inertia, P.hoist_kp, P.hoist_ki, P.hoist_torque_max,
                            P.hoist_holding_torque)
-        self.slew = _Axis(P.slew_distance, P.slew_v_max, P.slew_a_max, P.slew_jerk, P.slew_t_start,
-                          1.0, P.slew_inertia, P.slew_kp, P.slew_ki, P.slew_torque_max, 0.0)
+        self.slew = _Axis([(P.slew_distance, P.slew_t_start)], P.slew_v_max, P.slew_a_max, P.slew_jerk, 1.0, P.slew_inertia, P.slew_kp, P.slew_ki, P.slew_torque_max, 0.0)
         self.slew_speed_ref = 0.0
 
     def step(self, t: float, dt: float, hoist_speed: float, slew_speed: float):
@@ -143,18 +158,20 @@ class CraneDrive:
 
 def crane_drive_defaults(scene, holding_torque: float) -> dict:
     """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
-    scene's hoist and slew profiles as the references."""
+    scene's hoist and first axis's profiles as the references (the drive's slew loop drives the
+    scene's first axis, craneplant.crane_axes: a slew, a luff or a trolley's travel; for a prismatic
+    axis its inertia is the body's mass)."""
     from .craneplant import crane_parts   # here, not at the top: the crane drive FMU loads no plant
 
     p = crane_parts(scene)
     v = CraneDriveParams().values()
     reel = next(s for s in scene.sheaves if s.name == p["reel"])
     bodies = {b.name: b for b in scene.bodies}
-    jib, pay = bodies[p["slew"]], bodies[p["payload"]]
+    jib, pay = bodies[p["axes"][0]["body"]], bodies[p["payload"]]
     v["hoist.radius"] = reel.radius
     v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
     v["hoist.holding_torque"] = float(holding_torque)
-    v["slew.inertia"] = jib.inertia
+    v["slew.inertia"] = jib.inertia if jib.joint == "revolute" else jib.mass
     dv = scene.drive
     if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up
         v.update({"hoist.distance": -dv.distance, "hoist.v_max": dv.v_max, "hoist.a_max": dv.a_max,

@@ -29,18 +29,35 @@ CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_co
 CRANE_SCENE = "scene.toml"
 SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
 
-#: crane plant inputs: name -> (declared type, description)
-CRANE_INPUTS = {
-    "motor.torque": ("Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step"),
-    "slew.torque": ("Torque", "slew drive torque on the jib's joint (used when slew.input = 0), held over the step"),
-    "slew.speed": ("AngularVelocity", "slew speed of the jib's joint (used when slew.input = 1); the joint "
-                                      "rate ramps linearly to it over the step"),
-}
+HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step")
+
+
+def crane_inputs(axes: Sequence[Mapping]) -> dict:
+    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque, then per
+    axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its speed; the Integer
+    parameter <axis>.input chooses which one the plant uses."""
+    out = {HOIST_INPUT[0]: HOIST_INPUT[1:]}
+    for a in axes:
+        n, b = a["name"], a["body"]
+        rev = a["joint"] == "revolute"
+        out[f"{n}.{'torque' if rev else 'force'}"] = (
+            "Torque" if rev else "Force",
+            f"{n} drive {'torque' if rev else 'force'} on the {b}'s joint (used when {n}.input = 0), held over the step")
+        out[f"{n}.speed"] = ("AngularVelocity" if rev else "Velocity",
+                             f"{n} speed of the {b}'s joint (used when {n}.input = 1); the joint "
+                             f"rate ramps linearly to it over the step")
+    return out
+
+
+def axis_input_names(axis: Mapping) -> tuple:
+    """The two inputs of an axis in the order of its <axis>.input values (0: torque/force, 1: speed)."""
+    n = axis["name"]
+    return (f"{n}.{'torque' if axis['joint'] == 'revolute' else 'force'}", f"{n}.speed")
 
 
 def is_crane_scene(scene) -> bool:
-    """A scene the crane plant FMU can be built from (a revolute joint and a hoist drive)."""
-    return scene.drive.sheave is not None and any(b.joint == "revolute" for b in scene.bodies)
+    """A scene the crane plant FMU can be built from (a body on a joint and a hoist drive)."""
+    return scene.drive.sheave is not None and any(b.joint is not None for b in scene.bodies)
 
 
 def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapping[str, str]) -> list:
@@ -70,13 +87,21 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
         elif q.startswith("rotation."):
             spec.update(type="Angle", description=f"{obj} rotation vector from the scene's orientation, {q[-1]}")
         elif q == "angle":
-            spec.update(type="Angle", description=f"{obj} angle" + (" (slew, about the joint axis)" if obj == parts["slew"] else ""))
+            spec.update(type="Angle", description=f"{obj} angle" + (" (slew, about the joint axis)" if obj == parts.get("slew") else ""))
         elif q in ("angular_velocity", "speed"):
             spec.update(type="AngularVelocity", description=f"{obj} angular speed")
         elif q == "angular_acceleration":
             spec.update(type="AngularAcceleration", depends=True, description=f"{obj} angular acceleration")
         elif q == "joint_torque":
             spec.update(type="Torque", depends=True, description=f"torque the slew drive applies to {obj}'s joint")
+        elif q == "joint_force":
+            spec.update(type="Force", depends=True, description=f"force the travel drive applies to {obj}'s joint")
+        elif q == "velocity":
+            spec.update(type="Velocity", description=f"{obj} speed along its joint axis")
+        elif q == "acceleration":
+            spec.update(type="Acceleration", depends=True, description=f"{obj} acceleration along its joint axis")
+        elif q == "travel":
+            spec.update(type="Position", description=f"{obj} travel along its joint axis")
         elif q in ("tension_in", "tension_out"):
             side = "entry" if q == "tension_in" else "exit"
             spec.update(type="Force", depends=obj in sheaves, description=f"rope force at the {side} tangent point of {obj}")
