@@ -24,8 +24,6 @@ PARAMETERS = {
     "hoist.a_max": ("m/s2", "hoist acceleration limit of the reference"),
     "hoist.jerk": ("m/s3", "hoist jerk of the reference"),
     "hoist.t_start": ("s", "start time of the hoist reference"),
-    "hoist.lower": ("m", "lowering of the payload after the hoist travel (pick and place; 0: none)"),
-    "hoist.t_lower": ("s", "start time of the lowering (same speed, acceleration and jerk limits)"),
     "hoist.radius": ("m", "reel radius: rope speed = radius * motor speed"),
     "hoist.inertia": ("kg.m2", "inertia the hoist feed-forward assumes (motor side)"),
     "hoist.holding_torque": ("N.m", "pre-torque that holds the payload at rest"),
@@ -41,6 +39,8 @@ PARAMETERS = {
     "slew.kp": ("N.m.s/rad", "slew speed-loop proportional gain"),
     "slew.ki": ("N.m/rad", "slew speed-loop integral gain"),
     "slew.torque_max": ("N.m", "slew torque limit (both directions)"),
+    "hoist.lower": ("m", "lowering of the payload after the hoist travel (pick and place; 0: none)"),
+    "hoist.t_lower": ("s", "start time of the lowering (same speed, acceleration and jerk limits)"),
 }
 
 
@@ -53,8 +53,6 @@ class CraneDriveParams:
     hoist_a_max: float = 0.3
     hoist_jerk: float = 0.5
     hoist_t_start: float = 2.0
-    hoist_lower: float = 0.0
-    hoist_t_lower: float = 0.0
     hoist_radius: float = 0.3
     hoist_inertia: float = 245.0       # reel 20 + payload 2500 * 0.3^2
     hoist_holding_torque: float = 0.0
@@ -70,6 +68,8 @@ class CraneDriveParams:
     slew_kp: float = 6.0e5
     slew_ki: float = 3.0e5
     slew_torque_max: float = 2.0e5
+    hoist_lower: float = 0.0
+    hoist_t_lower: float = 0.0
 
     @classmethod
     def from_values(cls, values: dict) -> "CraneDriveParams":

@@ -34,6 +34,7 @@ import math
 import numpy as np
 
 from ..core.scene import Scene, SceneError, load_scene
+from ..core.solver import SolverError
 from .plant import Plant, with_joint_input
 
 SLEW_INPUTS = ("torque", "speed")      # the modes of an axis input (its Integer parameter <axis>.input: 0, 1)
@@ -135,7 +136,16 @@ class CranePlant:
         sc = scene
         for a in self.axes:
             sc = with_joint_input(sc, a["body"], self.modes[a["name"]])
-        self.plant = Plant(sc, **params)
+        try:
+            self.plant = Plant(sc, **params)
+        except SolverError as e:
+            free = [f"{a['name']}.input = 0 leaves the joint of {a['body']!r} free" for a in self.axes
+                    if self.modes[a["name"]] == "torque"]
+            if not free:
+                raise
+            # a torque (force) input starts at 0: nothing holds a joint the rope pulls on
+            raise SolverError(f"{e}; {', '.join(free)} in the initial statics (no torque or force holds "
+                              f"it against the rope): use the speed input (<axis>.input = 1)") from e
         # the plant's joint inputs follow the scene's body order, like crane_axes
         assert self.plant.joint_inputs == tuple(f"{a['body']}.{self.modes[a['name']]}" for a in self.axes)
         self.input_names = tuple(f"{a['name']}.{self._unit_word(a)}" for a in self.axes)

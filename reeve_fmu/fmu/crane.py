@@ -1,12 +1,13 @@
 """The crane plant and crane drive FMUs: configuration, build, and an fmpy master for the pair.
 
-* `build_crane_fmus(dest, scene)`: the crane plant FMU of a slewing-crane scene (fmus/reeve_crane_slave.py,
+* `build_crane_fmus(dest, scene)`: the crane plant FMU of a crane scene (fmus/reeve_crane_slave.py,
   model reeve_fmu.components.craneplant.CranePlant), named by `crane_plant_name` (`CranePlant.fmu` for the
   reference scene scenes/slewing_crane.toml, `Plant_<scene name>.fmu` for any other), and
   `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py, reeve_fmu.components.cranedrive.CraneDrive);
   `reeve-fmu build --scene <crane scene>` calls it.
-* `cosimulate_crane(plant_fmu, drive_fmu, ...)`: the hoist-and-slew cycle, Gauss-Seidel (the drive
-  steps first with the plant's speeds at t, then the plant holding the drive's new torques).
+* `cosimulate_crane(plant_fmu, drive_fmu, ...)`: a hoist-and-axis cycle (slew, luff or trolley
+  travel), Gauss-Seidel (the drive steps first with the plant's speeds at t, then the plant holding
+  the drive's new torques).
 
 This module imports only numpy (plus reeve_fmu) at import time: it is vendored into the FMUs.
 """
@@ -122,7 +123,7 @@ def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     from .cosim import checked_scene, fmu_config
 
     scene = checked_scene(scene_path)
-    cp = CranePlant(scene, "torque")
+    cp = CranePlant(scene, "speed")     # (joints held in the initial statics; the outputs do not depend on it)
     return fmu_config("reeve_fmu.crane_fmu/1", name, scene, CRANE_SCENE, parts=cp.parts, holding_torque=cp.holding_torque(),
                       stop_time=float(scene.t_end),
                       outputs=crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts))
@@ -180,15 +181,53 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 
+def pick_and_place(drive_values: Mapping[str, float], *, lift: Optional[float] = None,
+                   move: Optional[float] = None, t_start: float = 1.0, settle: float = 15.0) -> tuple[dict, float]:
+    """CraneDrive start values for a pick-and-place cycle from the drive's values sized for a scene
+    (`<plant>.drive.json`, crane_drive_defaults): hoist `lift` m up (default: the scene's hoist
+    travel), then move the first axis by `move` (rad or m; default: the scene's), then lower the same
+    `lift`, each S-curve starting when the one before has ended; `settle` s after the lowering. Returns
+    (values, end time)."""
+    from ..core.profiles import scurve_phases
+
+    v = dict(drive_values)
+    lift = abs(v["hoist.distance"]) if lift is None else float(lift)
+    move = v["slew.distance"] if move is None else float(move)
+
+    def duration(axis, d):
+        return sum(scurve_phases(d, v[f"{axis}.v_max"], v[f"{axis}.a_max"], v[f"{axis}.jerk"])[0])
+    t_move = t_start + duration("hoist", lift)
+    t_lower = t_move + duration("slew", move)
+    v.update({"hoist.distance": lift, "hoist.t_start": t_start, "slew.distance": move, "slew.t_start": t_move,
+              "hoist.lower": lift, "hoist.t_lower": t_lower})
+    return v, t_lower + duration("hoist", lift) + settle
+
+
+def plant_axes(handle) -> list:
+    """The axes (craneplant.crane_axes) of an opened crane plant FMU, from its resources."""
+    with open(Path(handle.unzip_dir) / "resources" / CRANE_CONFIG, encoding="utf-8") as fh:
+        return json.load(fh)["parts"]["axes"]
+
+
+def _axis_signals(axis: Mapping) -> tuple:
+    """Position, speed and drive-effort outputs of an axis's joint."""
+    b = axis["body"]
+    if axis["joint"] == "revolute":
+        return f"{b}.angle", f"{b}.angular_velocity", f"{b}.joint_torque"
+    return f"{b}.travel", f"{b}.velocity", f"{b}.joint_force"
+
+
 def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float = 30.0, slew_input: str = "speed",
-                     drive_values: Optional[Mapping[str, float]] = None,
-                     record: Sequence[str] = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw",
-                                              "payload.position.z", "jib.angle", "jib.angular_velocity",
-                                              "jib.joint_torque", "motor.speed", "tip.tension_out")) -> TimeSeries:
-    """Co-simulate CranePlant.fmu with CraneDrive.fmu (Gauss-Seidel, communication step `step`, points
-    k * step): the drive reads motor.speed and the jib's angular velocity, the plant takes motor.torque and
-    slew.torque or slew.speed (slew_input). The result holds the drive's two commands and `record` after
-    every step (from t = step on). Raises CosimError with both FMUs' logs if a step fails."""
+                     drive_values: Optional[Mapping[str, float]] = None, axis: Optional[str] = None,
+                     record: Optional[Sequence[str]] = None) -> TimeSeries:
+    """Co-simulate a crane plant FMU with CraneDrive.fmu (Gauss-Seidel, communication step `step`, points
+    k * step): the drive reads motor.speed and the speed of the plant's axis `axis` (default: its first,
+    e.g. slew or travel), the plant takes motor.torque and that axis's torque (force) or speed
+    (slew_input) from the drive's slew loop; any other axis of the plant is held at speed 0. The result
+    holds the drive's two commands and `record` after every step (from t = step on; default: payload
+    swing, yaw and height, the axis's position, speed and drive effort, motor.speed and the tension
+    leaving the last sheave). Raises ValueError naming an axis the plant lacks, CosimError with both
+    FMUs' logs if a step fails."""
     from .master import FmuUnit, run
     from .runner import SlaveHandle
 
@@ -199,14 +238,27 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
     try:
         plant = SlaveHandle.open(plant_fmu, "crane")
         handles.append(plant)
+        axes = plant_axes(plant)
+        names = [a["name"] for a in axes]
+        if axis is not None and axis not in names:
+            raise ValueError(f"{Path(plant_fmu).name} has no axis {axis!r} (no inputs {axis}.speed/.torque); "
+                             f"its axes: {names}")
+        ax = axes[names.index(axis)] if axis is not None else axes[0]
         drive = SlaveHandle.open(drive_fmu, "crane_drive")
         handles.append(drive)
-        plant.setup(0.0, t_end, start_values={"slew.input": SLEW_MODES.index(slew_input)})
+        modes = {f"{a['name']}.input": 1 for a in axes}
+        modes[f"{ax['name']}.input"] = SLEW_MODES.index(slew_input)
+        plant.setup(0.0, t_end, start_values=modes)
         drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
-        slew_w = next(nm for nm in plant.variables if nm.endswith(".angular_velocity"))
+        _, speed, effort = _axis_signals(ax)
         cmd = "slew.speed" if slew_input == "speed" else "slew.torque"
-        connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{slew_w}", "drive.slew.angular_velocity"),
-                       ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{cmd}"))
+        target = axis_input_names(ax)[SLEW_MODES.index(slew_input)]
+        connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{speed}", "drive.slew.angular_velocity"),
+                       ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{target}"))
+        if record is None:
+            tip = json.loads((Path(plant.unzip_dir) / "resources" / CRANE_CONFIG).read_text())["parts"]["tip"]
+            record = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw", "payload.position.z",
+                      *_axis_signals(ax), "motor.speed", f"{tip}.tension_out")
         recorded = {"drive": ["motor.torque", cmd], "plant": list(record)}
         r = run([FmuUnit("drive", drive), FmuUnit("plant", plant)], connections, n=n, step=step, grid="multiply",
                 record=recorded)
