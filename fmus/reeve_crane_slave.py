@@ -40,7 +40,7 @@ class CranePlantSlave(ReeveSlave):
             self.add_real(name, "input", declared_type=typ, start=start, description=desc)
         for a in self._axes:
             n, (first, second) = a["name"], axis_input_names(a)
-            self.add_integer(f"{n}.input", "parameter", "fixed", start=0, min=0, max=1,
+            self.add_integer(f"{n}.input", "parameter", "fixed", start=a.get("start_input", 0), min=0, max=1,
                              description=f"{n} input: 0 = {first}, 1 = {second}")
         self.add_real("hoist.holding_torque", "calculatedParameter", "fixed", declared_type="Torque",
                       getter=lambda: cfg["holding_torque"],

@@ -45,7 +45,7 @@ def crane_axes(scene: Scene) -> list:
     """The joint inputs of a crane scene, one per body on a joint in scene order: dicts with `name`
     (the role: "slew" for a revolute joint about the vertical, "luff" for a revolute joint about a
     horizontal axis, "travel" for a prismatic joint; the body's name when the role is taken),
-    `body`, `joint` ("revolute" or "prismatic"), `range` (the joint's range or None)."""
+    `body`, `joint` ("revolute" or "prismatic"), `axis`, `pivot`, `range` (the joint's range or None)."""
     g = np.asarray(scene.gravity, float)
     ez = -g / np.linalg.norm(g)
     axes, taken = [], set()
@@ -59,7 +59,8 @@ def crane_axes(scene: Scene) -> list:
             role = "slew" if abs(a @ ez) > (1.0 - 1e-9) * np.linalg.norm(a) else "luff"
         name = b.name if role in taken else role
         taken.add(name)
-        axes.append({"name": name, "body": b.name, "joint": b.joint,
+        axes.append({"name": name, "body": b.name, "joint": b.joint, "axis": [float(x) for x in b.joint_axis],
+                     "pivot": [float(x) for x in b.pivot],
                      "range": None if b.joint_range is None else [float(x) for x in b.joint_range]})
     return axes
 

@@ -120,10 +120,19 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
 def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
     from ..components.craneplant import CranePlant
+    from ..core.solver import SolverError
     from .cosim import checked_scene, fmu_config
 
     scene = checked_scene(scene_path)
     cp = CranePlant(scene, "speed")     # (joints held in the initial statics; the outputs do not depend on it)
+    for a in cp.parts["axes"]:
+        # <axis>.input starts at 0 (torque/force) where the initial statics holds the joint without
+        # one (a slewing jib), else at 1 (speed): a trolley or a boom the rope or gravity pulls on
+        try:
+            CranePlant(scene, {x["name"]: "torque" if x is a else "speed" for x in cp.parts["axes"]})
+            a["start_input"] = 0
+        except SolverError:
+            a["start_input"] = 1
     return fmu_config("reeve_fmu.crane_fmu/1", name, scene, CRANE_SCENE, parts=cp.parts, holding_torque=cp.holding_torque(),
                       stop_time=float(scene.t_end),
                       outputs=crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts))
@@ -181,18 +190,43 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None,
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 
+def pendulum_length(scene) -> float:
+    """Height of the last sheave's axle above the payload's centre of mass in the scene as written [m]
+    (the payload's pendulum length, to the sheave's axle)."""
+    from ..components.craneplant import crane_parts
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene) if not hasattr(scene, "sheaves") else scene
+    p = crane_parts(scene)
+    bodies = {b.name: b for b in scene.bodies}
+    tip = next(s for s in scene.sheaves if s.name == p["tip"])
+    z = float(tip.center[2]) + (float(bodies[tip.body].position[2]) if tip.body in bodies else 0.0)
+    return z - float(bodies[p["payload"]].position[2])
+
+
 def pick_and_place(drive_values: Mapping[str, float], *, lift: Optional[float] = None,
-                   move: Optional[float] = None, t_start: float = 1.0, settle: float = 15.0) -> tuple[dict, float]:
+                   move: Optional[float] = None, length: Optional[float] = None, t_start: float = 1.0,
+                   settle: float = 15.0) -> tuple[dict, float]:
     """CraneDrive start values for a pick-and-place cycle from the drive's values sized for a scene
     (`<plant>.drive.json`, crane_drive_defaults): hoist `lift` m up (default: the scene's hoist
     travel), then move the first axis by `move` (rad or m; default: the scene's), then lower the same
     `lift`, each S-curve starting when the one before has ended; `settle` s after the lowering. Returns
-    (values, end time)."""
+    (values, end time).
+
+    `length` (the pendulum length at the start, pendulum_length(scene)) shapes the axis move against
+    residual sway: with the hoisted length L = length - lift and T = 2 pi sqrt(L / g), the axis
+    accelerates and decelerates over T each (speed v = move / (1.5 T), acceleration v / T, jerk ramps
+    of T / 10). An acceleration pulse of that shape has no spectral content at 2 pi / T, so a linear
+    pendulum (the load seen from its suspension point) is at rest again after each ramp."""
     from ..core.profiles import scurve_phases
 
     v = dict(drive_values)
     lift = abs(v["hoist.distance"]) if lift is None else float(lift)
     move = v["slew.distance"] if move is None else float(move)
+    if length is not None:
+        T = 2.0 * math.pi * math.sqrt((length - lift) / 9.81)
+        vm = abs(move) / (1.5 * T)
+        v.update({"slew.v_max": vm, "slew.a_max": vm / T, "slew.jerk": vm / T / (0.1 * T)})
 
     def duration(axis, d):
         return sum(scurve_phases(d, v[f"{axis}.v_max"], v[f"{axis}.a_max"], v[f"{axis}.jerk"])[0])
@@ -207,6 +241,9 @@ def plant_axes(handle) -> list:
     """The axes (craneplant.crane_axes) of an opened crane plant FMU, from its resources."""
     with open(Path(handle.unzip_dir) / "resources" / CRANE_CONFIG, encoding="utf-8") as fh:
         return json.load(fh)["parts"]["axes"]
+
+
+AXIS_ALIASES = ("axis.position", "axis.speed", "axis.effort")   # record names for the driven axis's signals
 
 
 def _axis_signals(axis: Mapping) -> tuple:
@@ -226,7 +263,8 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
     (slew_input) from the drive's slew loop; any other axis of the plant is held at speed 0. The result
     holds the drive's two commands and `record` after every step (from t = step on; default: payload
     swing, yaw and height, the axis's position, speed and drive effort, motor.speed and the tension
-    leaving the last sheave). Raises ValueError naming an axis the plant lacks, CosimError with both
+    leaving the last sheave; `axis.position`, `axis.speed`, `axis.effort` name the driven axis's
+    angle or travel, its speed and its joint torque or force). Raises ValueError naming an axis the plant lacks, CosimError with both
     FMUs' logs if a step fails."""
     from .master import FmuUnit, run
     from .runner import SlaveHandle
@@ -259,7 +297,9 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
             tip = json.loads((Path(plant.unzip_dir) / "resources" / CRANE_CONFIG).read_text())["parts"]["tip"]
             record = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw", "payload.position.z",
                       *_axis_signals(ax), "motor.speed", f"{tip}.tension_out")
-        recorded = {"drive": ["motor.torque", cmd], "plant": list(record)}
+        alias = dict(zip(AXIS_ALIASES, _axis_signals(ax)))
+        plant_rec = [alias.get(x, x) for x in record]
+        recorded = {"drive": ["motor.torque", cmd], "plant": plant_rec}
         r = run([FmuUnit("drive", drive), FmuUnit("plant", plant)], connections, n=n, step=step, grid="multiply",
                 record=recorded)
     finally:
@@ -267,4 +307,28 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
             h.close()
     if r.failure is not None:
         raise r.failure
-    return TimeSeries(np.arange(n) * step + step, {k: v[1:] for k, v in r.columns(recorded).items()})
+    cols = r.columns(recorded)
+    for a, x in zip(record, plant_rec):
+        cols[a] = cols[x]
+    return TimeSeries(np.arange(n) * step + step, {k: v[1:] for k, v in cols.items()})
+
+
+def place_position(plant_fmu, distance: float, axis: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
+    """The payload's centre of mass at rest in the plant FMU's initial state, and the place position
+    of a pick and place that moves `axis` (default: the first) by `distance` (rad: turned about the
+    joint axis through its pivot; m: moved along the rail) and lowers the load back to the height it
+    was picked at. Opens the FMU once (in this process)."""
+    from .runner import SlaveHandle
+
+    with SlaveHandle.open(plant_fmu, "probe") as h:
+        axes = plant_axes(h)
+        h.setup(0.0, start_values={f"{a['name']}.input": 1 for a in axes})
+        start = np.array(h.get_many([f"payload.position.{c}" for c in "xyz"]))
+    ax = axes[0] if axis is None else next(a for a in axes if a["name"] == axis)
+    k = np.asarray(ax["axis"], float) / np.linalg.norm(ax["axis"])
+    if ax["joint"] == "prismatic":
+        return start, start + distance * k
+    p = np.asarray(ax["pivot"], float)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    R = np.eye(3) + math.sin(distance) * K + (1.0 - math.cos(distance)) * (K @ K)
+    return start, p + R @ (start - p)
