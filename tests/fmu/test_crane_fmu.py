@@ -210,11 +210,15 @@ def test_tower_crane_pick_and_place_ends_at_the_place_position(tower_fmus):
     r = job("pick_and_place_cycle", tower_fmus["tower_crane"]["fmu"], tower_fmus["drive"], "tower_crane")
     start, place, end = (np.array(r[k]) for k in ("start", "place", "end"))
     mean = np.array(r["last_period"]).mean(axis=1)       # over the last pendulum period: the rest position
-    check("slewed angle - 0.6", r["axis_end"] - 0.6, 1e-9)   # trapezoid sum of the reference speeds
-    check("payload at rest (mean over a period) - place, horizontal", np.linalg.norm(mean[:2] - place[:2]), 0.02)
-    check("payload end - place, height", end[2] - place[2], 5e-4)
+    # the speed input integrates the drive's reference speeds exactly (trapezoid): the S-curve's 0.6 rad
+    check("slewed angle - 0.6", r["axis_end"] - 0.6, 1e-12, reason=ROUNDOFF)
+    # where the load comes to rest: the mean over the last period removes the residual swing
+    # (observed 2.1e-5 m)
+    check("payload at rest (mean over a period) - place, horizontal", np.linalg.norm(mean[:2] - place[:2]), 1e-4)
+    check("payload end - place, height", end[2] - place[2], 5e-4)                    # observed 9.7e-5 m
+    # the end point swings about it: residual swing 0.0746 m (5.5 m with the scene's unshaped S-curve)
     check("payload end - place, horizontal", np.linalg.norm(end[:2] - place[:2]), 0.15)
-    check("largest swing angle", r["max_swing"], 0.03)
+    check("largest swing angle", r["max_swing"], 0.03)                                # observed 0.0160 rad
     assert np.linalg.norm(place - start) > 11.0          # it moved: 2 r sin(0.3) = 12.1 m
 
 
@@ -235,7 +239,7 @@ def test_tower_crane_fmu_bad_inputs_name_the_variable(tower_fmus):
     assert any("travel.input = 2 is outside [0, 1]" in m for m in r["mode_log"]), r["mode_log"]
     assert r["range_status"] != 0                        # discarded, the trolley stays where it was
     text = "\n".join(r["range_log"])
-    assert "travel.speed = 5000.0 would take trolley's joint to 25, outside its range [-15, 20]" in text, text[-2000:]
+    assert "travel.speed = 10000.0 would take trolley's joint to 25, outside its range [-15, 20]" in text, text[-2000:]
     assert r["travel"] == 0.0
 
 
