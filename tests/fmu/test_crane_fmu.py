@@ -24,6 +24,7 @@ EXACT = "exact here; round-off in general"
 SCENE = ROOT / "scenes" / "slewing_crane.toml"
 JOBS = str(ROOT / "tests" / "support" / "crane_jobs.py")
 G, M = 9.81, 2500.0
+OBS_TROLLEY = 1.0
 
 
 def job(name, *args, timeout=900.0):
@@ -220,6 +221,20 @@ def test_tower_crane_pick_and_place_ends_at_the_place_position(tower_fmus):
     check("payload end - place, horizontal", np.linalg.norm(end[:2] - place[:2]), 0.15)
     check("largest swing angle", r["max_swing"], 0.03)                                # observed 0.0160 rad
     assert np.linalg.norm(place - start) > 11.0          # it moved: 2 r sin(0.3) = 12.1 m
+
+
+def test_trolley_pick_and_place_ends_under_the_moved_trolley(tower_fmus):
+    """The same cycle with the trolley travelling 10 m out (scenes/tower_crane_trolley.toml): the load
+    comes to rest 10 m further out, straight under where it was picked (the rope leaves the trolley
+    sheave at the same offset). Its height is not the pick height: this scene's single rope path
+    lifts the load by the lead's lengthening (about the travel, docs/crane.md)."""
+    r = job("pick_and_place_cycle", tower_fmus["tower_crane_trolley"]["fmu"], tower_fmus["drive"],
+            "tower_crane_trolley")
+    start, place, end = (np.array(r[k]) for k in ("start", "place", "end"))
+    mean = np.array(r["last_period"]).mean(axis=1)
+    check("trolley travel - 10 m", r["axis_end"] - 10.0, 1e-11, reason=ROUNDOFF)
+    check("payload at rest (mean over a period) - place, horizontal", np.linalg.norm(mean[:2] - place[:2]), OBS_TROLLEY)
+    assert 9.0 < end[2] - start[2] < 11.0                # lifted by about the travel
 
 
 @pytest.mark.parametrize("scene,axis", [("tower_crane", "slew"), ("tower_crane_trolley", "travel")])

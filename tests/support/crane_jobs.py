@@ -156,9 +156,9 @@ def pick_and_place_cycle(plant_fmu, drive_fmu, scene):
     res = cosimulate_crane(plant_fmu, drive_fmu, t_end=t_end, drive_values=values,
                            record=("payload.position.x", "payload.position.y", "payload.position.z",
                                    "payload.swing_radial", "payload.swing_tangential", "axis.position"))
-    T = 2.0 * math.pi * math.sqrt(L / G)
-    last = res.time >= res.time[-1] - T
     pos = np.array([res[f"payload.position.{c}"] for c in "xyz"])
+    T = 2.0 * math.pi * math.sqrt((L - (pos[2, -1] - start[2])) / G)      # the pendulum at the end
+    last = res.time >= res.time[-1] - T
     return {"start": start.tolist(), "place": place.tolist(), "end": pos[:, -1].tolist(),
             "last_period": pos[:, last].tolist(), "axis_end": float(res["axis.position"][-1]),
             "max_swing": float(np.abs(np.array([res["payload.swing_radial"], res["payload.swing_tangential"]])).max()),
