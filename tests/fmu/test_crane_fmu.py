@@ -24,7 +24,6 @@ EXACT = "exact here; round-off in general"
 SCENE = ROOT / "scenes" / "slewing_crane.toml"
 JOBS = str(ROOT / "tests" / "support" / "crane_jobs.py")
 G, M = 9.81, 2500.0
-OBS_TROLLEY = 1.0
 
 
 def job(name, *args, timeout=900.0):
@@ -232,8 +231,9 @@ def test_trolley_pick_and_place_ends_under_the_moved_trolley(tower_fmus):
             "tower_crane_trolley")
     start, place, end = (np.array(r[k]) for k in ("start", "place", "end"))
     mean = np.array(r["last_period"]).mean(axis=1)
-    check("trolley travel - 10 m", r["axis_end"] - 10.0, 1e-11, reason=ROUNDOFF)
-    check("payload at rest (mean over a period) - place, horizontal", np.linalg.norm(mean[:2] - place[:2]), OBS_TROLLEY)
+    check("trolley travel - 10 m", r["axis_end"] - 10.0, 5e-11, reason=ROUNDOFF)
+    # observed 4.2e-5 m
+    check("payload at rest (mean over a period) - place, horizontal", np.linalg.norm(mean[:2] - place[:2]), 2e-4)
     assert 9.0 < end[2] - start[2] < 11.0                # lifted by about the travel
 
 
@@ -286,7 +286,9 @@ def test_c_host_runs_the_tower_crane_like_fmpy(tower_fmus, host, tmp_path):
     ref = job("cosim", plant, tower_fmus["drive"], values, steps * h, record)
     cols = list(zip(*r["rows"][1:]))
     assert max(abs(a - b) for a, b in zip(cols[0], ref["time"])) < 1e-15
-    why = "an ulp of the communication points (tests/fmu/test_fmu_hosts.py)"
-    for i, (name, tol) in enumerate(zip(record, (1e-13, 1e-16, 1e-17, 1e-11, 1e-4)), start=1):
+    # observed here (Python 3.11): 0, 1.3e-18, 8.7e-19, 1.6e-15, 1.8e-10; the round-off's growth differs by
+    # orders of magnitude between Python/numpy versions (test_fmu_hosts.py)
+    why = "an ulp of the communication points; its growth differs by Python/numpy version"
+    for i, (name, tol) in enumerate(zip(record, (1e-13, 1e-16, 1e-17, 1e-11, 1e-6)), start=1):
         check(f"tower crane in the C host against fmpy: {name}", [a - b for a, b in zip(cols[i], ref[name])], tol, why)
     assert ref["jib.angle"][-1] > 1e-3 and ref["payload.position.z"][-1] > ref["payload.position.z"][0]

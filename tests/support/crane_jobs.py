@@ -26,6 +26,24 @@ def build(dest):
                                    for n in ("CranePlant.fmu", "CraneDrive.fmu")}}
 
 
+def _rewind(plant_fmu, h, run, k0, axis):
+    """Save the state of h at step k0 (and serialize it), run 60 steps, restore, run them again, and
+    run them in a new instance from the serialized state: the three runs and h's errors."""
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    s = h.get_state()
+    blob = h.serialize_state(s)
+    a = run(h, k0, 60)
+    h.set_state(s)
+    b = run(h, k0, 60)
+    errors = [str(m) for m in h.errors(2)]
+    with SlaveHandle.open(plant_fmu, "crane2") as h2:
+        h2.setup(0.0, start_values={f"{axis}.input": 1})
+        h2.set_state(h2.deserialize_state(blob))
+        c = run(h2, k0, 60)
+    return {"a": a, "b": b, "c": c, "errors": errors}
+
+
 def static_and_state(plant_fmu):
     """Payload-end tension at rest with the holding torque (t = 0 and after 2 s), and get/set/serialize
     state: rewind and re-step bit-identically, also in a new instance from the serialized blob."""
@@ -48,17 +66,8 @@ def static_and_state(plant_fmu):
                 assert h.do_step(k * 5e-3, 5e-3) == 0
                 rows.append(h.get_many(outs))
             return rows
-        s = h.get_state()
-        blob = h.serialize_state(s)
-        a = run(h, 400, 60)
-        h.set_state(s)
-        b = run(h, 400, 60)
-        errors = [str(m) for m in h.errors(2)]
-    with SlaveHandle.open(plant_fmu, "crane2") as h2:
-        h2.setup(0.0, start_values={"slew.input": 1})
-        h2.set_state(h2.deserialize_state(blob))
-        c = run(h2, 400, 60)
-    return {"hold": hold, "t0": t0, "t2": t2, "a": a, "b": b, "c": c, "errors": errors}
+        r = _rewind(plant_fmu, h, run, 400, "slew")
+    return {"hold": hold, "t0": t0, "t2": t2, **r}
 
 
 def centripetal(plant_fmu, drive_fmu, omega, t_ramp, t_end):
@@ -185,17 +194,7 @@ def state_roundtrip(plant_fmu, axis):
         h.setup(0.0, start_values={f"{axis}.input": 1})
         hold = h.get("hoist.holding_torque")
         run(h, 0, 100)
-        s = h.get_state()
-        blob = h.serialize_state(s)
-        a = run(h, 100, 60)
-        h.set_state(s)
-        b = run(h, 100, 60)
-        errors = [str(m) for m in h.errors(2)]
-    with SlaveHandle.open(plant_fmu, "crane2") as h2:
-        h2.setup(0.0, start_values={f"{axis}.input": 1})
-        h2.set_state(h2.deserialize_state(blob))
-        c = run(h2, 100, 60)
-    return {"a": a, "b": b, "c": c, "errors": errors}
+        return _rewind(plant_fmu, h, run, 100, axis)
 
 
 def bad_inputs(tower_fmu, trolley_fmu, drive_fmu):
