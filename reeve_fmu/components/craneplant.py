@@ -93,7 +93,7 @@ def crane_parts(scene: Scene) -> dict:
     frame = tip_body if tip_body in jointed else jointed[0]
     parts = {"reel": reel, "axes": axes, "frame": frame, "payload": payload.name, "tip": tip,
              "rope": ropes[0].name}
-    slew = [a["body"] for a in axes if a["joint"] == "revolute"]
+    slew = [a["body"] for a in axes if a["name"] == "slew"]
     if slew:
         parts["slew"] = slew[0]
     return parts
