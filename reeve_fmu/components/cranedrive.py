@@ -157,7 +157,8 @@ class CraneDrive:
 
 
 def crane_drive_defaults(scene, holding_torque: float) -> dict:
-    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
+    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque (the hoist's
+    torque limit at least 1.5 times it), and the
     scene's hoist and first axis's profiles as the references (the drive's slew loop drives the
     scene's first axis, craneplant.crane_axes: a slew, a luff or a trolley's travel; for a prismatic
     axis its inertia is the body's mass)."""
@@ -171,6 +172,8 @@ def crane_drive_defaults(scene, holding_torque: float) -> dict:
     v["hoist.radius"] = reel.radius
     v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
     v["hoist.holding_torque"] = float(holding_torque)
+    # a hoist motor that can hold the load and accelerate it: at least 1.5 x the holding torque
+    v["hoist.torque_max"] = max(v["hoist.torque_max"], 1.5 * abs(float(holding_torque)))
     v["slew.inertia"] = jib.inertia if jib.joint == "revolute" else jib.mass
     dv = scene.drive
     if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up

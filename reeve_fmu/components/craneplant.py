@@ -68,7 +68,8 @@ def crane_axes(scene: Scene) -> list:
 def crane_parts(scene: Scene) -> dict:
     """Names of the hoist reel, the axes (`crane_axes`), the frame body that carries the suspension
     point, the payload and the last sheave of the hoist rope (plus `slew`: the slewing body, when
-    there is one); SceneError naming the key when the scene is not a crane."""
+    there is one; CranePlant adds `suspension`, the suspension point at t = 0); SceneError naming the
+    key when the scene is not a crane."""
     src = scene.source
     reel = scene.drive.sheave
     if reel is None:
@@ -189,6 +190,7 @@ class CranePlant:
         com = y0[self._i_pos]
         # S: above the initial centre of mass at the tip axle's height (relative to the pivot, at angle 0)
         S = com + ez * ((centre - com) @ ez)
+        p["suspension"] = S.tolist()      # at t = 0 (the FMU's configuration carries it: place_position)
         if self._prismatic:
             self._S0 = S - self._axis * float(y0[self._i_ang])
             er = self._axis - ez * (self._axis @ ez)

@@ -314,21 +314,32 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
 
 
 def place_position(plant_fmu, distance: float, axis: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
-    """The payload's centre of mass at rest in the plant FMU's initial state, and the place position
-    of a pick and place that moves `axis` (default: the first) by `distance` (rad: turned about the
-    joint axis through its pivot; m: moved along the rail) and lowers the load back to the height it
-    was picked at. Opens the FMU once (in this process)."""
+    """The payload's centre of mass at rest in the plant FMU's initial state, and the place position of
+    a pick and place that moves `axis` (default: the first) by `distance` (rad: turned about the joint
+    axis through its pivot; m: moved along the rail): horizontally, the start moved as the suspension
+    point moves (the load comes to rest below it); its height, the pick height. That height is exact
+    for a slew, which leaves the rope path as it was; a luff or a trolley's travel changes the rope
+    path (tower_crane_trolley.toml lifts the load by the lead's lengthening), so only the horizontal
+    place holds for them. Opens the FMU once (in this process)."""
     from .runner import SlaveHandle
 
     with SlaveHandle.open(plant_fmu, "probe") as h:
-        axes = plant_axes(h)
+        with open(Path(h.unzip_dir) / "resources" / CRANE_CONFIG, encoding="utf-8") as fh:
+            parts = json.load(fh)["parts"]
+        axes = parts["axes"]
         h.setup(0.0, start_values={f"{a['name']}.input": 1 for a in axes})
         start = np.array(h.get_many([f"payload.position.{c}" for c in "xyz"]))
     ax = axes[0] if axis is None else next(a for a in axes if a["name"] == axis)
     k = np.asarray(ax["axis"], float) / np.linalg.norm(ax["axis"])
+    S0 = np.asarray(parts["suspension"], float)
     if ax["joint"] == "prismatic":
-        return start, start + distance * k
-    p = np.asarray(ax["pivot"], float)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    R = np.eye(3) + math.sin(distance) * K + (1.0 - math.cos(distance)) * (K @ K)
-    return start, p + R @ (start - p)
+        S1 = S0 + distance * k
+    else:
+        from ..components.craneplant import _rotation
+
+        p = np.asarray(ax["pivot"], float)
+        S1 = p + _rotation(k, distance) @ (S0 - p)
+    move = S1 - S0
+    up = start - S0
+    up /= np.linalg.norm(up)                 # the vertical (the load hangs below S)
+    return start, start + move - up * (move @ up)

@@ -70,6 +70,27 @@ def test_speed_input_is_integrated_exactly_and_torque_input_equals_the_torque_ta
         with_joint_input(sc, "car", "speed")
 
 
+def test_crane_axes_by_role_and_drive_sized_to_hold_the_load():
+    """One axis per body on a joint, named by its role; the drive's hoist torque limit holds the load
+    (the luffing crane's 22 kN m holding torque is above the default 20 kN m limit)."""
+    from reeve_fmu.components.cranedrive import crane_drive_defaults
+    from reeve_fmu.components.craneplant import CranePlant, crane_axes
+    from reeve_fmu.core.scene import load_scene
+
+    roles = {s: [(a["name"], a["body"], a["joint"]) for a in crane_axes(load_scene(ROOT / "scenes" / f"{s}.toml"))]
+             for s in ("slewing_crane", "tower_crane", "tower_crane_trolley", "luffing_crane")}
+    assert roles == {"slewing_crane": [("slew", "jib", "revolute")], "tower_crane": [("slew", "jib", "revolute")],
+                     "tower_crane_trolley": [("travel", "trolley", "prismatic")],
+                     "luffing_crane": [("luff", "boom", "revolute")]}
+    sc = load_scene(ROOT / "scenes" / "luffing_crane.toml")
+    cp = CranePlant(sc, "speed")
+    v = crane_drive_defaults(sc, cp.holding_torque())
+    assert v["hoist.torque_max"] == 1.5 * cp.holding_torque() > 2e4
+    assert crane_drive_defaults(load_scene(SCENE), 7341.2)["hoist.torque_max"] == 2e4   # the reference crane's
+    with pytest.raises(ValueError, match="no axis 'travel' in this scene; its axes: \\['slew'\\]"):
+        CranePlant(load_scene(SCENE), {"travel": "speed"})
+
+
 # ------------------------------------------------------------------------------------------------
 # the FMUs
 # ------------------------------------------------------------------------------------------------
