@@ -66,7 +66,9 @@ def main(argv=None) -> int:
         start, place = place_position(plant, values["slew.distance"])
         end = np.array([res[f"payload.position.{c}"][-1] for c in "xyz"])
         print(f"payload start {np.round(start, 4).tolist()} m, place position {np.round(place, 4).tolist()} m, "
-              f"at the end {np.round(end, 4).tolist()} m: {np.linalg.norm(end - place):.4f} m from it")
+              f"at the end {np.round(end, 4).tolist()} m: {np.linalg.norm(end[:2] - place[:2]):.4f} m from it "
+              f"horizontally, {end[2] - place[2]:+.4f} m in height (exact only for a slew: a luff or a "
+              f"trolley's travel changes the rope path)")
     if a.png:
         plot(res, a.png, a.slew_input, Path(a.scene).stem)
         print(f"wrote {a.png}")
