@@ -1,13 +1,18 @@
-"""Hoist-and-slew cycle of the slewing crane: CranePlant.fmu + CraneDrive.fmu through the fmpy master.
+"""Crane cycles through the fmpy master: a crane plant FMU + CraneDrive.fmu.
 
-    python cosim/crane_cycle.py [--scene scenes/slewing_crane.toml] [--fmus DIR] [--slew-input speed]
-                                [--step 5e-3] [--t-end 30] [--png docs/img/crane_cosim_sway.png]
+    python cosim/crane_cycle.py [--scene scenes/tower_crane.toml] [--cycle pick-and-place|scene]
+                                [--fmus DIR] [--slew-input speed] [--step 5e-3] [--t-end T] [--png PNG]
 
-Builds both FMUs into DIR (default $REEVE_FMU_FMUS, else fmus/) from the scene, sizes the drive from the
-scene (reeve_fmu.components.cranedrive.crane_drive_defaults: the scene's hoist and slew S-curves as references, the
-holding torque as pre-torque), co-simulates with reeve_fmu.fmu.crane.cosimulate_crane and plots the
-payload sway (swing angles, slew speed, hoist motor torque). The FMUs run Python inside this process:
-run it in a fresh interpreter (it is a script, so it is).
+Builds both FMUs into DIR (default $REEVE_FMU_FMUS, else fmus/) from the scene and sizes the drive from
+the scene (reeve_fmu.components.cranedrive.crane_drive_defaults: the scene's hoist and first-axis
+S-curves, the holding torque as pre-torque). `--cycle pick-and-place` (default): hoist the scene's
+hoist travel up, move the first axis (slew, or the trolley's travel) by the scene's distance with a
+move shaped against residual sway (`--shaped 0`: the scene's S-curve), lower the load again, settle
+15 s (reeve_fmu.fmu.crane.pick_and_place), and report where the payload ends against the place
+position (the start position turned, or moved, by the axis's distance).
+`--cycle scene`: the scene's own hoist and axis profiles for --t-end s (default 30). Co-simulates with
+reeve_fmu.fmu.crane.cosimulate_crane and plots the payload sway (swing angles, axis speed, hoist motor
+torque). The FMUs run Python inside this process: run it in a fresh interpreter (it is a script, so it is).
 """
 from __future__ import annotations
 
@@ -22,34 +27,55 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default=str(ROOT / "scenes" / "slewing_crane.toml"))
+    ap.add_argument("--scene", default=str(ROOT / "scenes" / "tower_crane.toml"))
+    ap.add_argument("--cycle", choices=("pick-and-place", "scene"), default="pick-and-place")
+    ap.add_argument("--shaped", type=int, default=1, help="1: shape the axis move against sway (pick-and-place)")
     ap.add_argument("--fmus", default=os.environ.get("REEVE_FMU_FMUS") or str(ROOT / "fmus"))
     ap.add_argument("--slew-input", choices=("speed", "torque"), default="speed")
     ap.add_argument("--step", type=float, default=5e-3)
-    ap.add_argument("--t-end", type=float, default=30.0)
-    ap.add_argument("--png", default=str(ROOT / "docs" / "img" / "crane_cosim_sway.png"))
+    ap.add_argument("--t-end", type=float, default=None, help="end time (pick-and-place: from the cycle)")
+    ap.add_argument("--png", default=None, help="plot (default: none)")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
-    from reeve_fmu.fmu.crane import build_crane_fmus, cosimulate_crane
+    from reeve_fmu.fmu.crane import (build_crane_fmus, cosimulate_crane, pendulum_length, pick_and_place,
+                                     place_position)
 
     t0 = time.perf_counter()
     plant, drive, values = build_crane_fmus(a.fmus, a.scene)
     print(f"built {plant.name}, {drive.name} in {a.fmus} ({time.perf_counter() - t0:.1f} s)")
+    t_end = a.t_end or 30.0
+    if a.cycle == "pick-and-place":
+        values, t_cycle = pick_and_place(values, length=pendulum_length(a.scene) if a.shaped else None)
+        t_end = a.t_end or t_cycle
+        print(f"pick and place: hoist {values['hoist.distance']:g} m up from t = {values['hoist.t_start']:g} s, "
+              f"axis {values['slew.distance']:g} from {values['slew.t_start']:.2f} s, lower from "
+              f"{values['hoist.t_lower']:.2f} s, end {t_end:.2f} s")
     t0 = time.perf_counter()
-    res = cosimulate_crane(plant, drive, step=a.step, t_end=a.t_end, slew_input=a.slew_input, drive_values=values)
-    print(f"co-simulated {a.t_end:g} s in {time.perf_counter() - t0:.1f} s wall "
-          f"(step {a.step:g} s, slew input {a.slew_input})")
+    rec = ("payload.position.x", "payload.position.y", "payload.position.z", "payload.swing_radial",
+           "payload.swing_tangential")
+    res = cosimulate_crane(plant, drive, step=a.step, t_end=t_end, slew_input=a.slew_input, drive_values=values,
+                           record=rec + ("axis.speed", "axis.effort"))
+    print(f"co-simulated {t_end:g} s in {time.perf_counter() - t0:.1f} s wall "
+          f"(step {a.step:g} s, axis input {a.slew_input})")
     import numpy as np
 
     for name in ("payload.swing_radial", "payload.swing_tangential"):
         x = res[name]
         print(f"{name}: max |.| = {np.degrees(np.abs(x).max()):.3f} deg, at the end {np.degrees(x[-1]):.3f} deg")
-    plot(res, a.png, a.slew_input)
-    print(f"wrote {a.png}")
+    if a.cycle == "pick-and-place":
+        start, place = place_position(plant, values["slew.distance"])
+        end = np.array([res[f"payload.position.{c}"][-1] for c in "xyz"])
+        print(f"payload start {np.round(start, 4).tolist()} m, place position {np.round(place, 4).tolist()} m, "
+              f"at the end {np.round(end, 4).tolist()} m: {np.linalg.norm(end[:2] - place[:2]):.4f} m from it "
+              f"horizontally, {end[2] - place[2]:+.4f} m in height (exact only for a slew: a luff or a "
+              f"trolley's travel changes the rope path)")
+    if a.png:
+        plot(res, a.png, a.slew_input, Path(a.scene).stem)
+        print(f"wrote {a.png}")
     return 0
 
 
-def plot(res, png, slew_input):
+def plot(res, png, slew_input, scene):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -61,17 +87,17 @@ def plot(res, png, slew_input):
     ax[0].plot(t, np.degrees(res["payload.swing_tangential"]), label="tangential (slew direction)")
     ax[0].set_ylabel("payload swing [deg]")
     ax[0].legend(loc="best")
-    ax[1].plot(t, res["jib.angular_velocity"], label="jib speed")
-    ax[1].plot(t, res[f"slew.{slew_input}"] if slew_input == "speed" else res["jib.angular_velocity"] * np.nan,
-               "--", label="slew speed command")
-    ax[1].set_ylabel("slew speed [rad/s]")
+    ax[1].plot(t, res["axis.speed"], label="axis speed")
+    ax[1].plot(t, res[f"slew.{slew_input}"] if slew_input == "speed" else res["axis.speed"] * np.nan,
+               "--", label="axis speed command")
+    ax[1].set_ylabel("axis speed [rad/s or m/s]")
     ax[1].legend(loc="best")
     ax[2].plot(t, res["motor.torque"] / 1e3, label="hoist motor torque")
-    ax[2].plot(t, res["jib.joint_torque"] / 1e5, label="slew joint torque / 100")
+    ax[2].plot(t, res["axis.effort"] / 1e5, label="axis torque (N m) or force (N) / 1e5")
     ax[2].set_ylabel("torque [kN m]")
     ax[2].set_xlabel("time [s]")
     ax[2].legend(loc="best")
-    fig.suptitle("slewing crane, hoist + slew cycle: CranePlant.fmu + CraneDrive.fmu (fmpy)")
+    fig.suptitle(f"{scene}: crane plant FMU + CraneDrive.fmu (fmpy)")
     fig.tight_layout()
     Path(png).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(png, dpi=90)

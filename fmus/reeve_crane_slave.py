@@ -1,10 +1,11 @@
 """FMU entry of the crane plant (FMI 2.0 co-simulation): `reeve-fmu build --scene <crane scene>` ->
 CranePlant.fmu.
 
-Inputs  motor.torque [N.m] (hoist motor on the reel, positive hoists), slew.torque [N.m] or slew.speed
-        [rad/s] of the jib's joint (the fixed parameter slew.input selects: 0 torque, 1 speed; the
-        other input is ignored), all held over the communication step (the speed as a linear ramp
-        from its previous value).
+Inputs  motor.torque [N.m] (hoist motor on the reel, positive hoists) and per axis (a body on a joint:
+        slew, luff, travel; reeve_fmu.components.craneplant.crane_axes) <axis>.torque [N.m] (force
+        [N] for a prismatic joint) or <axis>.speed [rad/s, m/s] (the fixed parameter <axis>.input
+        selects: 0 torque/force, 1 speed; the other input is ignored), all held over the
+        communication step (the speed as a linear ramp from its previous value).
 Outputs the engine's outputs of the scene (payload position/velocity, jib angle/speed/joint torque,
         rope forces <sheave>.tension_in/out, ...) plus payload.swing_radial, payload.swing_tangential
         and payload.yaw (reeve_fmu.components.craneplant, docs/crane.md).
@@ -15,7 +16,7 @@ step returns fmi2Discard; further steps are refused until the master restores a 
 """
 import json
 
-from reeve_fmu.fmu.crane import CRANE_CONFIG, CRANE_INPUTS, SLEW_MODES
+from reeve_fmu.fmu.crane import CRANE_CONFIG, SLEW_MODES, axis_input_names, crane_inputs
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 
@@ -27,13 +28,20 @@ class CranePlantSlave(ReeveSlave):
             cfg = json.load(fh)
         self.config = cfg
         self.modelName = cfg["name"]
-        self.description = f"{type(self).description}; scene {cfg['scene_name']}: {cfg['scene_description']}"
+        names = [a["name"] for a in cfg["parts"]["axes"]]
+        what = type(self).description if names == ["slew"] else \
+            f"Crane (ALE rope model, reeve_fmu): hoist and {' and '.join(names)} inputs, payload sway out"
+        self.description = f"{what}; scene {cfg['scene_name']}: {cfg['scene_description']}"
         self.default_experiment = DefaultExperiment(start_time=0.0, stop_time=cfg["stop_time"], step_size=5e-3)
-        for name, (typ, desc) in CRANE_INPUTS.items():
+        self._axes = cfg["parts"]["axes"]
+        inputs = crane_inputs(self._axes)
+        for name, (typ, desc) in inputs.items():
             start = cfg["holding_torque"] if name == "motor.torque" else 0.0
             self.add_real(name, "input", declared_type=typ, start=start, description=desc)
-        self.add_integer("slew.input", "parameter", "fixed", start=0, min=0, max=1,
-                         description="slew input: 0 = slew.torque, 1 = slew.speed")
+        for a in self._axes:
+            n, (first, second) = a["name"], axis_input_names(a)
+            self.add_integer(f"{n}.input", "parameter", "fixed", start=a.get("start_input", 0), min=0, max=1,
+                             description=f"{n} input: 0 = {first}, 1 = {second}")
         self.add_real("hoist.holding_torque", "calculatedParameter", "fixed", declared_type="Torque",
                       getter=lambda: cfg["holding_torque"],
                       description="hoist motor torque that holds the payload at rest in the initial state")
@@ -41,7 +49,7 @@ class CranePlantSlave(ReeveSlave):
         for o in cfg["outputs"]:
             self.add_real(o["name"], "output", unit=o["unit"], declared_type=o["type"],
                           description=o["description"],
-                          dependencies=list(CRANE_INPUTS) if o["depends"] else ())
+                          dependencies=list(inputs) if o["depends"] else ())
             self._names.append(o["name"])
         self.add_output_arrays()      # FMI 3.0: payload.position, .rotation, ... (x, y, z); sheaves.*
         self.crane = None
@@ -49,9 +57,9 @@ class CranePlantSlave(ReeveSlave):
     def initialize(self):
         from reeve_fmu.components.craneplant import CranePlant
 
-        mode = SLEW_MODES[int(self.values["slew.input"])]
-        self._cmd = f"slew.{mode}"
-        self.crane = CranePlant(self.resource_path(self.config["scene"]), mode)
+        modes = {a["name"]: SLEW_MODES[int(self.values[f"{a['name']}.input"])] for a in self._axes}
+        self._cmd = [axis_input_names(a)[SLEW_MODES.index(modes[a["name"]])] for a in self._axes]
+        self.crane = CranePlant(self.resource_path(self.config["scene"]), modes)
         if list(self.crane.output_names) != self._names:
             raise RuntimeError("the crane model's outputs differ from the declared ones (resources out of date?)")
         for w in self.crane.warnings:
@@ -64,7 +72,7 @@ class CranePlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        self._write(self.crane.step(dt, v["motor.torque"], v[self._cmd]))
+        self._write(self.crane.step(dt, v["motor.torque"], [v[c] for c in self._cmd]))
         return True
 
     def get_hidden_state(self):

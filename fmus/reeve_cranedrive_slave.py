@@ -1,7 +1,8 @@
 """FMU entry of the crane drive (FMI 2.0 co-simulation): `reeve-fmu build --scene <crane scene>` ->
 CraneDrive.fmu (reeve_fmu.components.cranedrive: hoist and slew speed loops on S-curve references).
 
-Inputs  motor.speed [rad/s] (hoist motor, positive hoists), slew.angular_velocity [rad/s] (the jib).
+Inputs  motor.speed [rad/s] (hoist motor, positive hoists), slew.angular_velocity [rad/s] (the jib; or
+        the speed of whichever plant axis the master connects, e.g. a trolley's travel in m/s).
 Outputs motor.torque [N.m] (hoist), slew.torque [N.m], slew.speed [rad/s] (the slew reference speed,
         for a plant with a slew speed input), and the references. The drive samples the inputs at the
         start of the step: no output depends directly on an input.

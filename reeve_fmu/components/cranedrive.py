@@ -39,6 +39,8 @@ PARAMETERS = {
     "slew.kp": ("N.m.s/rad", "slew speed-loop proportional gain"),
     "slew.ki": ("N.m/rad", "slew speed-loop integral gain"),
     "slew.torque_max": ("N.m", "slew torque limit (both directions)"),
+    "hoist.lower": ("m", "lowering of the payload after the hoist travel (pick and place; 0: none)"),
+    "hoist.t_lower": ("s", "start time of the lowering (same speed, acceleration and jerk limits)"),
 }
 
 
@@ -66,6 +68,8 @@ class CraneDriveParams:
     slew_kp: float = 6.0e5
     slew_ki: float = 3.0e5
     slew_torque_max: float = 2.0e5
+    hoist_lower: float = 0.0
+    hoist_t_lower: float = 0.0
 
     @classmethod
     def from_values(cls, values: dict) -> "CraneDriveParams":
@@ -84,11 +88,23 @@ class CraneDriveParams:
         return {k.replace("_", ".", 1): v for k, v in asdict(self).items()}
 
 
+class _Moves:
+    """The sum of S-curve moves (distance, t_start) with the same limits: position, speed, acceleration."""
+
+    def __init__(self, moves, v_max, a_max, jerk):
+        self.profs = [scurve(d, v_max, a_max, jerk, t_start=t0) for d, t0 in moves]
+
+    def __call__(self, t):
+        if len(self.profs) == 1:
+            return self.profs[0](t)
+        return tuple(sum(c) for c in zip(*(p(t) for p in self.profs)))
+
+
 class _Axis:
     """One speed loop: reference profile of the axis position (unit per motor radian: `ratio`)."""
 
-    def __init__(self, distance, v_max, a_max, jerk, t_start, ratio, inertia, kp, ki, tmax, pre):
-        self.prof = scurve(distance, v_max, a_max, jerk, t_start=t_start)
+    def __init__(self, moves, v_max, a_max, jerk, ratio, inertia, kp, ki, tmax, pre):
+        self.prof = _Moves(moves, v_max, a_max, jerk)
         self.ratio, self.J, self.kp, self.ki, self.tmax = ratio, inertia, kp, ki, tmax
         self.integral = pre          # integrator state, N m
         self.torque = pre
@@ -112,11 +128,10 @@ class CraneDrive:
         P = self.params = params or CraneDriveParams()
         if not P.hoist_radius > 0.0:
             raise ValueError(f"hoist.radius must be > 0, got {P.hoist_radius}")
-        self.hoist = _Axis(P.hoist_distance, P.hoist_v_max, P.hoist_a_max, P.hoist_jerk, P.hoist_t_start,
-                           P.hoist_radius, P.hoist_inertia, P.hoist_kp, P.hoist_ki, P.hoist_torque_max,
+        hoist = [(P.hoist_distance, P.hoist_t_start)] + ([(-P.hoist_lower, P.hoist_t_lower)] if P.hoist_lower else [])
+        self.hoist = _Axis(hoist, P.hoist_v_max, P.hoist_a_max, P.hoist_jerk, P.hoist_radius, P.hoist_inertia, P.hoist_kp, P.hoist_ki, P.hoist_torque_max,
                            P.hoist_holding_torque)
-        self.slew = _Axis(P.slew_distance, P.slew_v_max, P.slew_a_max, P.slew_jerk, P.slew_t_start,
-                          1.0, P.slew_inertia, P.slew_kp, P.slew_ki, P.slew_torque_max, 0.0)
+        self.slew = _Axis([(P.slew_distance, P.slew_t_start)], P.slew_v_max, P.slew_a_max, P.slew_jerk, 1.0, P.slew_inertia, P.slew_kp, P.slew_ki, P.slew_torque_max, 0.0)
         self.slew_speed_ref = 0.0
 
     def step(self, t: float, dt: float, hoist_speed: float, slew_speed: float):
@@ -142,19 +157,24 @@ class CraneDrive:
 
 
 def crane_drive_defaults(scene, holding_torque: float) -> dict:
-    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque, and the
-    scene's hoist and slew profiles as the references."""
+    """Crane drive parameters sized from the scene: reel radius, inertias, holding torque (the hoist's
+    torque limit at least 1.5 times it), and the
+    scene's hoist and first axis's profiles as the references (the drive's slew loop drives the
+    scene's first axis, craneplant.crane_axes: a slew, a luff or a trolley's travel; for a prismatic
+    axis its inertia is the body's mass)."""
     from .craneplant import crane_parts   # here, not at the top: the crane drive FMU loads no plant
 
     p = crane_parts(scene)
     v = CraneDriveParams().values()
     reel = next(s for s in scene.sheaves if s.name == p["reel"])
     bodies = {b.name: b for b in scene.bodies}
-    jib, pay = bodies[p["slew"]], bodies[p["payload"]]
+    jib, pay = bodies[p["axes"][0]["body"]], bodies[p["payload"]]
     v["hoist.radius"] = reel.radius
     v["hoist.inertia"] = reel.inertia + scene.drive.motor_inertia + pay.mass * reel.radius ** 2
     v["hoist.holding_torque"] = float(holding_torque)
-    v["slew.inertia"] = jib.inertia
+    # a hoist motor that can hold the load and accelerate it: at least 1.5 x the holding torque
+    v["hoist.torque_max"] = max(v["hoist.torque_max"], 1.5 * abs(float(holding_torque)))
+    v["slew.inertia"] = jib.inertia if jib.joint == "revolute" else jib.mass
     dv = scene.drive
     if dv.kind == "speed" and dv.profile == "s-curve":     # the scene's hoist: rope hauled in = up
         v.update({"hoist.distance": -dv.distance, "hoist.v_max": dv.v_max, "hoist.a_max": dv.a_max,

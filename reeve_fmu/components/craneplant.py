@@ -1,10 +1,13 @@
 """A slewing crane as a co-simulation component (the crane plant FMU's model).
 
-`CranePlant` wraps `Plant` for a scene with a hoist drive (`[drive] sheave`, the reel), a body on a
-revolute joint (the slewing jib) and a hoist rope that ends on a free rigid body (the payload):
+`CranePlant` wraps `Plant` for a scene with a hoist drive (`[drive] sheave`, the reel), bodies on
+joints (slewing jib, luffing boom, trolley) and a hoist rope that ends on a free rigid body (the payload):
 
-* inputs: the hoist motor torque (the drive's `motor.torque` convention: positive hoists) and the
-  slew input, a torque or a speed of the jib's joint (chosen when the plant is built);
+* inputs: the hoist motor torque (the drive's `motor.torque` convention: positive hoists) and, per
+  body on a joint, one *axis* input, a torque (force) or a speed of that joint (chosen per axis when
+  the plant is built). The axes are named by role (`crane_axes`): `slew` (revolute about the
+  vertical), `luff` (revolute about a horizontal axis), `travel` (prismatic); a second joint of the
+  same role is named after its body;
 * outputs: the engine's outputs of the scene (payload position and velocity, rotation vector, jib
   angle/speed/joint torque, rope forces `<sheave>.tension_in/out`, ...) without `motor.torque`, plus
   three derived angles (`DERIVED`). The plant starts at rest with the holding torque applied
@@ -13,10 +16,12 @@ revolute joint (the slewing jib) and a hoist rope that ends on a free rigid body
   - `payload.swing_radial`, `payload.swing_tangential` [rad]: the direction of the line from the
     suspension point S to the payload's centre of mass, as angles from the downward vertical measured
     in the vertical planes along e_r and e_t (atan2(d.e_r, -d.e_z), atan2(d.e_t, -d.e_z), d = centre
-    of mass - S). S is fixed to the jib, at the height of the last sheave's axle, directly above the
-    payload's centre of mass in the initial equilibrium (so both angles start at 0); e_r is the
-    horizontal direction from the slew axis to S (outwards), e_t = e_z x e_r (the direction S moves
-    in a positive slew), e_z up (against gravity). A load slewed at constant speed w hangs outwards
+    of mass - S). S is fixed to the *frame* body (the last sheave's body when it is on a joint, else
+    the first body on a joint), at the height of the last sheave's axle, directly above the payload's
+    centre of mass in the initial equilibrium (so both angles start at 0); e_r is the horizontal
+    direction from a revolute frame's joint axis to S (outwards; for a prismatic frame the horizontal
+    direction of its rail), e_t = e_z x e_r (the direction S moves in a positive slew), e_z up
+    (against gravity). A load slewed at constant speed w hangs outwards
     at tan(swing_radial) = w^2 r / g (r: radius of its centre of mass) and lags (negative
     swing_tangential) while the slew accelerates;
   - `payload.yaw` [rad]: heading of the payload's body x axis in the horizontal plane, relative to
@@ -29,23 +34,50 @@ import math
 import numpy as np
 
 from ..core.scene import Scene, SceneError, load_scene
+from ..core.solver import SolverError
 from .plant import Plant, with_joint_input
 
-SLEW_INPUTS = ("torque", "speed")
+SLEW_INPUTS = ("torque", "speed")      # the modes of an axis input (its Integer parameter <axis>.input: 0, 1)
 DERIVED = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw")
 
 
+def crane_axes(scene: Scene) -> list:
+    """The joint inputs of a crane scene, one per body on a joint in scene order: dicts with `name`
+    (the role: "slew" for a revolute joint about the vertical, "luff" for a revolute joint about a
+    horizontal axis, "travel" for a prismatic joint; the body's name when the role is taken),
+    `body`, `joint` ("revolute" or "prismatic"), `axis`, `pivot`, `range` (the joint's range or None)."""
+    g = np.asarray(scene.gravity, float)
+    ez = -g / np.linalg.norm(g)
+    axes, taken = [], set()
+    for b in scene.bodies:
+        if b.joint is None:
+            continue
+        if b.joint == "prismatic":
+            role = "travel"
+        else:
+            a = np.asarray(b.joint_axis, float)
+            role = "slew" if abs(a @ ez) > (1.0 - 1e-9) * np.linalg.norm(a) else "luff"
+        name = b.name if role in taken else role
+        taken.add(name)
+        axes.append({"name": name, "body": b.name, "joint": b.joint, "axis": [float(x) for x in b.joint_axis],
+                     "pivot": [float(x) for x in b.pivot],
+                     "range": None if b.joint_range is None else [float(x) for x in b.joint_range]})
+    return axes
+
+
 def crane_parts(scene: Scene) -> dict:
-    """Names of the hoist reel, the slewing body, the payload and the last sheave of the hoist rope;
-    SceneError naming the key when the scene is not a slewing crane."""
+    """Names of the hoist reel, the axes (`crane_axes`), the frame body that carries the suspension
+    point, the payload and the last sheave of the hoist rope (plus `slew`: the slewing body, when
+    there is one; CranePlant adds `suspension`, the suspension point at t = 0); SceneError naming the
+    key when the scene is not a crane."""
     src = scene.source
     reel = scene.drive.sheave
     if reel is None:
         raise SceneError(f"{src}: [drive.sheave] a crane plant needs the hoist reel as the driven sheave")
-    slew = [b for b in scene.bodies if b.joint == "revolute"]
-    if not slew:
-        raise SceneError(f"{src}: [[bodies]] a crane plant needs a body on a revolute joint "
-                         f"(joint = {{ kind = \"revolute\", ... }}): the slewing jib")
+    axes = crane_axes(scene)
+    if not axes:
+        raise SceneError(f"{src}: [[bodies]] a crane plant needs a body on a joint "
+                         f"(joint = {{ kind = \"revolute\" | \"prismatic\", ... }}): the jib, boom or trolley")
     ropes = [r for r in scene.ropes if any(st.sheave == reel for st in r.route)]
     if not ropes:
         raise SceneError(f"{src}: [[ropes]] no rope runs over the hoist reel {reel!r}")
@@ -57,8 +89,15 @@ def crane_parts(scene: Scene) -> dict:
         raise SceneError(f"{src}: ropes.route of {ropes[0].name!r} must end at an anchor on a free body "
                          f"(the payload), got {last.anchor!r}")
     tip = [st.sheave for st in route if st.sheave is not None][-1]
-    return {"reel": reel, "slew": slew[0].name, "payload": payload.name, "tip": tip,
-            "rope": ropes[0].name}
+    tip_body = next(s.body for s in scene.sheaves if s.name == tip)
+    jointed = [a["body"] for a in axes]
+    frame = tip_body if tip_body in jointed else jointed[0]
+    parts = {"reel": reel, "axes": axes, "frame": frame, "payload": payload.name, "tip": tip,
+             "rope": ropes[0].name}
+    slew = [a["body"] for a in axes if a["name"] == "slew"]
+    if slew:
+        parts["slew"] = slew[0]
+    return parts
 
 
 def _rotation(axis, angle) -> np.ndarray:
@@ -68,19 +107,54 @@ def _rotation(axis, angle) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
 
 
-class CranePlant:
-    """Hoist torque and slew torque or speed in, crane outputs out (module docstring).
-    `step(dt, hoist_torque, slew)` advances by dt with both inputs held (the speed input ramps, see
-    plant.JointInput) and returns the outputs (`output_names`)."""
+def _modes(axes, inputs) -> dict:
+    """{axis name: "torque" | "speed"} from one mode for all axes or a mapping per axis name."""
+    names = [a["name"] for a in axes]
+    if isinstance(inputs, str):
+        inputs = {n: inputs for n in names}
+    unknown = sorted(set(inputs) - set(names))
+    if unknown:
+        raise ValueError(f"crane plant: no axis {unknown[0]!r} in this scene; its axes: {names}")
+    modes = {n: inputs.get(n, "torque") for n in names}
+    for n, m in modes.items():
+        if m not in SLEW_INPUTS:
+            raise ValueError(f"{n}.input must be one of {SLEW_INPUTS}, got {m!r}")
+    return modes
 
-    def __init__(self, scene: Scene | str, slew_input: str = "torque", **params):
+
+class CranePlant:
+    """Hoist torque and one torque (force) or speed per axis in, crane outputs out (module
+    docstring). `step(dt, hoist_torque, axes)` advances by dt with the inputs held (a speed input
+    ramps, see plant.JointInput) and returns the outputs (`output_names`); `axes` is one value per
+    axis in `input_names` order (a single number for a one-axis crane)."""
+
+    def __init__(self, scene: Scene | str, inputs="torque", **params):
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
-        if slew_input not in SLEW_INPUTS:
-            raise ValueError(f"slew input must be one of {SLEW_INPUTS}, got {slew_input!r}")
         self.parts = parts = crane_parts(scene)
-        self.slew_input = slew_input
-        self.plant = Plant(with_joint_input(scene, parts["slew"], slew_input), **params)
+        self.axes = parts["axes"]
+        self.modes = _modes(self.axes, inputs)
+        self.slew_input = self.modes[self.axes[0]["name"]]
+        sc = scene
+        for a in self.axes:
+            sc = with_joint_input(sc, a["body"], self.modes[a["name"]])
+        try:
+            self.plant = Plant(sc, **params)
+        except SolverError as e:
+            free = [f"{a['name']}.input = 0 leaves the joint of {a['body']!r} free" for a in self.axes
+                    if self.modes[a["name"]] == "torque"]
+            if not free:
+                raise
+            # a torque (force) input starts at 0: nothing holds a joint the rope pulls on
+            raise SolverError(f"{e}; {', '.join(free)} in the initial statics (no torque or force holds "
+                              f"it against the rope): use the speed input (<axis>.input = 1)") from e
+        # the plant's joint inputs follow the scene's body order, like crane_axes
+        assert self.plant.joint_inputs == tuple(f"{a['body']}.{self.modes[a['name']]}" for a in self.axes)
+        self.input_names = tuple(f"{a['name']}.{self._unit_word(a)}" for a in self.axes)
+        self._ranges = [(i, a) for i, a in enumerate(self.axes)
+                        if a["range"] is not None and self.modes[a["name"]] == "speed"]
+        self._jq = [self.plant.model.q_names.index(f"{a['body']}.{'angle' if a['joint'] == 'revolute' else 'travel'}")
+                    for a in self.axes]
         self.warnings = self.plant.warnings
         # the hoist convention: positive torque and speed hoist (the engine's sign follows the reeving)
         hold = self.plant.holding_torque()
@@ -94,39 +168,58 @@ class CranePlant:
         self._setup_geometry(self.plant.scene, names)
         self._y = self._outputs(self.plant._y)
 
+    def _unit_word(self, a) -> str:
+        m = self.modes[a["name"]]
+        return "force" if m == "torque" and a["joint"] == "prismatic" else m
+
     def _setup_geometry(self, scene, names) -> None:
         p = self.parts
         bodies = {b.name: b for b in scene.bodies}
-        jib = bodies[p["slew"]]
+        frame = bodies[p["frame"]]
         g = np.asarray(scene.gravity, float)
-        self._ez = -g / np.linalg.norm(g)
-        self._axis, self._pivot = np.asarray(jib.joint_axis, float), np.asarray(jib.pivot, float)
+        self._ez = ez = -g / np.linalg.norm(g)
+        self._prismatic = frame.joint == "prismatic"
+        self._axis, self._pivot = np.asarray(frame.joint_axis, float), np.asarray(frame.pivot, float)
         tip = next(s for s in scene.sheaves if s.name == p["tip"])
-        centre = np.asarray(tip.center, float) + (np.asarray(jib.position, float) if tip.body == jib.name else 0.0)
+        centre = np.asarray(tip.center, float) + (np.asarray(frame.position, float) if tip.body == frame.name else 0.0)
         pay = p["payload"]
         self._i_pos = [names.index(f"{pay}.position.{c}") for c in "xyz"]
         self._i_rot = [names.index(f"{pay}.rotation.{c}") for c in "xyz"]
-        self._i_ang = names.index(f"{p['slew']}.angle")
+        self._i_ang = names.index(f"{frame.name}.{'travel' if self._prismatic else 'angle'}")
         y0 = self.plant._y
         com = y0[self._i_pos]
-        ez = self._ez
         # S: above the initial centre of mass at the tip axle's height (relative to the pivot, at angle 0)
         S = com + ez * ((centre - com) @ ez)
+        p["suspension"] = S.tolist()      # at t = 0 (the FMU's configuration carries it: place_position)
+        if self._prismatic:
+            self._S0 = S - self._axis * float(y0[self._i_ang])
+            er = self._axis - ez * (self._axis @ ez)
+            if np.linalg.norm(er) < 1e-9:
+                raise SceneError(f"{scene.source}: the rail of {frame.name!r} is vertical: "
+                                 f"the radial swing direction is undefined")
+            self._er = er / np.linalg.norm(er)
+            return
         rot0 = _rotation(self._axis, float(y0[self._i_ang]))
         self._S0 = rot0.T @ (S - self._pivot)
         if np.linalg.norm(self._S0 - ez * (self._S0 @ ez)) < 1e-9:
-            raise SceneError(f"{scene.source}: the payload hangs on the slew axis of {p['slew']!r}: "
+            raise SceneError(f"{scene.source}: the payload hangs on the joint axis of {frame.name!r}: "
                              f"the radial swing direction is undefined")
+
+    def _frame(self, q):
+        """Suspension point S and the horizontal outward direction e_r at frame coordinate q."""
+        ez = self._ez
+        if self._prismatic:
+            return self._S0 + self._axis * q, self._er
+        S = self._pivot + _rotation(self._axis, q) @ self._S0
+        er = S - self._pivot
+        er = er - ez * (er @ ez)
+        return S, er / np.linalg.norm(er)
 
     def _outputs(self, y) -> np.ndarray:
         y = y.copy()
         y[self._flip] *= self.hoist_sign
         ez = self._ez
-        rot = _rotation(self._axis, float(y[self._i_ang]))
-        S = self._pivot + rot @ self._S0
-        er = S - self._pivot
-        er = er - ez * (er @ ez)
-        er /= np.linalg.norm(er)
+        S, er = self._frame(float(y[self._i_ang]))
         et = np.cross(ez, er)
         d = y[self._i_pos] - S
         down = -(d @ ez)
@@ -144,11 +237,22 @@ class CranePlant:
     def t(self) -> float:
         return self.plant.t
 
-    def step(self, dt: float, hoist_torque: float, slew: float) -> np.ndarray:
-        """Advance by dt with the hoist motor torque [N m] (positive hoists) and the slew torque
-        [N m] or speed [rad/s] held; returns the outputs. ValueError for bad inputs, SolverError
-        if the solver stops (state left at the last good step)."""
-        y = self.plant.step(dt, self.hoist_sign * hoist_torque, 0.0, (slew,))
+    def step(self, dt: float, hoist_torque: float, axes) -> np.ndarray:
+        """Advance by dt with the hoist motor torque [N m] (positive hoists) and the axis inputs
+        (torque [N m] / force [N] or speed [rad/s, m/s], `input_names` order) held; returns the
+        outputs. ValueError naming the input for a bad value (not finite, or a speed that would
+        take a joint with a range past its end within the step), SolverError if the solver stops
+        (state left at the last good step)."""
+        vals = (axes,) if np.ndim(axes) == 0 else tuple(axes)
+        st = self.plant.state
+        for i, a in self._ranges:
+            v = float(vals[i])
+            x = st.q[self._jq[i]] + 0.5 * (st.v[self._jq[i]] + v) * dt
+            lo, hi = a["range"]
+            if not lo <= x <= hi:
+                raise ValueError(f"{self.input_names[i]} = {v!r} would take {a['body']}'s joint to {x:.6g}, "
+                                 f"outside its range [{lo:g}, {hi:g}] (joint.range of the scene)")
+        y = self.plant.step(dt, self.hoist_sign * hoist_torque, 0.0, vals)
         self._y = self._outputs(y)
         return self._y
 

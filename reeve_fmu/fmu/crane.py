@@ -1,12 +1,13 @@
 """The crane plant and crane drive FMUs: configuration, build, and an fmpy master for the pair.
 
-* `build_crane_fmus(dest, scene)`: the crane plant FMU of a slewing-crane scene (fmus/reeve_crane_slave.py,
+* `build_crane_fmus(dest, scene)`: the crane plant FMU of a crane scene (fmus/reeve_crane_slave.py,
   model reeve_fmu.components.craneplant.CranePlant), named by `crane_plant_name` (`CranePlant.fmu` for the
   reference scene scenes/slewing_crane.toml, `Plant_<scene name>.fmu` for any other), and
   `CraneDrive.fmu` (fmus/reeve_cranedrive_slave.py, reeve_fmu.components.cranedrive.CraneDrive);
   `reeve-fmu build --scene <crane scene>` calls it.
-* `cosimulate_crane(plant_fmu, drive_fmu, ...)`: the hoist-and-slew cycle, Gauss-Seidel (the drive
-  steps first with the plant's speeds at t, then the plant holding the drive's new torques).
+* `cosimulate_crane(plant_fmu, drive_fmu, ...)`: a hoist-and-axis cycle (slew, luff or trolley
+  travel), Gauss-Seidel (the drive steps first with the plant's speeds at t, then the plant holding
+  the drive's new torques).
 
 This module imports only numpy (plus reeve_fmu) at import time: it is vendored into the FMUs.
 """
@@ -29,18 +30,35 @@ CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_co
 CRANE_SCENE = "scene.toml"
 SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
 
-#: crane plant inputs: name -> (declared type, description)
-CRANE_INPUTS = {
-    "motor.torque": ("Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step"),
-    "slew.torque": ("Torque", "slew drive torque on the jib's joint (used when slew.input = 0), held over the step"),
-    "slew.speed": ("AngularVelocity", "slew speed of the jib's joint (used when slew.input = 1); the joint "
-                                      "rate ramps linearly to it over the step"),
-}
+HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step")
+
+
+def crane_inputs(axes: Sequence[Mapping]) -> dict:
+    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque, then per
+    axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its speed; the Integer
+    parameter <axis>.input chooses which one the plant uses."""
+    out = {HOIST_INPUT[0]: HOIST_INPUT[1:]}
+    for a in axes:
+        n, b = a["name"], a["body"]
+        rev = a["joint"] == "revolute"
+        out[f"{n}.{'torque' if rev else 'force'}"] = (
+            "Torque" if rev else "Force",
+            f"{n} drive {'torque' if rev else 'force'} on the {b}'s joint (used when {n}.input = 0), held over the step")
+        out[f"{n}.speed"] = ("AngularVelocity" if rev else "Velocity",
+                             f"{n} speed of the {b}'s joint (used when {n}.input = 1); the joint "
+                             f"rate ramps linearly to it over the step")
+    return out
+
+
+def axis_input_names(axis: Mapping) -> tuple:
+    """The two inputs of an axis in the order of its <axis>.input values (0: torque/force, 1: speed)."""
+    n = axis["name"]
+    return (f"{n}.{'torque' if axis['joint'] == 'revolute' else 'force'}", f"{n}.speed")
 
 
 def is_crane_scene(scene) -> bool:
-    """A scene the crane plant FMU can be built from (a revolute joint and a hoist drive)."""
-    return scene.drive.sheave is not None and any(b.joint == "revolute" for b in scene.bodies)
+    """A scene the crane plant FMU can be built from (a body on a joint and a hoist drive)."""
+    return scene.drive.sheave is not None and any(b.joint is not None for b in scene.bodies)
 
 
 def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapping[str, str]) -> list:
@@ -70,13 +88,21 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
         elif q.startswith("rotation."):
             spec.update(type="Angle", description=f"{obj} rotation vector from the scene's orientation, {q[-1]}")
         elif q == "angle":
-            spec.update(type="Angle", description=f"{obj} angle" + (" (slew, about the joint axis)" if obj == parts["slew"] else ""))
+            spec.update(type="Angle", description=f"{obj} angle" + (" (slew, about the joint axis)" if obj == parts.get("slew") else ""))
         elif q in ("angular_velocity", "speed"):
             spec.update(type="AngularVelocity", description=f"{obj} angular speed")
         elif q == "angular_acceleration":
             spec.update(type="AngularAcceleration", depends=True, description=f"{obj} angular acceleration")
         elif q == "joint_torque":
             spec.update(type="Torque", depends=True, description=f"torque the slew drive applies to {obj}'s joint")
+        elif q == "joint_force":
+            spec.update(type="Force", depends=True, description=f"force the travel drive applies to {obj}'s joint")
+        elif q == "velocity":
+            spec.update(type="Velocity", description=f"{obj} speed along its joint axis")
+        elif q == "acceleration":
+            spec.update(type="Acceleration", depends=True, description=f"{obj} acceleration along its joint axis")
+        elif q == "travel":
+            spec.update(type="Position", description=f"{obj} travel along its joint axis")
         elif q in ("tension_in", "tension_out"):
             side = "entry" if q == "tension_in" else "exit"
             spec.update(type="Force", depends=obj in sheaves, description=f"rope force at the {side} tangent point of {obj}")
@@ -94,10 +120,19 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
 def crane_config(scene_path, name: str = CRANE_NAME) -> dict:
     """The JSON configuration the crane plant FMU carries (resources/reeve_crane.json)."""
     from ..components.craneplant import CranePlant
+    from ..core.solver import SolverError
     from .cosim import checked_scene, fmu_config
 
     scene = checked_scene(scene_path)
-    cp = CranePlant(scene, "torque")
+    cp = CranePlant(scene, "speed")     # (joints held in the initial statics; the outputs do not depend on it)
+    for a in cp.parts["axes"]:
+        # <axis>.input starts at 0 (torque/force) where the initial statics holds the joint without
+        # one (a slewing jib), else at 1 (speed): a trolley or a boom the rope or gravity pulls on
+        try:
+            CranePlant(scene, {x["name"]: "torque" if x is a else "speed" for x in cp.parts["axes"]})
+            a["start_input"] = 0
+        except SolverError:
+            a["start_input"] = 1
     return fmu_config("reeve_fmu.crane_fmu/1", name, scene, CRANE_SCENE, parts=cp.parts, holding_torque=cp.holding_torque(),
                       stop_time=float(scene.t_end),
                       outputs=crane_output_specs(cp.output_names, [s.name for s in scene.sheaves], cp.parts))
@@ -156,15 +191,82 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None, standalone: boo
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 
+def pendulum_length(scene) -> float:
+    """Height of the last sheave's axle above the payload's centre of mass in the scene as written [m]
+    (the payload's pendulum length, to the sheave's axle)."""
+    from ..components.craneplant import crane_parts
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene) if not hasattr(scene, "sheaves") else scene
+    p = crane_parts(scene)
+    bodies = {b.name: b for b in scene.bodies}
+    tip = next(s for s in scene.sheaves if s.name == p["tip"])
+    z = float(tip.center[2]) + (float(bodies[tip.body].position[2]) if tip.body in bodies else 0.0)
+    return z - float(bodies[p["payload"]].position[2])
+
+
+def pick_and_place(drive_values: Mapping[str, float], *, lift: Optional[float] = None,
+                   move: Optional[float] = None, length: Optional[float] = None, t_start: float = 1.0,
+                   settle: float = 15.0) -> tuple[dict, float]:
+    """CraneDrive start values for a pick-and-place cycle from the drive's values sized for a scene
+    (`<plant>.drive.json`, crane_drive_defaults): hoist `lift` m up (default: the scene's hoist
+    travel), then move the first axis by `move` (rad or m; default: the scene's), then lower the same
+    `lift`, each S-curve starting when the one before has ended; `settle` s after the lowering. Returns
+    (values, end time).
+
+    `length` (the pendulum length at the start, pendulum_length(scene)) shapes the axis move against
+    residual sway: with the hoisted length L = length - lift and T = 2 pi sqrt(L / g), the axis
+    accelerates and decelerates over T each (speed v = move / (1.5 T), acceleration v / T, jerk ramps
+    of T / 10). An acceleration pulse of that shape has no spectral content at 2 pi / T, so a linear
+    pendulum (the load seen from its suspension point) is at rest again after each ramp."""
+    from ..core.profiles import scurve_phases
+
+    v = dict(drive_values)
+    lift = abs(v["hoist.distance"]) if lift is None else float(lift)
+    move = v["slew.distance"] if move is None else float(move)
+    if length is not None:
+        T = 2.0 * math.pi * math.sqrt((length - lift) / 9.81)
+        vm = abs(move) / (1.5 * T)
+        v.update({"slew.v_max": vm, "slew.a_max": vm / T, "slew.jerk": vm / T / (0.1 * T)})
+
+    def duration(axis, d):
+        return sum(scurve_phases(d, v[f"{axis}.v_max"], v[f"{axis}.a_max"], v[f"{axis}.jerk"])[0])
+    t_move = t_start + duration("hoist", lift)
+    t_lower = t_move + duration("slew", move)
+    v.update({"hoist.distance": lift, "hoist.t_start": t_start, "slew.distance": move, "slew.t_start": t_move,
+              "hoist.lower": lift, "hoist.t_lower": t_lower})
+    return v, t_lower + duration("hoist", lift) + settle
+
+
+def plant_axes(handle) -> list:
+    """The axes (craneplant.crane_axes) of an opened crane plant FMU, from its resources."""
+    with open(Path(handle.unzip_dir) / "resources" / CRANE_CONFIG, encoding="utf-8") as fh:
+        return json.load(fh)["parts"]["axes"]
+
+
+AXIS_ALIASES = ("axis.position", "axis.speed", "axis.effort")   # record names for the driven axis's signals
+
+
+def _axis_signals(axis: Mapping) -> tuple:
+    """Position, speed and drive-effort outputs of an axis's joint."""
+    b = axis["body"]
+    if axis["joint"] == "revolute":
+        return f"{b}.angle", f"{b}.angular_velocity", f"{b}.joint_torque"
+    return f"{b}.travel", f"{b}.velocity", f"{b}.joint_force"
+
+
 def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float = 30.0, slew_input: str = "speed",
-                     drive_values: Optional[Mapping[str, float]] = None,
-                     record: Sequence[str] = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw",
-                                              "payload.position.z", "jib.angle", "jib.angular_velocity",
-                                              "jib.joint_torque", "motor.speed", "tip.tension_out")) -> TimeSeries:
-    """Co-simulate CranePlant.fmu with CraneDrive.fmu (Gauss-Seidel, communication step `step`, points
-    k * step): the drive reads motor.speed and the jib's angular velocity, the plant takes motor.torque and
-    slew.torque or slew.speed (slew_input). The result holds the drive's two commands and `record` after
-    every step (from t = step on). Raises CosimError with both FMUs' logs if a step fails."""
+                     drive_values: Optional[Mapping[str, float]] = None, axis: Optional[str] = None,
+                     record: Optional[Sequence[str]] = None) -> TimeSeries:
+    """Co-simulate a crane plant FMU with CraneDrive.fmu (Gauss-Seidel, communication step `step`, points
+    k * step): the drive reads motor.speed and the speed of the plant's axis `axis` (default: its first,
+    e.g. slew or travel), the plant takes motor.torque and that axis's torque (force) or speed
+    (slew_input) from the drive's slew loop; any other axis of the plant is held at speed 0. The result
+    holds the drive's two commands and `record` after every step (from t = step on; default: payload
+    swing, yaw and height, the axis's position, speed and drive effort, motor.speed and the tension
+    leaving the last sheave; `axis.position`, `axis.speed`, `axis.effort` name the driven axis's
+    angle or travel, its speed and its joint torque or force). Raises ValueError naming an axis the plant lacks, CosimError with both
+    FMUs' logs if a step fails."""
     from .master import FmuUnit, run
     from .runner import SlaveHandle
 
@@ -175,15 +277,30 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
     try:
         plant = SlaveHandle.open(plant_fmu, "crane")
         handles.append(plant)
+        axes = plant_axes(plant)
+        names = [a["name"] for a in axes]
+        if axis is not None and axis not in names:
+            raise ValueError(f"{Path(plant_fmu).name} has no axis {axis!r} (no inputs {axis}.speed/.torque); "
+                             f"its axes: {names}")
+        ax = axes[names.index(axis)] if axis is not None else axes[0]
         drive = SlaveHandle.open(drive_fmu, "crane_drive")
         handles.append(drive)
-        plant.setup(0.0, t_end, start_values={"slew.input": SLEW_MODES.index(slew_input)})
+        modes = {f"{a['name']}.input": 1 for a in axes}
+        modes[f"{ax['name']}.input"] = SLEW_MODES.index(slew_input)
+        plant.setup(0.0, t_end, start_values=modes)
         drive.setup(0.0, t_end, start_values=dict(drive_values or {}))
-        slew_w = next(nm for nm in plant.variables if nm.endswith(".angular_velocity"))
+        _, speed, effort = _axis_signals(ax)
         cmd = "slew.speed" if slew_input == "speed" else "slew.torque"
-        connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{slew_w}", "drive.slew.angular_velocity"),
-                       ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{cmd}"))
-        recorded = {"drive": ["motor.torque", cmd], "plant": list(record)}
+        target = axis_input_names(ax)[SLEW_MODES.index(slew_input)]
+        connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{speed}", "drive.slew.angular_velocity"),
+                       ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{target}"))
+        if record is None:
+            tip = json.loads((Path(plant.unzip_dir) / "resources" / CRANE_CONFIG).read_text())["parts"]["tip"]
+            record = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw", "payload.position.z",
+                      *_axis_signals(ax), "motor.speed", f"{tip}.tension_out")
+        alias = dict(zip(AXIS_ALIASES, _axis_signals(ax)))
+        plant_rec = [alias.get(x, x) for x in record]
+        recorded = {"drive": ["motor.torque", cmd], "plant": plant_rec}
         r = run([FmuUnit("drive", drive), FmuUnit("plant", plant)], connections, n=n, step=step, grid="multiply",
                 record=recorded)
     finally:
@@ -191,4 +308,39 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
             h.close()
     if r.failure is not None:
         raise r.failure
-    return TimeSeries(np.arange(n) * step + step, {k: v[1:] for k, v in r.columns(recorded).items()})
+    cols = r.columns(recorded)
+    for a, x in zip(record, plant_rec):
+        cols[a] = cols[x]
+    return TimeSeries(np.arange(n) * step + step, {k: v[1:] for k, v in cols.items()})
+
+
+def place_position(plant_fmu, distance: float, axis: Optional[str] = None) -> tuple[np.ndarray, np.ndarray]:
+    """The payload's centre of mass at rest in the plant FMU's initial state, and the place position of
+    a pick and place that moves `axis` (default: the first) by `distance` (rad: turned about the joint
+    axis through its pivot; m: moved along the rail): horizontally, the start moved as the suspension
+    point moves (the load comes to rest below it); its height, the pick height. That height is exact
+    for a slew, which leaves the rope path as it was; a luff or a trolley's travel changes the rope
+    path (tower_crane_trolley.toml lifts the load by the lead's lengthening), so only the horizontal
+    place holds for them. Opens the FMU once (in this process)."""
+    from .runner import SlaveHandle
+
+    with SlaveHandle.open(plant_fmu, "probe") as h:
+        with open(Path(h.unzip_dir) / "resources" / CRANE_CONFIG, encoding="utf-8") as fh:
+            parts = json.load(fh)["parts"]
+        axes = parts["axes"]
+        h.setup(0.0, start_values={f"{a['name']}.input": 1 for a in axes})
+        start = np.array(h.get_many([f"payload.position.{c}" for c in "xyz"]))
+    ax = axes[0] if axis is None else next(a for a in axes if a["name"] == axis)
+    k = np.asarray(ax["axis"], float) / np.linalg.norm(ax["axis"])
+    S0 = np.asarray(parts["suspension"], float)
+    if ax["joint"] == "prismatic":
+        S1 = S0 + distance * k
+    else:
+        from ..components.craneplant import _rotation
+
+        p = np.asarray(ax["pivot"], float)
+        S1 = p + _rotation(k, distance) @ (S0 - p)
+    move = S1 - S0
+    up = start - S0
+    up /= np.linalg.norm(up)                 # the vertical (the load hangs below S)
+    return start, start + move - up * (move @ up)

@@ -297,11 +297,18 @@ class SlaveHandle:
         self.time = start_time
 
     # -- variables ------------------------------------------------------------------------------
+    def _ref(self, name: str):
+        try:
+            return self._vr[name]
+        except KeyError:
+            raise KeyError(f"{self.path.name} has no variable {name!r}; its inputs: "
+                           f"{[v.name for v in self.md.modelVariables if v.causality == 'input']}") from None
+
     def vr(self, name: str) -> int:
-        return self._vr[name][1]
+        return self._ref(name)[1]
 
     def set(self, name: str, value) -> None:
-        typ, vr = self._vr[name]
+        typ, vr = self._ref(name)
         f = self._fmu
         if typ == "Real":
             f.setReal([vr], [float(value)])
@@ -317,7 +324,7 @@ class SlaveHandle:
             self.set(name, value)
 
     def get(self, name: str):
-        typ, vr = self._vr[name]
+        typ, vr = self._ref(name)
         f = self._fmu
         if typ == "Real":
             return f.getReal([vr])[0]

@@ -26,6 +26,24 @@ def build(dest):
                                    for n in ("CranePlant.fmu", "CraneDrive.fmu")}}
 
 
+def _rewind(plant_fmu, h, run, k0, axis):
+    """Save the state of h at step k0 (and serialize it), run 60 steps, restore, run them again, and
+    run them in a new instance from the serialized state: the three runs and h's errors."""
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    s = h.get_state()
+    blob = h.serialize_state(s)
+    a = run(h, k0, 60)
+    h.set_state(s)
+    b = run(h, k0, 60)
+    errors = [str(m) for m in h.errors(2)]
+    with SlaveHandle.open(plant_fmu, "crane2") as h2:
+        h2.setup(0.0, start_values={f"{axis}.input": 1})
+        h2.set_state(h2.deserialize_state(blob))
+        c = run(h2, k0, 60)
+    return {"a": a, "b": b, "c": c, "errors": errors}
+
+
 def static_and_state(plant_fmu):
     """Payload-end tension at rest with the holding torque (t = 0 and after 2 s), and get/set/serialize
     state: rewind and re-step bit-identically, also in a new instance from the serialized blob."""
@@ -48,17 +66,8 @@ def static_and_state(plant_fmu):
                 assert h.do_step(k * 5e-3, 5e-3) == 0
                 rows.append(h.get_many(outs))
             return rows
-        s = h.get_state()
-        blob = h.serialize_state(s)
-        a = run(h, 400, 60)
-        h.set_state(s)
-        b = run(h, 400, 60)
-        errors = [str(m) for m in h.errors(2)]
-    with SlaveHandle.open(plant_fmu, "crane2") as h2:
-        h2.setup(0.0, start_values={"slew.input": 1})
-        h2.set_state(h2.deserialize_state(blob))
-        c = run(h2, 400, 60)
-    return {"hold": hold, "t0": t0, "t2": t2, "a": a, "b": b, "c": c, "errors": errors}
+        r = _rewind(plant_fmu, h, run, 400, "slew")
+    return {"hold": hold, "t0": t0, "t2": t2, **r}
 
 
 def centripetal(plant_fmu, drive_fmu, omega, t_ramp, t_end):
@@ -116,3 +125,107 @@ def cosim(plant_fmu, drive_fmu, drive_values, t_end, record):
     res = cosimulate_crane(plant_fmu, drive_fmu, step=5e-3, t_end=t_end, slew_input="speed",
                            drive_values=drive_values, record=tuple(record))
     return {"time": res.time.tolist(), **{n: res[n].tolist() for n in record}}
+
+
+def build_scene(dest, scene):
+    """`reeve-fmu build --scene scenes/<scene>.toml --dest dest` in this process, fmpy validate of the
+    plant FMU (Plant_<scene>.fmu), and its variables' causality, type and start."""
+    _host()
+    import zipfile
+    from xml.etree import ElementTree as ET
+
+    from reeve_fmu.cli import main
+    from fmpy.validation import validate_fmu
+
+    rc = main(["build", "--scene", os.path.join(REPO, "scenes", f"{scene}.toml"), "--dest", dest])
+    fmu = os.path.join(dest, f"Plant_{scene}.fmu")
+    root = ET.fromstring(zipfile.ZipFile(fmu).read("modelDescription.xml"))
+    var = {sv.get("name"): {"causality": sv.get("causality"), "tag": sv[0].tag, "type": sv[0].get("declaredType"),
+                            "start": sv[0].get("start"), "description": sv.get("description")}
+           for sv in root.find("ModelVariables")}
+    return {"rc": rc, "fmu": fmu, "problems": [str(p) for p in validate_fmu(fmu)], "variables": var}
+
+
+def pick_and_place_cycle(plant_fmu, drive_fmu, scene):
+    """The pick-and-place cycle of cosim/crane_cycle.py (shaped move, reeve_fmu.fmu.crane.pick_and_place)
+    through cosimulate_crane: the payload's start and place positions and its path over the last
+    pendulum period."""
+    _host()
+    import json
+    import numpy as np
+
+    from reeve_fmu.fmu.crane import cosimulate_crane, pendulum_length, pick_and_place, place_position
+
+    path = os.path.join(REPO, "scenes", f"{scene}.toml")
+    with open(plant_fmu[:-4] + ".drive.json", encoding="utf-8") as fh:
+        values = json.load(fh)["drive"]
+    L = pendulum_length(path)
+    values, t_end = pick_and_place(values, length=L)
+    start, place = place_position(plant_fmu, values["slew.distance"])
+    res = cosimulate_crane(plant_fmu, drive_fmu, t_end=t_end, drive_values=values,
+                           record=("payload.position.x", "payload.position.y", "payload.position.z",
+                                   "payload.swing_radial", "payload.swing_tangential", "axis.position"))
+    pos = np.array([res[f"payload.position.{c}"] for c in "xyz"])
+    T = 2.0 * math.pi * math.sqrt((L - (pos[2, -1] - start[2])) / G)      # the pendulum at the end
+    last = res.time >= res.time[-1] - T
+    return {"start": start.tolist(), "place": place.tolist(), "end": pos[:, -1].tolist(),
+            "last_period": pos[:, last].tolist(), "axis_end": float(res["axis.position"][-1]),
+            "max_swing": float(np.abs(np.array([res["payload.swing_radial"], res["payload.swing_tangential"]])).max()),
+            "values": values, "t_end": t_end, "L": L}
+
+
+def state_roundtrip(plant_fmu, axis):
+    """get/set/serialize state of a crane plant FMU with its `axis` driven by speed: rewind and re-step
+    bit-identically, also in a new instance from the serialized blob."""
+    _host()
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    outs = ["payload.position.x", "payload.position.z", "payload.swing_radial", "payload.swing_tangential",
+            "motor.speed"]
+
+    def run(h, k0, n):
+        rows = []
+        for k in range(k0, k0 + n):
+            h.set_many({"motor.torque": hold * (1.0 + 0.02 * math.sin(k / 7.0)), f"{axis}.speed": 0.002 * (k - k0)})
+            assert h.do_step(k * 5e-3, 5e-3) == 0
+            rows.append(h.get_many(outs))
+        return rows
+    with SlaveHandle.open(plant_fmu, "crane") as h:
+        h.setup(0.0, start_values={f"{axis}.input": 1})
+        hold = h.get("hoist.holding_torque")
+        run(h, 0, 100)
+        return _rewind(plant_fmu, h, run, 100, axis)
+
+
+def bad_inputs(tower_fmu, trolley_fmu, drive_fmu):
+    """Errors that name the variable: an input of an axis the scene lacks (trolley on the slewing tower
+    crane), an axis the plant lacks in cosimulate_crane, <axis>.input out of [0, 1], and a trolley speed
+    that would run the trolley off its rail (joint.range)."""
+    _host()
+    from reeve_fmu.fmu.crane import cosimulate_crane
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    out = {}
+    with SlaveHandle.open(tower_fmu, "tower") as h:
+        try:
+            h.set("travel.speed", 0.1)
+            out["missing"] = None
+        except KeyError as e:
+            out["missing"] = str(e)
+    try:
+        cosimulate_crane(tower_fmu, drive_fmu, t_end=0.01, axis="travel")
+        out["axis"] = None
+    except ValueError as e:
+        out["axis"] = str(e)
+    with SlaveHandle.open(trolley_fmu, "trolley") as h:
+        h.setup(0.0, initialize=False)
+        h.set("travel.input", 2)
+        out["mode_log"] = [m.message for m in h.messages]
+    with SlaveHandle.open(trolley_fmu, "trolley2") as h:
+        h.setup(0.0, start_values={"travel.input": 1})
+        h.set("motor.torque", h.get("hoist.holding_torque"))
+        h.set("travel.speed", 10000.0)                    # ramped from 0: 25 m in 5 ms, past the rail's end
+        out["range_status"] = h.do_step(0.0, 5e-3)
+        out["range_log"] = [m.message for m in h.messages]
+        out["travel"] = h.get("trolley.travel")
+    return out
