@@ -295,7 +295,8 @@ def cosimulate_crane(plant_fmu, drive_fmu, *, step: float = 5e-3, t_end: float =
         connections = (("plant.motor.speed", "drive.motor.speed"), (f"plant.{speed}", "drive.slew.angular_velocity"),
                        ("drive.motor.torque", "plant.motor.torque"), (f"drive.{cmd}", f"plant.{target}"))
         if record is None:
-            tip = json.loads((Path(plant.unzip_dir) / "resources" / CRANE_CONFIG).read_text())["parts"]["tip"]
+            config = Path(plant.unzip_dir) / "resources" / CRANE_CONFIG
+            tip = json.loads(config.read_text(encoding="utf-8"))["parts"]["tip"]
             record = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw", "payload.position.z",
                       *_axis_signals(ax), "motor.speed", f"{tip}.tension_out")
         alias = dict(zip(AXIS_ALIASES, _axis_signals(ax)))
