@@ -270,10 +270,11 @@ def reported_tension(nd, EA, tonly, QE, ie, T):
     for k in range(nd):
         dk = QE[ie, nd + k] - QE[ie, k]
         dist2 += dk * dk
-    eps = math.sqrt(dist2) / l - 1.0 if l > 0.0 else 0.0
-    if eps > 0.0:
+    if l > 0.0 and dist2 > l * l:            # stretched (no square root on the common path)
         return T if T > 0.0 else 0.0
-    return 0.0 if tonly else EA * eps
+    if tonly or l <= 0.0:
+        return 0.0
+    return EA * (math.sqrt(dist2) / l - 1.0)
 
 
 def element_arrays(nd: int):
