@@ -18,7 +18,7 @@ master restores an FMU state or resets.
 
 Built with `reeve-fmu build --fmi 3` (FMI 3.0): also the arrays sheaves.angle, .speed, .tension_in,
 .tension_out over the sheaves' scalars, and, when the host allows early return, steps that end at the
-solver step of a brake engagement or release, a slack or snap-taut rope (_step_to_event).
+solver step of a brake engagement or release, a slack or snap-taut rope, slip onset (_step_to_event).
 """
 import json
 
@@ -29,7 +29,7 @@ from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 class ReevingPlantSlave(ReeveSlave):
     description = "Reeving system (ALE rope model, reeve_fmu): motor torque in, car/rope/sheave states out"
-    might_return_early = True      # FMI 3.0: at brake engagement, slack, snap-taut (_step_to_event)
+    might_return_early = True      # FMI 3.0: brake engagement, slack, snap-taut, slip (_step_to_event)
 
     def define(self):
         with open(self.resource_path(PLANT_CONFIG), encoding="utf-8") as fh:
@@ -103,7 +103,8 @@ class ReevingPlantSlave(ReeveSlave):
 
     def _step_to_event(self, t, dt):
         """FMI 3.0 with early return allowed: the step ends at the end of the solver step in which the
-        brake engages or releases or a rope force reaches or leaves 0 (Plant.step_to_event)."""
+        brake engages or releases, a rope force reaches or leaves 0 or the rope starts or stops slipping
+        (Plant.step_to_event)."""
         v = self.values
         y, t_end, event = self.plant.step_to_event(dt, v["motor.torque"], v["brake.command"])
         if t_end >= t + dt:                  # no event, or at the step's end: a full step

@@ -17,7 +17,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..core.kernel import UE_TORQUE, U_TORQUE
+from ..core.kernel import IN_TRAC_Z, UE_TORQUE, U_TORQUE
 from ..core.model import State, build_model
 from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
@@ -148,7 +148,11 @@ class Plant:
     def step_to_event(self, dt: float, torque: float, brake_command: float) -> tuple:
         """As step() (no joint inputs), ending early at the end of the first solver step in which an event
         happens: the brake engages or releases (brake.engaged, a first-order lag after the command,
-        crosses 1/2: it has no sharper instant), a rope force reaches 0 (slack) or leaves 0 (snap-taut).
+        crosses 1/2: it has no sharper instant), a rope force reaches 0 (slack) or leaves 0 (snap-taut),
+        the rope starts or stops slipping on a slipping traction sheave (its groove-friction deflection
+        leaves or re-enters the sticking band, |z| <= 0.9 creep: contact._elastoplastic). A drum that runs
+        empty is not an event here: the solver stops there (SolverError), the FMU's step is a Discard
+        whose last successful time is the last solver step before it.
         Returns (outputs, time reached, the event or None). The step is made as by step(); only when
         the watched signs differ at its end is it made again from its start in solver steps to find the
         first one (an event undone within the same step is not seen). Without an event the result is
@@ -173,18 +177,26 @@ class Plant:
         return self._y, self.state.t, None      # an event undone within the step
 
     def _indicators(self, y) -> tuple:
-        """(brake at least half engaged, every rope force > 0): what step_to_event watches."""
+        """(brake at least half engaged, every rope force > 0, the traction sheave slipping): what
+        step_to_event watches. Slipping: the groove-friction deflection the step ended with (the state's
+        info) beyond the sticking band 0.9 creep (contact._elastoplastic: linear below, sliding above)."""
         idx = self._event_index
         if idx is None:
             names = self.output_names
             forces = [i for i, n in enumerate(names) if ".tension" in n]
-            idx = self._event_index = (names.index("brake.engaged") if "brake.engaged" in names else -1, forces)
-        brake, forces = idx
-        return (brake >= 0 and float(y[brake]) >= 0.5, tuple(float(y[i]) > 0.0 for i in forces))
+            slip = any(s.slip for s in self.scene.sheaves)
+            idx = self._event_index = (names.index("brake.engaged") if "brake.engaged" in names else -1, forces,
+                                       0.9 * self.model.K.trac_zmax if slip else -1.0)
+        brake, forces, band = idx
+        return (brake >= 0 and float(y[brake]) >= 0.5, tuple(float(y[i]) > 0.0 for i in forces),
+                band >= 0.0 and abs(float(self.state.info[IN_TRAC_Z])) > band)
 
     def _event(self, before, now) -> str:
         if before[0] != now[0]:
             return "the brake engages" if now[0] else "the brake releases"
+        if before[2] != now[2]:
+            sheave = next(s.name for s in self.scene.sheaves if s.slip)
+            return f"{sheave} starts to slip" if now[2] else f"{sheave} stops slipping"
         names = [n for n in self.output_names if ".tension" in n]
         changed = [(n, b) for n, a, b in zip(names, before[1], now[1]) if a != b]
         return "; ".join(f"{n} {'snap-taut' if taut else 'slack'}" for n, taut in changed)
