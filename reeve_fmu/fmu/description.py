@@ -90,7 +90,7 @@ _FMI3_KIND = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "Stri
 FMI2_ONLY_CAPABILITIES = ("canInterpolateInputs", "canNotUseMemoryManagementFunctions",
                           "canRunAsynchronuously", "maxOutputDerivativeOrder")
 #: what the FMI 3.0 adapter declares beyond the FMI 2.0 flags
-FMI3_CAPABILITIES = {"hasEventMode": "false", "mightReturnEarlyFromDoStep": "false",
+FMI3_CAPABILITIES = {"hasEventMode": "true", "mightReturnEarlyFromDoStep": "false",
                      "canReturnEarlyAfterIntermediateUpdate": "false", "providesIntermediateUpdate": "false"}
 _PYVAR = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 

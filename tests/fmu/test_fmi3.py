@@ -92,7 +92,7 @@ def test_fmi3_fmus_validate_and_declare_the_fmi2_variables(fmus, fmus3):
             f"binaries/x86_64-linux/{model}{s}.so" for s in ("", "_pythonfmu", "_pyexit"))
         cs = r3.find("CoSimulation").attrib
         assert cs["canGetAndSetFMUState"] == cs["canSerializeFMUState"] == "true"
-        assert cs["hasEventMode"] == "false"
+        assert cs["hasEventMode"] == "true" and cs["providesIntermediateUpdate"] == "false"
         assert cs["mightReturnEarlyFromDoStep"] == {"plant": "true", "drive": "false"}[key]
         v2, v3 = _variables2(r2), _variables3(r3)
         arrays = {n: v3.pop(n) for n in [n for n in v3 if n not in v2 and n != "time"]}
@@ -234,7 +234,7 @@ def test_fmi3_state_rewind_serialization_and_reset_are_exact(fmus3):
 EXPECTED = {  # call: (status, words of the logged reason)
     "doStep_before_init": (ERROR, "fmi3DoStep called in state Instantiated"),
     "exit_before_enter": (ERROR, "fmi3ExitInitializationMode called in state Instantiated"),
-    "event_mode": (ERROR, "fmi3EnterEventMode is not supported"),
+    "event_mode": (ERROR, "fmi3EnterEventMode called in state Instantiated"),
     "enter_twice": (ERROR, "fmi3EnterInitializationMode called in state Step Mode"),
     "nvalues_mismatch": (ERROR, "nValues = 3, but the 2 value reference(s) hold 2 value(s)"),
     "array_nvalues": (ERROR, "nValues = 1, but the 1 value reference(s) hold 8 value(s)"),
@@ -263,10 +263,40 @@ def test_fmi3_bad_calls_return_error_with_the_reason_and_the_instance_goes_on(fm
     assert r["time"] == 2e-3
 
 
-def test_fmi3_event_mode_request_is_refused_with_the_reason(fmus3):
+def test_fmi3_intermediate_variables_request_is_refused_with_the_reason(fmus3):
     r = run_in_subprocess(f"{JOBS}:instantiate_refused", fmus3["drive"], timeout=600)
     assert r["instantiated"] is False
-    assert any("eventModeUsed = true, but this FMU has no Event Mode" in m for m in r["log"]), r
+    assert any("intermediate variables were requested, but this FMU has no Intermediate Update Mode" in m
+               for m in r["log"]), r
+
+
+def test_fmi3_event_mode_state_machine(fmus3):
+    """eventModeUsed: fmi3ExitInitializationMode enters Event Mode (fmi3DoStep there is refused),
+    fmi3UpdateDiscreteStates reports nothing to update and no time event, fmi3EnterStepMode leaves it.
+    At 10 ms the plant's step over the brake release returns early with eventHandlingNeeded; in Event
+    Mode the host sets inputs and reads outputs at the event time, then the rest of the step ends on the
+    grid. Calls out of order (Event Mode before initialization, Step Mode twice, fmi3UpdateDiscreteStates
+    in Step Mode, fmi3DoStep in Event Mode, Event Mode on an instance without eventModeUsed) are
+    fmi3Error with the reason, and the instance goes on."""
+    r = run_in_subprocess(f"{JOBS}:event_mode", fmus3["plant"], fmus3["drive"], 0.01, 300, timeout=900)
+    refused = {"enter_event_before_init": "fmi3EnterEventMode called in state Instantiated",
+               "step_in_event_mode": "fmi3DoStep called in state Event Mode",
+               "enter_step_twice": "fmi3EnterStepMode called in state Step Mode",
+               "update_in_step_mode": "fmi3UpdateDiscreteStates called in state Step Mode",
+               "step_before_step_mode": "fmi3DoStep called in state Event Mode",
+               "drive_event_mode": "fmi3EnterEventMode: the instance was created with eventModeUsed = false"}
+    for call, words in refused.items():
+        status, log = r[call]
+        assert status == ERROR and any(words in m for m in log), (call, r[call])
+    no_update = [False, False, False, False, False, 0.0]
+    assert r["update_after_init"] == r["update"] == no_update
+    for call in ("enter_step", "enter_event", "set_in_event_mode", "enter_step_after_event", "rest",
+                 "terminate_in_event_mode"):
+        assert r[call] == [OK, []], (call, r[call])
+    hit = r["hit"]      # the brake release of test_fmi3_early_return_at_the_brake_release, now an event
+    assert hit["t"] == 0.71 and hit["event"] and hit["early"] and hit["t"] < hit["last"] == hit["time"] < 0.72
+    assert r["get_in_event_mode"][0] == hit["last"] and r["get_in_event_mode"][1] < 0.5
+    assert r["time_after"] == 0.72
 
 
 # ------------------------------------------------------------------------------------------------

@@ -209,7 +209,8 @@ def bad_calls(drive_fmu):
 
 
 def instantiate_refused(drive_fmu):
-    """eventModeUsed = true (the FMU has no Event Mode): no instance, the reason logged."""
+    """Intermediate variables requested (the FMU has no Intermediate Update Mode): no instance, the
+    reason logged."""
     from fmpy import extract, read_model_description
     from fmpy.fmi3 import FMU3Slave
 
@@ -218,10 +219,54 @@ def instantiate_refused(drive_fmu):
     f = FMU3Slave(guid=md.guid, unzipDirectory=extract(drive_fmu), instanceName="drive",
                   modelIdentifier=md.coSimulation.modelIdentifier)
     try:
-        f.instantiate(eventModeUsed=True, logMessage=lambda env, st, cat, msg: log.append(msg.decode()))
+        f.instantiate(requiredIntermediateVariables=[1],
+                      logMessage=lambda env, st, cat, msg: log.append(msg.decode()))
         return {"instantiated": True, "log": log}
     except Exception as exc:
         return {"instantiated": False, "error": str(exc), "log": log}
+
+
+def event_mode(plant_fmu, drive_fmu, h, n_max):
+    """The FMI 3.0 co-simulation state machine with eventModeUsed: out-of-order calls around Event Mode,
+    then the trip at h (Gauss-Seidel) until the plant returns early at an event, Event Mode there (the
+    drive stepped to the event time, the new inputs set in Event Mode), and the rest of the step."""
+    drive = Fmu(drive_fmu, "drive")
+    plant = Fmu(plant_fmu, "plant", eventModeUsed=True, earlyReturnAllowed=True, loggingOn=True)
+    f, res = plant.fmu, {}
+    res["enter_event_before_init"] = _try(plant, lambda: f.enterEventMode())
+    drive.start(DRIVE_VALUES)
+    plant.start()                       # eventModeUsed: Event Mode after initialization
+    res["step_in_event_mode"] = _try(plant, lambda: f.doStep(0.0, h))
+    res["update_after_init"] = list(f.updateDiscreteStates())
+    res["enter_step"] = _try(plant, lambda: f.enterStepMode())
+    res["enter_step_twice"] = _try(plant, lambda: f.enterStepMode())
+    res["update_in_step_mode"] = _try(plant, lambda: f.updateDiscreteStates())
+    res["drive_event_mode"] = _try(drive, lambda: drive.fmu.enterEventMode())
+    res["hit"] = None
+    t = 0.0
+    for k in range(n_max):
+        t = k * h
+        drive.set([a for a, _ in TO_DRIVE], plant.get([b for _, b in TO_DRIVE]))
+        drive.step(t, h)
+        plant.set([a for a, _ in TO_PLANT], drive.get([b for _, b in TO_PLANT]))
+        event, stop, early, last = plant.step(t, h)
+        if early or event:
+            res["hit"] = {"t": t, "event": event, "early": early, "last": last, "time": plant.get(["time"])[0]}
+            break
+    if res["hit"] is not None:
+        last = res["hit"]["last"]
+        res["enter_event"] = _try(plant, lambda: f.enterEventMode())
+        res["set_in_event_mode"] = _try(plant, lambda: plant.set(["motor.torque"], [100.0]))
+        res["get_in_event_mode"] = plant.get(["time", "brake.engaged"])
+        res["update"] = list(f.updateDiscreteStates())
+        res["step_before_step_mode"] = _try(plant, lambda: f.doStep(last, t + h - last))
+        res["enter_step_after_event"] = _try(plant, lambda: f.enterStepMode())
+        res["rest"] = _try(plant, lambda: f.doStep(last, t + h - last))
+        res["time_after"] = plant.get(["time"])[0]
+    res["terminate_in_event_mode"] = _try(plant, lambda: (f.enterEventMode(), f.terminate()))
+    f.freeInstance()
+    drive.close()
+    return res
 
 
 def arrays(plant_fmu, drive_fmu, n):

@@ -22,9 +22,16 @@
  * - fmi3DoStep's out-arguments: lastSuccessfulTime, terminateSimulation, earlyReturn: when the host
  *   passed earlyReturnAllowed, the slave is told so (allow_early_return) and a model that declares
  *   mightReturnEarlyFromDoStep (the elevator plant) may end a step at an event; the time it reached is
- *   lastSuccessfulTime. No Event Mode (hasEventMode is false);
+ *   lastSuccessfulTime;
+ * - Event Mode (hasEventMode): a host that instantiated with eventModeUsed gets the FMI 3.0 co-simulation
+ *   state machine with it: fmi3ExitInitializationMode enters Event Mode, fmi3EnterStepMode leaves it;
+ *   an early return at an event sets eventHandlingNeeded, and fmi3EnterEventMode (from Step Mode) lets
+ *   the host set inputs and read outputs at that instant; fmi3UpdateDiscreteStates reports no discrete
+ *   state to update, no next time event (the models' events are state events the plant finds itself,
+ *   and its inputs are held over a step, so there is nothing to iterate). Without eventModeUsed these
+ *   calls are fmi3Error with the reason;
  * - everything the FMU does not provide (Model Exchange, Scheduled Execution, clocks, other types,
- *   derivatives, configuration and event mode) is fmi3Error with a logged reason, never a crash.
+ *   derivatives, configuration mode) is fmi3Error with a logged reason, never a crash.
  */
 #include <stdbool.h>
 #include <stdint.h>
@@ -59,8 +66,9 @@ typedef void (*fmi3ClockUpdateCallback)(fmi3InstanceEnvironment);
 typedef void (*fmi3LockPreemptionCallback)(void);
 typedef void (*fmi3UnlockPreemptionCallback)(void);
 
-enum { S3_INSTANTIATED, S3_INIT, S3_STEP, S3_TERMINATED };
-static const char *state3_name[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated"};
+enum { S3_INSTANTIATED, S3_INIT, S3_STEP, S3_TERMINATED, S3_EVENT };
+static const char *state3_name[] = {"Instantiated", "Initialization Mode", "Step Mode", "Terminated",
+                                    "Event Mode"};
 
 typedef struct {
     fmi3ValueReference vr;
@@ -81,6 +89,7 @@ typedef struct {
     double refused_steps;           /* the slave's count of refused doSteps, as last seen */
     int early_allowed;              /* the host passed earlyReturnAllowed */
     int early_return;               /* ... and the slave accepted it */
+    int event_mode_used;            /* the host passed eventModeUsed: Event Mode after initialization */
 } Inst3;
 
 /* the FMI 2.0 logger the inner instance gets: formats the message and hands it to the FMI 3.0 one */
@@ -138,7 +147,7 @@ static int in_state(Inst3 *x, const char *fn, int allowed_mask)
     log3(x, fmi3Error, "%s: %s called in state %s", x->name, fn, state3_name[x->state]);
     return 0;
 }
-#define ANY_STATE 0xF
+#define ANY_STATE 0x1F
 #define BIT(s) (1 << (s))
 
 /* an array variable of the FMU (resources/reeve_fmi3_arrays.txt): its elements' FMI 2.0 references */
@@ -313,11 +322,10 @@ EXPORT fmi3Instance fmi3InstantiateCoSimulation(
     x->env = instanceEnvironment;
     x->log = logMessage;
     x->name = strdup(instanceName ? instanceName : "");
-    if (eventModeUsed || nRequiredIntermediateVariables) {
-        log3(x, fmi3Error, "%s: cannot instantiate: %s (the modelDescription declares hasEventMode and "
-             "providesIntermediateUpdate false)", x->name,
-             eventModeUsed ? "eventModeUsed = true, but this FMU has no Event Mode"
-                           : "intermediate variables were requested, but this FMU has no Intermediate Update Mode");
+    if (nRequiredIntermediateVariables) {
+        log3(x, fmi3Error, "%s: cannot instantiate: intermediate variables were requested, but this FMU has "
+             "no Intermediate Update Mode (the modelDescription declares providesIntermediateUpdate false)",
+             x->name);
         goto fail;
     }
     if (path_to_uri(resourcePath, uri, sizeof uri) != 0) {
@@ -332,6 +340,7 @@ EXPORT fmi3Instance fmi3InstantiateCoSimulation(
     if (!x->c) goto fail;
     read_arrays(x, resourcePath);
     x->early_allowed = earlyReturnAllowed;
+    x->event_mode_used = eventModeUsed;
     if (earlyReturnAllowed) x->early_return = slave_call(x, "allow_early_return");
     x->state = S3_INSTANTIATED;
     return (fmi3Instance)x;
@@ -382,13 +391,15 @@ EXPORT fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
     fmi2Status s;
     GUARD3("fmi3ExitInitializationMode", BIT(S3_INIT));
     s = fmi2ExitInitializationMode(x->c);
-    x->state = S3_STEP; /* as the slave: a failed initialization is reported by every later doStep */
+    /* as the slave: a failed initialization is reported by every later doStep. With eventModeUsed the
+     * FMI 3.0 co-simulation state machine goes to Event Mode first (fmi3EnterStepMode then). */
+    x->state = x->event_mode_used ? S3_EVENT : S3_STEP;
     return done3(x, s, before);
 }
 
 EXPORT fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    GUARD3("fmi3Terminate", BIT(S3_INIT) | BIT(S3_STEP));
+    GUARD3("fmi3Terminate", BIT(S3_INIT) | BIT(S3_STEP) | BIT(S3_EVENT));
     x->state = S3_TERMINATED;
     return done3(x, fmi2Terminate(x->c), before);
 }
@@ -429,7 +440,7 @@ EXPORT fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunica
             last = currentCommunicationPoint;
         if (fmi2GetBooleanStatus(x->c, fmi2Terminated, &stop) != fmi2OK) stop = 0;
     }
-    if (eventHandlingNeeded) *eventHandlingNeeded = false;
+    if (eventHandlingNeeded) *eventHandlingNeeded = early && x->event_mode_used;
     if (earlyReturn) *earlyReturn = early;
     if (terminateSimulation) *terminateSimulation = stop != 0;
     if (lastSuccessfulTime) *lastSuccessfulTime = last;
@@ -445,7 +456,7 @@ EXPORT fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunica
 }
 
 /* ------------------------------------------------------------------ values */
-#define SETTABLE (BIT(S3_INSTANTIATED) | BIT(S3_INIT) | BIT(S3_STEP))
+#define SETTABLE (BIT(S3_INSTANTIATED) | BIT(S3_INIT) | BIT(S3_STEP) | BIT(S3_EVENT))
 
 EXPORT fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                  fmi3Float64 values[], size_t nValues)
@@ -631,13 +642,56 @@ EXPORT fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte 
     return done3(x, fmi2DeSerializeFMUstate(x->c, (const fmi2Byte *)serializedState, size, state), before);
 }
 
+/* ------------------------------------------------------------------ Event Mode (eventModeUsed) */
+static int event_mode_used(Inst3 *x, const char *fn)
+{
+    if (x->event_mode_used) return 1;
+    log3(x, fmi3Error, "%s: %s: the instance was created with eventModeUsed = false (it has no Event Mode; "
+         "instantiate with eventModeUsed = true to use it)", x->name, fn);
+    return 0;
+}
+
+EXPORT fmi3Status fmi3EnterEventMode(fmi3Instance instance)
+{
+    GUARD3("fmi3EnterEventMode", BIT(S3_STEP));
+    if (!event_mode_used(x, "fmi3EnterEventMode")) return fmi3Error;
+    x->state = S3_EVENT;
+    return fmi3OK;
+}
+
+EXPORT fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
+                                           fmi3Boolean *terminateSimulation,
+                                           fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                           fmi3Boolean *valuesOfContinuousStatesChanged,
+                                           fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
+{
+    GUARD3("fmi3UpdateDiscreteStates", BIT(S3_EVENT));
+    (void)before;
+    /* no discrete states: the event iteration has converged at once; no time events are scheduled */
+    if (discreteStatesNeedUpdate) *discreteStatesNeedUpdate = false;
+    if (terminateSimulation) *terminateSimulation = false;
+    if (nominalsOfContinuousStatesChanged) *nominalsOfContinuousStatesChanged = false;
+    if (valuesOfContinuousStatesChanged) *valuesOfContinuousStatesChanged = false;
+    if (nextEventTimeDefined) *nextEventTimeDefined = false;
+    if (nextEventTime) *nextEventTime = 0.0;
+    return fmi3OK;
+}
+
+EXPORT fmi3Status fmi3EnterStepMode(fmi3Instance instance)
+{
+    GUARD3("fmi3EnterStepMode", BIT(S3_EVENT));
+    (void)before;
+    x->state = S3_STEP;
+    return fmi3OK;
+}
+
 /* ------------------------------------------------------------------ what this FMU does not provide */
 static fmi3Status unsupported(fmi3Instance instance, const char *fn)
 {
     Inst3 *x = (Inst3 *)instance;
     if (!x) return fmi3Error;
-    log3(x, fmi3Error, "%s: %s is not supported by this FMU (co-simulation without Event Mode, "
-         "Intermediate Update Mode, clocks or derivatives)", x->name, fn);
+    log3(x, fmi3Error, "%s: %s is not supported by this FMU (co-simulation without Intermediate Update "
+         "Mode, clocks or derivatives)", x->name, fn);
     return fmi3Error;
 }
 
@@ -674,15 +728,10 @@ EXPORT fmi3Instance fmi3InstantiateScheduledExecution(
         uses;                                                                                        \
         return unsupported(instance, #name);                                                         \
     }
-UNSUPPORTED(fmi3EnterEventMode, (fmi3Instance instance), (void)0)
-UNSUPPORTED(fmi3EnterStepMode, (fmi3Instance instance), (void)0)
 UNSUPPORTED(fmi3EnterConfigurationMode, (fmi3Instance instance), (void)0)
 UNSUPPORTED(fmi3ExitConfigurationMode, (fmi3Instance instance), (void)0)
 UNSUPPORTED(fmi3EvaluateDiscreteStates, (fmi3Instance instance), (void)0)
 UNSUPPORTED(fmi3EnterContinuousTimeMode, (fmi3Instance instance), (void)0)
-UNSUPPORTED(fmi3UpdateDiscreteStates, (fmi3Instance instance, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *c,
-                                       fmi3Boolean *d, fmi3Boolean *e, fmi3Float64 *f),
-            (void)a; (void)b; (void)c; (void)d; (void)e; (void)f)
 UNSUPPORTED(fmi3GetNumberOfVariableDependencies, (fmi3Instance instance, fmi3ValueReference v, size_t *n),
             (void)v; (void)n)
 UNSUPPORTED(fmi3GetVariableDependencies, (fmi3Instance instance, fmi3ValueReference d, size_t e[],
