@@ -521,8 +521,9 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                record: Optional[Sequence[str]] = None, record_every: int = 1,
                progress: Optional[Callable[[float], None]] = None, progress_every: float = 0.25,
                timing: bool = False, echo_log: bool = False, ns_step_differences: bool = False,
-               monitor: bool = True, on_instability: str = "warn") -> TimeSeries:
-    """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (see the module docstring).
+               monitor: bool = True, on_instability: str = "warn", early_return: Optional[bool] = None) -> TimeSeries:
+    """Co-simulate the plant and drive FMUs with fmpy `FMU2Slave`s (`FMU3Slave`s for FMI 3.0 FMUs; see the
+    module docstring).
 
     step          communication step (s); any value > 0
     t_end         end time (default: the drive's last move + 1 s)
@@ -541,6 +542,10 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                   drive's torque.max
     on_instability  "warn": log a warning and continue (the result is flagged); "stop": also end the
                   run at the detection (result truncated there); "raise": raise CosimInstability
+    early_return  FMI 3.0 plant FMU: instantiate it with earlyReturnAllowed and eventModeUsed, so that its
+                  steps end at its events and the drive is stepped to the event time (fmu.master, "Early
+                  return"; info["events"]: the event times). Default: on for an FMI 3.0 plant FMU; an
+                  FMI 2.0 plant has no early return (True is then an error)
 
     The master is fmu.master.run over CONNECTIONS: per step exactly one setReal, doStep and getReal call
     per FMU through fmpy's ctypes functions with preallocated value-reference and value arrays; the
@@ -565,13 +570,13 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
     t_wall0 = time.perf_counter()
     try:
         plant, drive = _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles, t_end, plant_values,
-                                  drive_values, echo_log)
-        plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output"]
+                                  drive_values, echo_log, early_return)
+        plant_outputs = [v.name for v in plant.md.modelVariables if v.causality == "output" and not v.dimensions]
         rec = [r for r in (record if record is not None else plant_outputs) if r not in PLANT_EXCHANGE]
         missing = [r for r in rec if r not in plant.variables]
         if missing:
             raise ValueError(f"plant FMU has no variables {missing}")
-        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type == "Real"]
+        drive_rec = [r for r in DRIVE_RECORD if r in drive.variables and drive.variables[r].type in ("Real", "Float64")]
         recorded = {"plant": list(PLANT_EXCHANGE) + rec, "drive": list(DRIVE_EXCHANGE) + drive_rec}
         P, D = FmuUnit("plant", plant), FmuUnit("drive", drive)
         probe = None
@@ -594,6 +599,8 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
             "rtf_after_first_step": ((run.n - 1) * step / (run.loop_wall - run.t_first)
                                      if run.n > 1 and run.loop_wall > run.t_first else math.inf),
             "fmu_warnings": warnings}
+    if run.events is not None:
+        info["events"] = [te for te, _ in run.events]
     if run.step_ns is not None:
         info["plant_doStep_ns"] = run.step_ns["plant"]["step"]
         info["drive_doStep_ns"] = run.step_ns["drive"]["step"]
@@ -614,10 +621,19 @@ def _run_info(run: master.MasterRun, step: float, probe: Optional[_MonitorProbe]
     return info
 
 
-def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_values, drive_values, echo_log):
+def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_values, drive_values, echo_log,
+               early_return: Optional[bool] = None):
     """Open, set up and initialize both FMUs (appended to `handles` as they open, so that the caller
-    closes whatever was opened); an initialization error raises CosimError with the FMU's log."""
-    plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log)
+    closes whatever was opened); an initialization error raises CosimError with the FMU's log.
+    early_return: see cosimulate."""
+    from fmpy import read_model_description
+
+    fmi3 = read_model_description(str(plant_fmu)).fmiVersion.startswith("3")
+    if early_return and not fmi3:
+        raise ValueError(f"early_return: {Path(plant_fmu).name} is an FMI 2.0 FMU (early return is FMI 3.0; "
+                         f"build it with reeve-fmu build --fmi 3)")
+    plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log, early_return=fmi3 if early_return is None
+                             else early_return)
     handles.append(plant)
     drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log)
     handles.append(drive)

@@ -3,15 +3,23 @@
 A *unit* has named real inputs and outputs and steps from t to t + h:
 
 * `FmuUnit`: an FMU through fmpy (a reeve_fmu.fmu.runner.SlaveHandle). Per step one fmi2SetReal,
-  fmi2DoStep and fmi2GetReal through fmpy's ctypes functions, with preallocated value-reference and value
-  arrays; an FMU whose inputs all come from one other FMU reads them straight from that FMU's output
-  buffer (no copy).
+  fmi2DoStep and fmi2GetReal (FMI 3.0: fmi3SetFloat64, fmi3DoStep, fmi3GetFloat64) through fmpy's ctypes
+  functions, with preallocated value-reference and value arrays; an FMU whose inputs all come from one
+  other FMU reads them straight from that FMU's output buffer (no copy).
 * `PlantUnit`, `DriveUnit`: reeve_fmu.components' Plant and ElectricDrive in this process (the
   monolithic reference, the HIL reference run): the same models the FMUs run, without FMI.
 
 Connections are data: `("plant.motor.speed", "drive.motor.speed")`, source first; the unit's name is
 the text before the first dot. Schemes: "gauss-seidel" steps the units in the order given, each with the
 newest outputs of the others; "jacobi" gives every unit the outputs at t, then steps them all.
+
+Early return (FMI 3.0): when one FMU unit was instantiated with earlyReturnAllowed (SlaveHandle
+`early_return`), a communication step is made in pieces: when that FMU ends its step early at an event
+(earlyReturn, lastSuccessfulTime te), the units that were already stepped beyond te are set back to
+their state at the piece's start (fmi3SetFMUState) and stepped to te with the inputs they had; the
+units after it in the Gauss-Seidel order step to te; the FMU goes through Event Mode at te with the
+others' outputs at te; the piece from te then continues to the same communication point. Without such
+a unit (every FMI 2.0 run) the loop is the plain one.
 
 `run(units, connections, n=..., step=...)` makes the communication steps and returns a `MasterRun` (the
 recorded rows per unit, the steps made, wall times); `MasterRun.series()` turns it into the one result
@@ -97,14 +105,19 @@ def _no_call() -> int:
 
 
 class FmuUnit:
-    """An FMU (SlaveHandle, set up and initialized) as a unit of the master."""
+    """An FMU (SlaveHandle, set up and initialized) as a unit of the master. FMI 3.0 with early return
+    (the handle's `early_return`): `returns_early`; after each step `reached` (the time the step ended
+    at) and `event` (eventHandlingNeeded)."""
 
     def __init__(self, name: str, handle):
         self.name, self.handle = name, handle
+        self.fmi3 = bool(getattr(handle, "fmi3", False))
+        self.returns_early = bool(getattr(handle, "early_return", False))
+        self._saved = None
 
     def has_output(self, var: str) -> bool:
         v = self.handle.variables.get(var)
-        return v is not None and v.type == "Real"
+        return v is not None and v.type in ("Real", "Float64") and not getattr(v, "dimensions", None)
 
     def bind_outputs(self, exchange: Sequence[str], record: Sequence[str]) -> None:
         """The output buffer (the exchanged outputs first, then the recorded ones) and its getReal."""
@@ -116,8 +129,13 @@ class FmuUnit:
         self.outp = _FastReal(h, names)
         self.out = self.outp.view
         f = h.fmu
-        self.get = partial(f.dll.fmi2GetReal, f.component, self.outp.vr, self.outp.n, self.outp.buf)
-        self.step = partial(f.dll.fmi2DoStep, f.component)
+        if self.fmi3:
+            self.get = partial(f.dll.fmi3GetFloat64, f.component, self.outp.vr, self.outp.n, self.outp.buf,
+                               self.outp.n)
+            self._bind_step3()
+        else:
+            self.get = partial(f.dll.fmi2GetReal, f.component, self.outp.vr, self.outp.n, self.outp.buf)
+            self.step = partial(f.dll.fmi2DoStep, f.component)
         self.record_names = self.outp.names
         self.row = self._row
 
@@ -131,8 +149,54 @@ class FmuUnit:
         self.inp = _FastReal(h, inputs, buf=source.outp.buf if source is not None else None)
         self.in_view = self.inp.view
         f = h.fmu
-        self.set = partial(f.dll.fmi2SetReal, f.component, self.inp.vr, self.inp.n, self.inp.buf) \
-            if self.inp.n else _no_call
+        if not self.inp.n:
+            self.set = _no_call
+        elif self.fmi3:
+            self.set = partial(f.dll.fmi3SetFloat64, f.component, self.inp.vr, self.inp.n, self.inp.buf, self.inp.n)
+        else:
+            self.set = partial(f.dll.fmi2SetReal, f.component, self.inp.vr, self.inp.n, self.inp.buf)
+
+    def _bind_step3(self):
+        """fmi3DoStep with its out-arguments preallocated; `reached` and `event` after each step."""
+        from ctypes import byref
+        from fmpy.fmi3 import fmi3Boolean, fmi3Float64
+
+        f = self.handle.fmu
+        flags = [fmi3Boolean() for _ in range(3)]
+        last = fmi3Float64()
+        early = flags[2]
+        call = partial(f.dll.fmi3DoStep, f.component)
+        refs = [byref(x) for x in flags] + [byref(last)]
+        self.reached, self.event = 0.0, False
+
+        def step(t, h, flag):
+            s = call(t, h, bool(flag), *refs)
+            self.reached = last.value if early.value else t + h
+            self.event = flags[0].value
+            return s
+        self.step = step
+
+    def save(self) -> None:
+        """Keep the FMU's state (fmi3GetFMUState / fmi2GetFMUstate) to step back to."""
+        h = self.handle
+        if self._saved is not None:
+            h.free_state(self._saved)
+        self._saved = h.get_state()
+
+    def restore(self) -> None:
+        self.handle.set_state(self._saved)
+
+    def event_mode(self, gather) -> None:
+        """After a step that returned eventHandlingNeeded: Event Mode, the inputs set there (gathered
+        from the others' outputs at the event), fmi3UpdateDiscreteStates, Step Mode."""
+        f = self.handle.fmu
+        f.enterEventMode()
+        if gather is not None:
+            gather()
+        _check(self.set(), f"{self.name} setFloat64 (Event Mode)", [self], self.reached)
+        while f.updateDiscreteStates()[0]:
+            pass
+        f.enterStepMode()
 
     def _row(self):
         return self.out
@@ -261,6 +325,7 @@ class MasterRun:
     loop_wall: float
     step_ns: Optional[dict] = None          # unit -> wall time of each doStep (ns), with timing=True
     failure: Optional[CosimError] = None    # the error that ended the run early, if any
+    events: Optional[list] = None           # early return: [(time, unit)] of the steps ended at an event
 
     def drop_partial(self) -> None:
         """Keep only the rows at whole recording intervals."""
@@ -387,11 +452,33 @@ def run(units: Sequence, connections, *, n: int, step: float, scheme: str = "gau
     every = max(1, int(round(progress_every / step))) if progress is not None else n + 1
     run_ = MasterRun({u.name: u.record_names for u, _ in recs}, {u.name: R for u, R in recs}, 1, n, False,
                      False, step, record_every, 0.0, 0.0, step_ns)
-    _loop(run_, plan, units, time_grid(step, grid), ns_step_differences, scheme == "gauss-seidel", probe, recs,
-          progress, every)
+    gs = scheme == "gauss-seidel"
+    back = _early_plan(plan, gs)
+    if not any(getattr(u, "returns_early", False) for u, _ in plan):
+        _loop(run_, plan, units, time_grid(step, grid), ns_step_differences, gs, probe, recs, progress, every)
+    elif timing or ns_step_differences:
+        raise ValueError("timing and ns_step_differences are per communication step: not with early return")
+    else:
+        _loop_events(run_, plan, back, units, time_grid(step, grid), gs, probe, recs, progress, every)
     if progress is not None:
         progress(run_.n * step)
     return run_
+
+
+def _early_plan(plan, gs: bool) -> list:
+    """The units to step back when the unit that may return early (at most one) ends a step early:
+    Gauss-Seidel, those stepped before it; Jacobi, all others. [] when no unit returns early."""
+    early = [i for i, (u, _) in enumerate(plan) if getattr(u, "returns_early", False)]
+    if not early:
+        return []
+    if len(early) > 1:
+        raise ValueError(f"early return: at most one unit may return early, got "
+                         f"{[plan[i][0].name for i in early]}")
+    back = [x for i, x in enumerate(plan) if i != early[0] and (i < early[0] or not gs)]
+    bad = [u.name for u, _ in back if not hasattr(u, "save")]
+    if bad:
+        raise ValueError(f"early return: the units {bad} cannot be set back to an earlier state (FMU units can)")
+    return back
 
 
 def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, every) -> None:
@@ -442,3 +529,77 @@ def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, 
     run_.loop_wall = time.perf_counter() - t_loop0
     run_.j, run_.n, run_.stop, run_.t_first = j, n, stop, t_first
     run_.partial = stop and n % record_every != 0
+
+
+def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progress, every) -> None:
+    """The communication steps with a unit that may return early (module docstring): each step from t_k
+    to t_(k+1) in pieces (_piece); recording, probe and progress per communication step as in _loop."""
+    n, step, record_every = run_.n, run_.step, run_.record_every
+    groups = [[x] for x in plan] if gs else [plan]
+    j, stop, t_first, events = 1, False, 0.0, []
+    t_loop0 = time.perf_counter()
+    k = 0
+    try:
+        for k in range(n):
+            t, t_end = tk(k), tk(k + 1)
+            if probe is not None:
+                probe.before()
+            while t < t_end:
+                t = _piece(groups, back, units, t, t_end, events)
+            if probe is not None:
+                stop = probe.after(k)
+            if (k + 1) % record_every == 0 or stop:
+                for u, R in recs:
+                    R[j] = u.row()
+                j += 1
+            if (k + 1) % every == 0:
+                progress((k + 1) * step)
+            if k == 0:
+                t_first = time.perf_counter() - t_loop0
+            if stop:
+                n = k + 1
+                break
+    except CosimError as exc:
+        run_.failure, n = exc, k
+    run_.loop_wall = time.perf_counter() - t_loop0
+    run_.j, run_.n, run_.stop, run_.t_first, run_.events = j, n, stop, t_first, events
+    run_.partial = stop and n % record_every != 0
+
+
+def _piece(groups, back, units, t, t_end, events) -> float:
+    """Step every unit from t to t_end, or to the time te < t_end at which the unit that may return early
+    ended its step at an event: the units already stepped beyond te (`back`, saved first) are set back
+    and stepped to te with the inputs they had; those after it step to te. Returns the time reached."""
+    for u, _ in back:
+        u.save()
+    te, done = t_end, []
+    for group in groups:
+        for u, gather in group:
+            if gather is not None:
+                gather()
+            _ok(u.set(), u, "set", units, t)
+        for u, _ in group:
+            _ok(u.step(t, te - t, 1), u, "doStep", units, t)
+        hit = next((u for u, _ in group if getattr(u, "returns_early", False) and u.reached < te), None)
+        if hit is not None:
+            te = hit.reached
+            events.append((te, hit.name))
+            for v, gather in done + [x for x in group if x[0] is not hit]:
+                v.restore()
+                if gather is not None:
+                    gather()
+                _ok(v.set(), v, "set", units, t)
+                _ok(v.step(t, te - t, 1), v, "doStep (to the event)", units, t)
+                if (v, gather) in done:
+                    _ok(v.get(), v, "get", units, t)
+        for u, _ in group:
+            _ok(u.get(), u, "get", units, t)
+        done += group
+        if hit is not None and hit.event:
+            hit.event_mode(next(g for u, g in group if u is hit))
+    return te
+
+
+def _ok(status, u, what, units, t) -> None:
+    if status > 1:
+        _check(status, f"{u.name} {what}", units, t)

@@ -195,20 +195,33 @@ class LogMessage(NamedTuple):
         return f"[{self.status_name.upper()}] {self.message}"
 
 
+#: FMI 3.0 variable types -> the FMI 2.0 names this wrapper dispatches on
+_FMI3_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
 class SlaveHandle:
-    """One FMU2Slave instance with name-based access, collected log messages and cleanup."""
+    """One FMU2Slave (or, for an FMI 3.0 FMU, FMU3Slave) instance with name-based access, collected log
+    messages and cleanup. FMI 3.0: `early_return` instantiates with earlyReturnAllowed and
+    eventModeUsed (the FMU's Event Mode is entered by `handle_event` after an early return); `fmi3`
+    tells the version; `last_step` holds fmi3DoStep's (eventHandlingNeeded, terminateSimulation,
+    earlyReturn, lastSuccessfulTime) of do_step."""
 
     def __init__(self, fmu_path: Union[str, Path], instance_name: str = "instance", *,
-                 logging_on: bool = True, echo: bool = False, unzip_dir: Union[str, Path, None] = None):
+                 logging_on: bool = True, echo: bool = False, unzip_dir: Union[str, Path, None] = None,
+                 early_return: bool = False):
         from fmpy import extract, read_model_description
 
         self.path = Path(fmu_path)
         self.instance_name = instance_name
         self.md = read_model_description(str(self.path))
+        self.fmi3 = self.md.fmiVersion.startswith("3")
+        self.early_return = bool(early_return and self.fmi3)
+        self.last_step = None
         self._owns_dir = unzip_dir is None
         self.unzip_dir = str(unzip_dir) if unzip_dir is not None else str(extract(str(self.path)))
         self.variables = {v.name: v for v in self.md.modelVariables}
-        self._vr = {v.name: (v.type, v.valueReference) for v in self.md.modelVariables}
+        self._vr = {v.name: (_FMI3_TYPES.get(v.type, v.type) if self.fmi3 else v.type, v.valueReference)
+                    for v in self.md.modelVariables}
         self.messages: list[LogMessage] = []
         self.echo = echo
         self.time: Optional[float] = None
@@ -222,8 +235,9 @@ class SlaveHandle:
     # -- construction -------------------------------------------------------------------------
     @classmethod
     def open(cls, fmu_path, instance_name: str = "instance", *, logging_on: bool = True,
-             echo: bool = False, unzip_dir=None) -> "SlaveHandle":
-        h = cls(fmu_path, instance_name, logging_on=logging_on, echo=echo, unzip_dir=unzip_dir)
+             echo: bool = False, unzip_dir=None, early_return: bool = False) -> "SlaveHandle":
+        h = cls(fmu_path, instance_name, logging_on=logging_on, echo=echo, unzip_dir=unzip_dir,
+                early_return=early_return)
         try:
             h.instantiate()
         except BaseException:
@@ -231,22 +245,24 @@ class SlaveHandle:
             raise
         return h
 
+    def _record(self, status, category, message, instance) -> None:
+        try:
+            msg = LogMessage(int(status), category.decode("utf-8", "replace") if category else "",
+                             message.decode("utf-8", "replace") if message else "",
+                             instance.decode("utf-8", "replace") if instance else "")
+            self.messages.append(msg)
+            if self.echo:
+                print(str(msg), file=sys.stderr)
+        except Exception:  # pragma: no cover - never raise into C
+            pass
+
     def _make_callbacks(self):
         from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                                fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
         from fmpy.fmi1 import calloc, free
 
         def _logger(component, instance, status, category, message):
-            try:
-                msg = LogMessage(int(status),
-                                 category.decode("utf-8", "replace") if category else "",
-                                 message.decode("utf-8", "replace") if message else "",
-                                 instance.decode("utf-8", "replace") if instance else "")
-                self.messages.append(msg)
-                if self.echo:
-                    print(str(msg), file=sys.stderr)
-            except Exception:  # pragma: no cover - never raise into C
-                pass
+            self._record(status, category, message, instance)
 
         cb = fmi2CallbackFunctions()
         cb.logger = fmi2CallbackLoggerTYPE(_logger)
@@ -263,15 +279,23 @@ class SlaveHandle:
 
     def instantiate(self):
         from fmpy.fmi2 import FMU2Slave
+        from fmpy.fmi3 import FMU3Slave
 
-        self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip_dir,
-                              modelIdentifier=self.md.coSimulation.modelIdentifier,
-                              instanceName=self.instance_name)
+        self._fmu = (FMU3Slave if self.fmi3 else FMU2Slave)(
+            guid=self.md.guid, unzipDirectory=self.unzip_dir, modelIdentifier=self.md.coSimulation.modelIdentifier,
+            instanceName=self.instance_name)
         try:
-            self._fmu.instantiate(callbacks=self._make_callbacks(), loggingOn=self._logging_on)
+            if self.fmi3:
+                name = self.instance_name.encode("utf-8")
+                self._fmu.instantiate(loggingOn=self._logging_on, eventModeUsed=self.early_return,
+                                      earlyReturnAllowed=self.early_return,
+                                      logMessage=lambda env, st, cat, msg: self._record(st, cat, msg, name))
+            else:
+                self._fmu.instantiate(callbacks=self._make_callbacks(), loggingOn=self._logging_on)
         except Exception as exc:
             # fmpy only says "Failed to instantiate model"; the cause is in the FMU's log
-            raise RuntimeError(f"fmi2Instantiate of {self.path.name} ({self.instance_name!r}) "
+            raise RuntimeError(f"{'fmi3InstantiateCoSimulation' if self.fmi3 else 'fmi2Instantiate'} of "
+                               f"{self.path.name} ({self.instance_name!r}) "
                                f"failed: {exc}\n" + (self.log_text() or
                                                      "(no log messages; use logging_on=True)")
                                ) from exc
@@ -279,22 +303,39 @@ class SlaveHandle:
 
     @property
     def fmu(self):
-        """The underlying fmpy FMU2Slave."""
+        """The underlying fmpy FMU2Slave (FMU3Slave)."""
         return self._fmu
 
     def setup(self, start_time: float = 0.0, stop_time: Optional[float] = None,
               tolerance: Optional[float] = None, start_values: Optional[dict] = None,
               initialize: bool = True) -> None:
-        """setupExperiment, enterInitializationMode, set start values, exitInitializationMode."""
+        """setupExperiment, enterInitializationMode, set start values, exitInitializationMode (FMI 3.0:
+        enterInitializationMode with the times, ...; with eventModeUsed then Event Mode is left at once:
+        fmi3UpdateDiscreteStates, fmi3EnterStepMode)."""
         f = self._fmu
-        f.setupExperiment(tolerance=tolerance, startTime=start_time, stopTime=stop_time)
-        f.enterInitializationMode()
+        if self.fmi3:
+            f.enterInitializationMode(tolerance=tolerance, startTime=start_time, stopTime=stop_time)
+        else:
+            f.setupExperiment(tolerance=tolerance, startTime=start_time, stopTime=stop_time)
+            f.enterInitializationMode()
         if start_values:
             self.set_many(start_values)
         if initialize:
             f.exitInitializationMode()
             self._initialized = True
+            if self.early_return:
+                f.updateDiscreteStates()
+                f.enterStepMode()
         self.time = start_time
+
+    def handle_event(self) -> None:
+        """FMI 3.0 with eventModeUsed, after a step that returned eventHandlingNeeded: Event Mode (the
+        inputs may be set there), fmi3UpdateDiscreteStates until nothing is left to update, Step Mode."""
+        f = self._fmu
+        f.enterEventMode()
+        while f.updateDiscreteStates()[0]:
+            pass
+        f.enterStepMode()
 
     # -- variables ------------------------------------------------------------------------------
     def _ref(self, name: str):
@@ -311,9 +352,9 @@ class SlaveHandle:
         typ, vr = self._ref(name)
         f = self._fmu
         if typ == "Real":
-            f.setReal([vr], [float(value)])
+            (f.setFloat64 if self.fmi3 else f.setReal)([vr], [float(value)])
         elif typ == "Integer" or typ == "Enumeration":
-            f.setInteger([vr], [int(value)])
+            (f.setInt32 if self.fmi3 else f.setInteger)([vr], [int(value)])
         elif typ == "Boolean":
             f.setBoolean([vr], [bool(value)])
         else:
@@ -327,9 +368,9 @@ class SlaveHandle:
         typ, vr = self._ref(name)
         f = self._fmu
         if typ == "Real":
-            return f.getReal([vr])[0]
+            return (f.getFloat64 if self.fmi3 else f.getReal)([vr])[0]
         if typ == "Integer" or typ == "Enumeration":
-            return f.getInteger([vr])[0]
+            return (f.getInt32 if self.fmi3 else f.getInteger)([vr])[0]
         if typ == "Boolean":
             return bool(f.getBoolean([vr])[0])
         v = f.getString([vr])[0]
@@ -339,7 +380,8 @@ class SlaveHandle:
         reals = [n for n in names if self._vr[n][0] == "Real"]
         out = {}
         if reals:
-            out.update(zip(reals, self._fmu.getReal([self._vr[n][1] for n in reals])))
+            get = self._fmu.getFloat64 if self.fmi3 else self._fmu.getReal
+            out.update(zip(reals, get([self._vr[n][1] for n in reals])))
         for n in names:
             if n not in out:
                 out[n] = self.get(n)
@@ -351,11 +393,14 @@ class SlaveHandle:
 
     # -- stepping -------------------------------------------------------------------------------
     def do_step(self, t: float, dt: float) -> int:
-        """fmi2DoStep; returns the status code (0 ok, 1 warning, 2 discard, 3 error, 4 fatal)."""
+        """fmi2DoStep (fmi3DoStep: its out-arguments in last_step); returns the status code (0 ok, 1
+        warning, 2 discard, 3 error, 4 fatal)."""
         from fmpy.fmi1 import FMICallException
 
         try:
-            self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
+            r = self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
+            if self.fmi3:
+                self.last_step = r
         except FMICallException as e:
             return int(e.status)
         return 0
@@ -370,21 +415,21 @@ class SlaveHandle:
 
     # -- state ----------------------------------------------------------------------------------
     def get_state(self):
-        return self._fmu.getFMUstate()
+        return self._fmu.getFMUState() if self.fmi3 else self._fmu.getFMUstate()
 
     def set_state(self, state, time: Optional[float] = None) -> None:
-        self._fmu.setFMUstate(state)
+        (self._fmu.setFMUState if self.fmi3 else self._fmu.setFMUstate)(state)
         if time is not None:
             self.time = time
 
     def free_state(self, state) -> None:
-        self._fmu.freeFMUstate(state)
+        (self._fmu.freeFMUState if self.fmi3 else self._fmu.freeFMUstate)(state)
 
     def serialize_state(self, state) -> bytes:
-        return self._fmu.serializeFMUstate(state)
+        return (self._fmu.serializeFMUState if self.fmi3 else self._fmu.serializeFMUstate)(state)
 
     def deserialize_state(self, blob: bytes):
-        return self._fmu.deSerializeFMUstate(blob)
+        return (self._fmu.deserializeFMUState if self.fmi3 else self._fmu.deSerializeFMUstate)(blob)
 
     def reset(self) -> None:
         self._fmu.reset()
