@@ -10,6 +10,8 @@ Inputs  motor.speed [rad/s], motor.angle [rad] (from the plant, held over the st
 Outputs motor.torque [N.m] and brake.command (1 = release, 0 = apply) at the end of the step, plus
         the references and the sequencer phase. No output depends directly on an input (the drive
         samples at the start of the step).
+FMI 3.0 (`reeve-fmu build --fmi 3`), early return allowed: a step ends at the speed-loop tick at which
+        the brake command switches (release after the pre-torque, apply after the zero-speed hold).
 Parameters: reeve_fmu.components.drive.DRIVE_PARAMETERS (all fixed; the drive is built in initialization).
 """
 import numpy as np
@@ -37,6 +39,9 @@ class ElectricDriveSlave(ReeveSlave):
     description = ("Elevator electric drive (reeve_fmu): trip sequencer, S-curve, speed PI with torque "
                    "feed-forward, Level 1 torque lag + dead time or Level 2 PMSM dq model, brake "
                    "sequencing")
+    #: FMI 3.0 with early return allowed: a step ends at the speed-loop tick at which the brake command
+    #: switches (ElectricDrive.next_command_switch), so the plant gets the command from that instant
+    might_return_early = True
 
     def define(self):
         self.modelName = "ElectricDrive"
@@ -127,11 +132,17 @@ class ElectricDriveSlave(ReeveSlave):
                         f"communication steps')", Fmi2Status.warning)
         v = self.values
         d = self.drive
-        v["motor.torque"], v["brake.command"] = d.step(t, dt, v["motor.speed"], v["motor.angle"])
+        te = d.next_command_switch(t, t + dt) if self.early_return_allowed else None
+        v["motor.torque"], v["brake.command"] = d.step(t, dt if te is None else te - t, v["motor.speed"],
+                                                       v["motor.angle"])
         # the snapshot of the drive state for the other outputs: raw bytes (a tenth of tolist's cost)
         self._snap = (d._xs.tobytes(), d._xi.tobytes())
         self.defer_outputs(self._writer)
-        return True
+        if te is None:
+            return True
+        self.log(f"early return at t = {te!r} s (step {t!r} + {dt!r} s): the brake "
+                 f"{'apply' if v['brake.command'] else 'release'} command (from the next step on)", Fmi2Status.ok)
+        return te
 
     def _write_snap(self):
         xs, xi = self._snap

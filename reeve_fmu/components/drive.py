@@ -573,6 +573,25 @@ class ElectricDrive:
         _advance(self._xs.copy(), self._xi.copy(), self._P, self._sched, self._prof, t, t + 1e-3, 0.0, 0.0,
                  math.nan)
 
+    def next_command_switch(self, t0: float, t1: float) -> Optional[float]:
+        """The first speed-loop tick in (t0, t1) at which the brake command changes (the release
+        command at the pre-torque's end, the apply command after the zero-speed hold), else None. A
+        step from t0 to that tick still gives the old command; the tick runs at the start of the next
+        step (ticks run in [t, t + dt)), whose command is then the new one from the tick on."""
+        hb, nsp = float(self._P[_P_HB]), int(self._P[_P_NSP])
+        eps = 1e-6 * hb                           # _advance's tick tolerance
+        for row in self._sched:
+            for ti in (row[_S_TL], row[_S_TD]):
+                m = math.ceil(ti / (nsp * hb) - 1e-9)
+                if (m * nsp) * hb < ti:
+                    m += 1
+                tick = (m * nsp) * hb             # the first speed tick at or after the switch (_advance's k hb)
+                if t0 + eps < tick < t1 - eps:
+                    return float(tick)
+                if tick >= t1:
+                    return None
+        return None
+
     # -- FMU state ------------------------------------------------------------------------------------
     def get_state(self) -> dict:
         """All hidden state as builtin Python types (JSON/pickle-safe)."""

@@ -542,10 +542,11 @@ def cosimulate(plant_fmu, drive_fmu, *, step: float = 1e-3, t_end: Optional[floa
                   drive's torque.max
     on_instability  "warn": log a warning and continue (the result is flagged); "stop": also end the
                   run at the detection (result truncated there); "raise": raise CosimInstability
-    early_return  FMI 3.0 plant FMU: instantiate it with earlyReturnAllowed and eventModeUsed, so that its
-                  steps end at its events and the drive is stepped to the event time (fmu.master, "Early
-                  return"; info["events"]: the event times). Default: on for an FMI 3.0 plant FMU; an
-                  FMI 2.0 plant has no early return (True is then an error)
+    early_return  FMI 3.0 FMUs: instantiate them with earlyReturnAllowed and eventModeUsed, so that a step
+                  ends at the plant's events (brake engagement, slack, slip) and the drive's brake command
+                  switches, and the other FMU is stepped to that time (fmu.master, "Early return";
+                  info["events"]: the times). Default: on for FMI 3.0 FMUs; FMI 2.0 FMUs have no early
+                  return (True is then an error)
 
     The master is fmu.master.run over CONNECTIONS: per step exactly one setReal, doStep and getReal call
     per FMU through fmpy's ctypes functions with preallocated value-reference and value arrays; the
@@ -628,14 +629,15 @@ def _open_pair(SlaveHandle, plant_fmu, drive_fmu, handles: list, t_end, plant_va
     early_return: see cosimulate."""
     from fmpy import read_model_description
 
-    fmi3 = read_model_description(str(plant_fmu)).fmiVersion.startswith("3")
-    if early_return and not fmi3:
-        raise ValueError(f"early_return: {Path(plant_fmu).name} is an FMI 2.0 FMU (early return is FMI 3.0; "
-                         f"build it with reeve-fmu build --fmi 3)")
-    plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log, early_return=fmi3 if early_return is None
-                             else early_return)
+    fmi3 = {k: read_model_description(str(f)).fmiVersion.startswith("3")
+            for k, f in (("plant", plant_fmu), ("drive", drive_fmu))}
+    if early_return and not all(fmi3.values()):
+        raise ValueError(f"early_return: {Path(plant_fmu if not fmi3['plant'] else drive_fmu).name} is an FMI 2.0 "
+                         f"FMU (early return is FMI 3.0; build it with reeve-fmu build --fmi 3)")
+    early = {k: v if early_return is None else bool(early_return) for k, v in fmi3.items()}
+    plant = SlaveHandle.open(plant_fmu, "plant", echo=echo_log, early_return=early["plant"])
     handles.append(plant)
-    drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log)
+    drive = SlaveHandle.open(drive_fmu, "drive", echo=echo_log, early_return=early["drive"])
     handles.append(drive)
     plant.setup(0.0, t_end, start_values=dict(plant_values or {}))
     drive.setup(0.0, t_end, start_values=dict(drive_values or {}))

@@ -13,12 +13,13 @@ Connections are data: `("plant.motor.speed", "drive.motor.speed")`, source first
 the text before the first dot. Schemes: "gauss-seidel" steps the units in the order given, each with the
 newest outputs of the others; "jacobi" gives every unit the outputs at t, then steps them all.
 
-Early return (FMI 3.0): when one FMU unit was instantiated with earlyReturnAllowed (SlaveHandle
-`early_return`), a communication step is made in pieces: when that FMU ends its step early at an event
-(earlyReturn, lastSuccessfulTime te), the units that were already stepped beyond te are set back to
-their state at the piece's start (fmi3SetFMUState) and stepped to te with the inputs they had; the
-units after it in the Gauss-Seidel order step to te; the FMU goes through Event Mode at te with the
-others' outputs at te; the piece from te then continues to the same communication point. Without such
+Early return (FMI 3.0): when FMU units were instantiated with earlyReturnAllowed (SlaveHandle
+`early_return`), a communication step is made in pieces: when such an FMU ends its step early at an
+event (earlyReturn, lastSuccessfulTime te), the units that were already stepped beyond te are set back
+to their state at the piece's start (fmi3SetFMUState) and stepped to te with the inputs they had; the
+units after it in the Gauss-Seidel order step to te; an FMU that asked for event handling goes through
+Event Mode at te with the others' outputs at te; the piece from te then continues to the same
+communication point. Without such
 a unit (every FMI 2.0 run) the loop is the plain one.
 
 `run(units, connections, n=..., step=...)` makes the communication steps and returns a `MasterRun` (the
@@ -466,15 +467,12 @@ def run(units: Sequence, connections, *, n: int, step: float, scheme: str = "gau
 
 
 def _early_plan(plan, gs: bool) -> list:
-    """The units to step back when the unit that may return early (at most one) ends a step early:
-    Gauss-Seidel, those stepped before it; Jacobi, all others. [] when no unit returns early."""
+    """The units to save before each piece of a step, to set back when a unit ends its step early:
+    Gauss-Seidel, those stepped before the last unit that may return early; Jacobi, all."""
     early = [i for i, (u, _) in enumerate(plan) if getattr(u, "returns_early", False)]
     if not early:
         return []
-    if len(early) > 1:
-        raise ValueError(f"early return: at most one unit may return early, got "
-                         f"{[plan[i][0].name for i in early]}")
-    back = [x for i, x in enumerate(plan) if i != early[0] and (i < early[0] or not gs)]
+    back = [x for i, x in enumerate(plan) if not gs or i < early[-1]]
     bad = [u.name for u, _ in back if not hasattr(u, "save")]
     if bad:
         raise ValueError(f"early return: the units {bad} cannot be set back to an earlier state (FMU units can)")
@@ -567,9 +565,10 @@ def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progre
 
 
 def _piece(groups, back, units, t, t_end, events) -> float:
-    """Step every unit from t to t_end, or to the time te < t_end at which the unit that may return early
-    ended its step at an event: the units already stepped beyond te (`back`, saved first) are set back
-    and stepped to te with the inputs they had; those after it step to te. Returns the time reached."""
+    """Step every unit from t to t_end, or to the earliest time te < t_end at which a unit that may return
+    early ended its step at an event: the units already stepped beyond te (saved first: `back`) are set
+    back and stepped to te with the inputs they had, those after it step to te; a unit that asked for
+    event handling at te goes through Event Mode with the others' outputs at te. Returns the time reached."""
     for u, _ in back:
         u.save()
     te, done = t_end, []
@@ -580,8 +579,9 @@ def _piece(groups, back, units, t, t_end, events) -> float:
             _ok(u.set(), u, "set", units, t)
         for u, _ in group:
             _ok(u.step(t, te - t, 1), u, "doStep", units, t)
-        hit = next((u for u, _ in group if getattr(u, "returns_early", False) and u.reached < te), None)
-        if hit is not None:
+        hits = [u for u, _ in group if getattr(u, "returns_early", False) and u.reached < te]
+        if hits:
+            hit = min(hits, key=lambda u: u.reached)
             te = hit.reached
             events.append((te, hit.name))
             for v, gather in done + [x for x in group if x[0] is not hit]:
@@ -595,8 +595,9 @@ def _piece(groups, back, units, t, t_end, events) -> float:
         for u, _ in group:
             _ok(u.get(), u, "get", units, t)
         done += group
-        if hit is not None and hit.event:
-            hit.event_mode(next(g for u, g in group if u is hit))
+    for u, gather in done:
+        if getattr(u, "returns_early", False) and u.event and u.reached == te:
+            u.event_mode(gather)
     return te
 
 
