@@ -155,18 +155,21 @@ class Plant:
         whose last successful time is the last solver step before it.
         Returns (outputs, time reached, the event or None). The step is made as by step(); only when
         the watched signs differ at its end is it made again from its start in solver steps to find the
-        first one (an event undone within the same step is not seen). Without an event the result is
-        step()'s bit for bit."""
+        first one (an event undone within the same step is not seen). Without an event, or when the
+        step is one solver step, the result is step()'s bit for bit."""
         if self._joints:
             raise ValueError("step_to_event: this plant has joint inputs; use step()")
         start, y_start = self.state.copy(), self._y
         before = self._indicators(y_start)
         self.step(dt, torque, brake_command)
-        if self._indicators(self._y) == before:
+        after = self._indicators(self._y)
+        if after == before:
             return self._y, self.state.t, None
+        n = max(1, math.ceil(dt / self.sim.h - 1e-9))
+        if n == 1:                          # one solver step: the event is at its end (no redo)
+            return self._y, self.state.t, self._event(before, after)
         self.state, self._y = start, y_start
         t0 = start.t
-        n = max(1, math.ceil(dt / self.sim.h - 1e-9))
         for k in range(1, n + 1):
             tk = t0 + dt if k == n else t0 + k * (dt / n)
             self.step(tk - self.state.t, torque, brake_command)

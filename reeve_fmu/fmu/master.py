@@ -107,8 +107,8 @@ def _no_call() -> int:
 
 class FmuUnit:
     """An FMU (SlaveHandle, set up and initialized) as a unit of the master. FMI 3.0 with early return
-    (the handle's `early_return`): `returns_early`; after each step `reached` (the time the step ended
-    at) and `event` (eventHandlingNeeded)."""
+    (the handle's `early_return`): `returns_early`; after each step `early` (earlyReturn), `reached`
+    (the time the step ended at) and `event` (eventHandlingNeeded)."""
 
     def __init__(self, name: str, handle):
         self.name, self.handle = name, handle
@@ -168,11 +168,12 @@ class FmuUnit:
         early = flags[2]
         call = partial(f.dll.fmi3DoStep, f.component)
         refs = [byref(x) for x in flags] + [byref(last)]
-        self.reached, self.event = 0.0, False
+        self.reached, self.event, self.early = 0.0, False, False
 
         def step(t, h, flag):
             s = call(t, h, bool(flag), *refs)
-            self.reached = last.value if early.value else t + h
+            self.early = early.value
+            self.reached = last.value if self.early else t + h
             self.event = flags[0].value
             return s
         self.step = step
@@ -542,8 +543,10 @@ def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progre
             t, t_end = tk(k), tk(k + 1)
             if probe is not None:
                 probe.before()
+            h = step                    # a whole step is passed as `step`, as _loop does
             while t < t_end:
-                t = _piece(groups, back, units, t, t_end, events)
+                t = _piece(groups, back, units, t, t_end, h, events)
+                h = t_end - t
             if probe is not None:
                 stop = probe.after(k)
             if (k + 1) % record_every == 0 or stop:
@@ -564,8 +567,8 @@ def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progre
     run_.partial = stop and n % record_every != 0
 
 
-def _piece(groups, back, units, t, t_end, events) -> float:
-    """Step every unit from t to t_end, or to the earliest time te < t_end at which a unit that may return
+def _piece(groups, back, units, t, t_end, h, events) -> float:
+    """Step every unit from t by h (to t_end), or to the earliest time te < t_end at which a unit that may return
     early ended its step at an event: the units already stepped beyond te (saved first: `back`) are set
     back and stepped to te with the inputs they had, those after it step to te; a unit that asked for
     event handling at te goes through Event Mode with the others' outputs at te. Returns the time reached."""
@@ -578,8 +581,8 @@ def _piece(groups, back, units, t, t_end, events) -> float:
                 gather()
             _ok(u.set(), u, "set", units, t)
         for u, _ in group:
-            _ok(u.step(t, te - t, 1), u, "doStep", units, t)
-        hits = [u for u, _ in group if getattr(u, "returns_early", False) and u.reached < te]
+            _ok(u.step(t, h if te == t_end else te - t, 1), u, "doStep", units, t)
+        hits = [u for u, _ in group if getattr(u, "returns_early", False) and u.early and u.reached < te]
         if hits:
             hit = min(hits, key=lambda u: u.reached)
             te = hit.reached
@@ -596,7 +599,7 @@ def _piece(groups, back, units, t, t_end, events) -> float:
             _ok(u.get(), u, "get", units, t)
         done += group
     for u, gather in done:
-        if getattr(u, "returns_early", False) and u.event and u.reached == te:
+        if getattr(u, "returns_early", False) and u.early and u.event and u.reached == te:
             u.event_mode(gather)
     return te
 
