@@ -251,6 +251,19 @@ def test_slip_onset_ends_a_step_at_the_solver_step_where_the_rope_starts_to_slip
     assert abs(first - te) < 1e-12 and not any(out for t, out in fine if t < te - 1e-12)
 
 
+def test_master_runs_fmi3_fmus_with_early_return_as_the_fmi2_fmus_when_no_event_falls_inside_a_step(fmus, fmus3):
+    """cosimulate at 1 ms over the first 2 s of the R1 trip (pre-torque, brake release, start): the FMI
+    3.0 pair with early return (the default) records what the FMI 2.0 pair records, bit for bit, with no
+    early return (the plant's solver step is the communication step; the drive's commands fall on the
+    grid); at 10 ms the FMI 3.0 pair's plant returns early at the brake release (0.714 s)."""
+    a = run_in_subprocess(f"{JOBS}:master", fmus["plant"], fmus["drive"], 2.0, 1e-3, timeout=900)
+    b = run_in_subprocess(f"{JOBS}:master", fmus3["plant"], fmus3["drive"], 2.0, 1e-3, timeout=900)
+    assert a["events"] is None and b["events"] == []
+    assert b["rows"] == a["rows"] and len(a["rows"][0]) == 2001 and a["rows"][1][-1] > 0.1
+    c = run_in_subprocess(f"{JOBS}:master", fmus3["plant"], fmus3["drive"], 2.0, 1e-2, timeout=900)
+    assert len(c["events"]) == 1 and abs(c["events"][0] - 0.714) < 1e-12
+
+
 def test_master_early_return_makes_the_brake_stop_coupling_error_smaller(fmus, fmus3):
     """benchmarks/brake_stop_coupling.py with the drive tuned for 10 ms coupling: the brake stop after a
     3 m move, Gauss-Seidel at 10 ms, against the monolithic 0.1 ms reference. The FMI 2.0 pair gets the

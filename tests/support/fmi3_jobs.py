@@ -338,3 +338,15 @@ def early_return(plant_fmu, drive_fmu, h, n_max):
     plant.close()
     drive.close()
     return {"hit": hit, "fine": fine, "rows": rows}
+
+
+def master(plant_fmu, drive_fmu, t_end, h):
+    """The package's master (reeve_fmu.fmu.cosim.cosimulate: FMI 3.0 FMUs with early return by default)
+    over the R1 trip's start: the recorded plant columns and the early-return event times. The one job
+    here that imports reeve_fmu (the master is the subject)."""
+    from reeve_fmu.fmu.cosim import cosimulate
+
+    r = cosimulate(plant_fmu, drive_fmu, step=h, t_end=t_end, drive_values=DRIVE_VALUES, record=list(RECORD),
+                   monitor=False)
+    return {"rows": [r[c].tolist() for c in RECORD + ("motor.torque", "brake.command")],
+            "events": r.info.get("events")}
