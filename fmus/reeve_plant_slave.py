@@ -18,7 +18,8 @@ master restores an FMU state or resets.
 
 Built with `reeve-fmu build --fmi 3` (FMI 3.0): also the arrays sheaves.angle, .speed, .tension_in,
 .tension_out over the sheaves' scalars, and, when the host allows early return, steps that end at the
-solver step of a brake engagement or release, a slack or snap-taut rope, slip onset (_step_to_event).
+solver step of a brake engagement or release, a slack or snap-taut rope, slip onset, or at the last
+solver step before a drum runs empty (_step_to_event).
 """
 import json
 

@@ -17,7 +17,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..core.kernel import IN_TRAC_Z, UE_TORQUE, U_TORQUE
+from ..core.kernel import IN_STATUS, IN_TRAC_Z, UE_TORQUE, U_TORQUE
 from ..core.model import State, build_model
 from ..core.plausibility import check_or_raise
 from ..core.scene import Body, Rope, Scene, SceneError, load_scene
@@ -151,8 +151,8 @@ class Plant:
         crosses 1/2: it has no sharper instant), a rope force reaches 0 (slack) or leaves 0 (snap-taut),
         the rope starts or stops slipping on a slipping traction sheave (its groove-friction deflection
         leaves or re-enters the sticking band, |z| <= 0.9 creep: contact._elastoplastic). A drum that runs
-        empty is not an event here: the solver stops there (SolverError), the FMU's step is a Discard
-        whose last successful time is the last solver step before it.
+        empty stops the solver (SolverError): the step ends at the last solver step before it (the event
+        "the solver stops: ..."), and the next step raises the SolverError (no solver step made).
         Returns (outputs, time reached, the event or None). The step is made as by step(); only when
         the watched signs differ at its end is it made again from its start in solver steps to find the
         first one (an event undone within the same step is not seen). Without an event, or when the
@@ -161,10 +161,14 @@ class Plant:
             raise ValueError("step_to_event: this plant has joint inputs; use step()")
         start, y_start = self.state.copy(), self._y
         before = self._indicators(y_start)
-        self.step(dt, torque, brake_command)
+        stop = None
+        try:
+            self.step(dt, torque, brake_command)
+        except SolverError as exc:
+            stop = self._stopped(start.t, exc)
         after = self._indicators(self._y)
         if after == before:
-            return self._y, self.state.t, None
+            return self._y, self.state.t, stop
         n = max(1, math.ceil(dt / self.sim.h - 1e-9))
         if n == 1:                          # one solver step: the event is at its end (no redo)
             return self._y, self.state.t, self._event(before, after)
@@ -172,12 +176,24 @@ class Plant:
         t0 = start.t
         for k in range(1, n + 1):
             tk = t0 + dt if k == n else t0 + k * (dt / n)
-            self.step(tk - self.state.t, torque, brake_command)
+            try:
+                self.step(tk - self.state.t, torque, brake_command)
+            except SolverError as exc:
+                return self._y, self.state.t, self._stopped(t0, exc)
             self.state.t = tk
             now = self._indicators(self._y)
             if now != before:
                 return self._y, tk, self._event(before, now)
         return self._y, self.state.t, None      # an event undone within the step
+
+    def _stopped(self, t0: float, exc: SolverError) -> str:
+        """After a SolverError in step_to_event: when a drum ran empty after t0, the outputs at the last
+        good solver step (where the state was left) and the event; otherwise the error again."""
+        st = self.state
+        if int(st.info[IN_STATUS]) != 4 or not st.t > t0:
+            raise exc
+        self._y = self.sim.outputs(st).copy()
+        return f"the solver stops: {exc}"
 
     def _indicators(self, y) -> tuple:
         """(brake at least half engaged, every rope force > 0, the traction sheave slipping): what

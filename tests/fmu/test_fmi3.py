@@ -251,6 +251,38 @@ def test_slip_onset_ends_a_step_at_the_solver_step_where_the_rope_starts_to_slip
     assert abs(first - te) < 1e-12 and not any(out for t, out in fine if t < te - 1e-12)
 
 
+def test_an_empty_drum_ends_a_step_at_the_last_solver_step_before_it():
+    """scenes/crane_two_fall_hoist.toml with 0.5 m of rope on the drum (the rope 99.5 m shorter), solver
+    step 1 ms, the hook falling with the motor torque 0: in 1 ms steps (step()) the solver stops at
+    0.177 s, the drum empty; in 10 ms steps (step_to_event) the step from 0.174 s ends early at that
+    last good solver step with the reason, and the next step raises the solver's error."""
+    from dataclasses import replace
+
+    from reeve_fmu.components.plant import Plant
+    from reeve_fmu.core.scene import load_scene
+    from reeve_fmu.core.solver import SolverError
+
+    sc = load_scene(ROOT / "scenes" / "crane_two_fall_hoist.toml")
+    sc = replace(sc, sheaves=tuple(replace(s, stored=0.5) if s.kind == "drum" else s for s in sc.sheaves),
+                 ropes=tuple(replace(r, length=r.length - 99.5) for r in sc.ropes),
+                 solver=replace(sc.solver, step=1e-3))
+    fine = Plant(sc)
+    with pytest.raises(SolverError, match="its stored length reached 0 m"):
+        for _ in range(1000):
+            fine.step(1e-3, 0.0, 1.0)
+    assert abs(fine.state.t - 0.177) < 1e-9
+    p = Plant(sc)
+    events = []
+    with pytest.raises(SolverError, match="drum 'drum' \\(its stored length reached 0 m\\)"):
+        for _ in range(100):
+            t0 = p.state.t
+            _, te, event = p.step_to_event(0.01, 0.0, 1.0)
+            events.append((t0, te, event))
+    t0, te, event = events[-1]
+    assert abs(te - fine.state.t) < 1e-9 and t0 < te < t0 + 0.01 and event.startswith("the solver stops: t = 0.177000 s: a drum")
+    assert p.state.t == te
+
+
 def test_master_runs_fmi3_fmus_with_early_return_as_the_fmi2_fmus_when_no_event_falls_inside_a_step(fmus, fmus3):
     """cosimulate at 1 ms over the first 2 s of the R1 trip (pre-torque, brake release, start): the FMI
     3.0 pair with early return (the default) records what the FMI 2.0 pair records, bit for bit, with no
