@@ -19,8 +19,7 @@ event (earlyReturn, lastSuccessfulTime te), the units that were already stepped 
 to their state at the piece's start (fmi3SetFMUState) and stepped to te with the inputs they had; the
 units after it in the Gauss-Seidel order step to te; an FMU that asked for event handling goes through
 Event Mode at te with the others' outputs at te; the piece from te then continues to the same
-communication point. Without such
-a unit (every FMI 2.0 run) the loop is the plain one.
+communication point. Without such a unit (every FMI 2.0 run) the loop is the plain one.
 
 `run(units, connections, n=..., step=...)` makes the communication steps and returns a `MasterRun` (the
 recorded rows per unit, the steps made, wall times); `MasterRun.series()` turns it into the one result
@@ -568,10 +567,11 @@ def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progre
 
 
 def _piece(groups, back, units, t, t_end, h, events) -> float:
-    """Step every unit from t by h (to t_end), or to the earliest time te < t_end at which a unit that may return
-    early ended its step at an event: the units already stepped beyond te (saved first: `back`) are set
-    back and stepped to te with the inputs they had, those after it step to te; a unit that asked for
-    event handling at te goes through Event Mode with the others' outputs at te. Returns the time reached."""
+    """Step every unit from t by h (to t_end), or to the earliest time te < t_end at which a unit that may
+    return early ended its step at an event: the units already stepped beyond te (saved first: `back`)
+    are set back and stepped to te with the inputs they had, those after it step to te; a unit that
+    asked for event handling at te goes through Event Mode with the others' outputs at te. Returns the
+    time reached."""
     for u, _ in back:
         u.save()
     te, done = t_end, []
