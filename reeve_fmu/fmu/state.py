@@ -34,7 +34,9 @@ def canonical_state(obj, path="state"):
             if type(k) is not str:
                 raise TypeError(f"{path}: dict key {k!r} is {type(k).__name__}, must be str "
                                 f"(JSON would turn it into a string)")
-            out[k] = canonical_state(v, f"{path}.{k}")
+            tv = type(v)    # a scalar as is, without the call (most of a slave's values: the state's cost)
+            out[k] = v if tv is float or tv is int or tv is bool or tv is str or v is None \
+                else canonical_state(v, f"{path}.{k}")
         return out
     if t is list or t is tuple:
         return [canonical_state(v, f"{path}[{i}]") for i, v in enumerate(obj)]
