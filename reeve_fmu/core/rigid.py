@@ -152,3 +152,124 @@ def rigid_terms(K, q, v, M, Q):
                     for r in range(3):
                         acc += T[i, m] * Jw[i, r] * T[r, n]
                 M[K.rb_q[k, m], K.rb_q[k, n]] += acc
+
+
+# Columns of Kernel.ch_f, one row per body on a joint on a moving body (builder/bodies.chain_fields):
+# parent's kind (0 revolute, 1 prismatic), axis, pivot; own kind, axis, pivot (scene's pose); centre of
+# mass at the scene's pose; mass; gravity; inertia tensor about the centre of mass (scene axes, 9)
+CH_PK, CH_PA, CH_PP, CH_CK, CH_CA, CH_CP, CH_X0, CH_M, CH_G, CH_J = 0, 1, 4, 7, 8, 11, 14, 17, 18, 21
+CH_SIZE = 30
+
+
+@njit(cache=True, inline="always")
+def _turn(a0, a1, a2, c, s, v0, v1, v2):
+    """v turned by the angle (cos c, sin s) about the unit axis a (Rodrigues)."""
+    d = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
+    return (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * d, v1 * c + (a2 * v0 - a0 * v2) * s + a1 * d,
+            v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
+
+
+@njit(cache=True, inline="always")
+def _x(a, b):
+    return np.array((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
+
+
+@njit(cache=True)
+def chain_terms(K, q, v, M, Q):
+    """Mass, weight and velocity terms of the bodies on a joint on a moving body (a trolley on a slewing
+    jib, a boom luffing on a slewing superstructure), by projecting Newton-Euler on the two joint
+    coordinates (parent's p, own c). With J_i the velocity of the centre of mass and W_i the angular
+    velocity per unit rate of coordinate i, M[i, j] += m J_i.J_j + W_i.J_w W_j and
+    Q[i] += m g.J_i - m J_i.a_q - W_i.(J_w al_q + w x J_w w): a_q = w_p x (w_p x r_p) + 2 w_p x u_rel +
+    w_r x (w_r x r_c) the centre's acceleration at zero coordinate accelerations (centripetal, Coriolis),
+    al_q = w_p x w_r; J_w = R J R^T the world inertia tensor."""
+    for k in range(K.ch_q.shape[0]):
+        f = K.ch_f[k]
+        ip, ic = K.ch_q[k, 0], K.ch_q[k, 1]
+        pa, pp = f[CH_PA:CH_PA + 3], f[CH_PP:CH_PP + 3]
+        ca, cp = f[CH_CA:CH_CA + 3], f[CH_CP:CH_CP + 3]
+        m = f[CH_M]
+        # own joint in the parent's frame at the scene's pose: the centre y, the turn (cc, sc) about ca
+        cc, sc = 1.0, 0.0
+        y = f[CH_X0:CH_X0 + 3].copy()
+        if f[CH_CK] == 0.0:
+            cc, sc = math.cos(q[ic]), math.sin(q[ic])
+            r0, r1, r2 = _turn(ca[0], ca[1], ca[2], cc, sc, y[0] - cp[0], y[1] - cp[1], y[2] - cp[2])
+            y[0], y[1], y[2] = cp[0] + r0, cp[1] + r1, cp[2] + r2
+        else:
+            y += q[ic] * ca
+        # the parent's motion: turn (cp_, sp_) about pa through pp, or slide along pa
+        x = y.copy()
+        xp = cp.copy()                       # the own joint's pivot, world
+        cpa, spa = 1.0, 0.0
+        if f[CH_PK] == 0.0:
+            cpa, spa = math.cos(q[ip]), math.sin(q[ip])
+            for z in (x, xp):
+                r0, r1, r2 = _turn(pa[0], pa[1], pa[2], cpa, spa, z[0] - pp[0], z[1] - pp[1], z[2] - pp[2])
+                z[0], z[1], z[2] = pp[0] + r0, pp[1] + r1, pp[2] + r2
+        else:
+            x += q[ip] * pa
+            xp += q[ip] * pa
+        aw = np.empty(3)                     # own axis, world
+        aw[0], aw[1], aw[2] = _turn(pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2])
+        Jv = np.zeros((2, 3))
+        Wv = np.zeros((2, 3))
+        if f[CH_PK] == 0.0:
+            Jv[0] = _x(pa, x - pp)
+            Wv[0] = pa
+        else:
+            Jv[0] = pa
+        if f[CH_CK] == 0.0:
+            Jv[1] = _x(aw, x - xp)
+            Wv[1] = aw
+        else:
+            Jv[1] = aw
+        wp = Wv[0] * v[ip]
+        wr = Wv[1] * v[ic]
+        w = wp + wr
+        urel = Jv[1] * v[ic]
+        aq = 2.0 * _x(wp, urel) + _x(wr, _x(wr, x - xp))
+        if f[CH_PK] == 0.0:
+            aq += _x(wp, _x(wp, x - pp))
+        alq = _x(wp, wr)
+        # world inertia tensor: R = R_parent R_own applied to the tensor's columns and rows
+        Jw = f[CH_J:CH_J + 9].copy().reshape(3, 3)
+        for rep in range(2):                 # Jw <- R Jw R^T: turn the columns, transpose, twice
+            for col in range(3):
+                u0, u1, u2 = _turn(ca[0], ca[1], ca[2], cc, sc, Jw[0, col], Jw[1, col], Jw[2, col])
+                u0, u1, u2 = _turn(pa[0], pa[1], pa[2], cpa, spa, u0, u1, u2)
+                Jw[0, col], Jw[1, col], Jw[2, col] = u0, u1, u2
+            Jw = Jw.T.copy()
+        h = Jw @ w
+        e = Jw @ alq + _x(w, h)
+        g = f[CH_G:CH_G + 3]
+        idx = (ip, ic)
+        for i in range(2):
+            Q[idx[i]] += m * (g[0] * Jv[i, 0] + g[1] * Jv[i, 1] + g[2] * Jv[i, 2]) - m * (Jv[i] @ aq) - Wv[i] @ e
+            for j in range(2):
+                M[idx[i], idx[j]] += m * (Jv[i] @ Jv[j]) + Wv[i] @ (Jw @ Wv[j])
+
+
+@njit(cache=True)
+def chain_potential(K, q):
+    """Gravity potential -m g.x of the bodies on a joint on a moving body (their centres of mass x)."""
+    V = 0.0
+    for k in range(K.ch_q.shape[0]):
+        f = K.ch_f[k]
+        ip, ic = K.ch_q[k, 0], K.ch_q[k, 1]
+        pa, pp, ca, cp = f[CH_PA:CH_PA + 3], f[CH_PP:CH_PP + 3], f[CH_CA:CH_CA + 3], f[CH_CP:CH_CP + 3]
+        x0, x1, x2 = f[CH_X0], f[CH_X0 + 1], f[CH_X0 + 2]
+        if f[CH_CK] == 0.0:
+            r0, r1, r2 = _turn(ca[0], ca[1], ca[2], math.cos(q[ic]), math.sin(q[ic]), x0 - cp[0], x1 - cp[1],
+                               x2 - cp[2])
+            x0, x1, x2 = cp[0] + r0, cp[1] + r1, cp[2] + r2
+        else:
+            x0, x1, x2 = x0 + q[ic] * ca[0], x1 + q[ic] * ca[1], x2 + q[ic] * ca[2]
+        if f[CH_PK] == 0.0:
+            r0, r1, r2 = _turn(pa[0], pa[1], pa[2], math.cos(q[ip]), math.sin(q[ip]), x0 - pp[0], x1 - pp[1],
+                               x2 - pp[2])
+            x0, x1, x2 = pp[0] + r0, pp[1] + r1, pp[2] + r2
+        else:
+            x0, x1, x2 = x0 + q[ip] * pa[0], x1 + q[ip] * pa[1], x2 + q[ip] * pa[2]
+        V -= f[CH_M] * (f[CH_G] * x0 + f[CH_G + 1] * x1 + f[CH_G + 2] * x2)
+    return V

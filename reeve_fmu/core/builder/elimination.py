@@ -77,7 +77,7 @@ def joint_tables(scene, body_dofs, g, springs):
             jt.append((j, np.array(mo.torque, float).T))
         elif mo.kind == "torque-input":  # a constant table the Plant overwrites each step
             jt.append((j, np.zeros((2, 1))))
-        if b.joint == "revolute":
+        if b.joint == "revolute" and b.parent is None:   # on a moving body: rigid.chain_terms
             # potential -m g . R(angle) d0 of the centre of mass, d0 from the pivot (Rodrigues)
             a, d0 = np.asarray(b.joint_axis), np.asarray(b.position) - np.asarray(b.pivot)
             A = b.mass * (g @ np.cross(a, d0))
