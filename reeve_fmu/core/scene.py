@@ -127,7 +127,7 @@ class Torsion:
 
 @dataclass(frozen=True)
 class Drive:
-    kind: str = "none"               # none | speed | torque | external
+    kind: str = "none"               # none | speed | torque | external (| speed-input: set by the Plant)
     sheave: str | None = None
     roping: float = 1.0              # load speed = rim speed / roping (speed profiles are load speeds)
     profile: str = "s-curve"         # s-curve | table (kind = speed)

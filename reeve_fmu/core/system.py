@@ -460,7 +460,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             lo = min(a, b)
             y[k] = hi / lo if lo > 0.0 else math.inf
         elif kind == 5:
-            if K.drive_kind == 1:
+            if K.drive_kind == 1 or K.drive_kind == 4:
                 # reaction of the prescribed sheave coordinate: tau = -R (M qdd - Q)_sigma
                 j = K.out_i[k]
                 r = -Q[j]

@@ -30,14 +30,18 @@ CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_co
 CRANE_SCENE = "scene.toml"
 SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
 
-HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step")
+HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists; used when "
+                                         "hoist.input = 0), held over the step")
+HOIST_SPEED = ("hoist.speed", "AngularVelocity", "hoist motor speed (positive hoists; used when hoist.input = 1); "
+                                                 "the drum's rate ramps linearly to it over the step")
+HOIST_INPUTS = (HOIST_INPUT[0], HOIST_SPEED[0])   # in the order of hoist.input's values (0 torque, 1 speed)
 
 
 def crane_inputs(axes: Sequence[Mapping]) -> dict:
-    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque, then per
-    axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its speed; the Integer
-    parameter <axis>.input chooses which one the plant uses."""
-    out = {HOIST_INPUT[0]: HOIST_INPUT[1:]}
+    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque and
+    speed, then per axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its
+    speed; the Integer parameters hoist.input and <axis>.input choose which one the plant uses."""
+    out = {HOIST_INPUT[0]: HOIST_INPUT[1:], HOIST_SPEED[0]: HOIST_SPEED[1:]}
     for a in axes:
         n, b = a["name"], a["body"]
         rev = a["joint"] == "revolute"
@@ -108,6 +112,10 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
             spec.update(type="Force", depends=obj in sheaves, description=f"rope force at the {side} tangent point of {obj}")
         elif q in ("tension_start", "tension_end"):
             spec.update(type="Force", description=f"rope force at the {q[8:]} of rope {obj}")
+        elif n == "hoist.torque":
+            spec.update(type="Torque", depends=True,
+                        description="hoist motor torque: the torque input, or the torque the speed input needs "
+                                    "(positive hoists)")
         elif n in ("motor.angle", "motor.speed"):
             spec.update(type="Angle" if q == "angle" else "AngularVelocity",
                         description=f"hoist motor {q} (positive hoists)")
