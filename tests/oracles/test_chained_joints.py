@@ -237,3 +237,12 @@ def test_winch_on_a_body_without_motion_is_refused():
     with pytest.raises(SceneError) as exc:
         parse_scene(tomllib.loads(text), "chain.toml")
     assert "[sheaves[0].body]" in str(exc.value) and "no joint and no free coordinate" in str(exc.value)
+
+
+def test_torsion_rope_over_a_joint_on_a_moving_body_is_refused():
+    import tomllib
+    text = CHAIN.format(trolley=TROLLEY, hook=FREE, winch_body="jib").replace(
+        'rhoA = 0.5', 'rhoA = 0.5\ntorsion = { law = "torque-factor", diameter = 0.02, k0 = 0.05 }')
+    with pytest.raises(SceneError) as exc:
+        build_model(parse_scene(tomllib.loads(text), "chain.toml"))
+    assert "[ropes[0].torsion]" in str(exc.value) and "trolley" in str(exc.value), str(exc.value)
