@@ -523,7 +523,7 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def _body_motion(q, v, bq, b0, bk, bax, b, out):
+def _body_motion(q, v, bq, b0, bk, bax, BR, b, out):
     """Rigid motion of body b at velocities v: out = (reference point O, its velocity, omega, the
     part of d omega / dt that is not from accelerations, O's acceleration at zero coordinate
     accelerations); a point P moves with velocity u_O + omega x (P - O) and, at zero coordinate
@@ -533,7 +533,7 @@ def _body_motion(q, v, bq, b0, bk, bax, b, out):
     if b < 0:
         return
     if bk[b] == 3:
-        _chain_motion(q, v, bq, b0, bk, bax, b, out)
+        _chain_motion(q, v, bq, b0, bk, bax, BR, b, out)
         return
     if bk[b] == 1:
         for m in range(3):
@@ -563,16 +563,12 @@ def _body_motion(q, v, bq, b0, bk, bax, b, out):
 
 
 @njit(cache=True)
-def _chain_motion(q, v, bq, b0, bk, bax, b, out):
+def _chain_motion(q, v, bq, b0, bk, bax, BR, b, out):
     """_body_motion of a kind-3 body (on a joint on the moving body p = bq[b, 7]): O its reference point
     (its joint's pivot, or the slider's point), omega = w_p + w_r (parent's, own), domega = w_p x w_r;
     u_O = w_p x (O - pivot_p) (or p's slide) + the own slide a u', a_O = w_p x (w_p x (O - pivot_p))
-    + 2 w_p x a u' (Coriolis)."""
+    + 2 w_p x a u' (Coriolis). BR: the body rotations of rows_eval at q."""
     p = bq[b, 7]
-    BR = np.empty((bq.shape[0], 5))
-    for c in (b, p):
-        th = q[bq[c, 3]] if bq[c, 3] >= 0 else 0.0
-        BR[c, 0], BR[c, 1], BR[c, 2], BR[c, 3], BR[c, 4] = bax[c, 0], bax[c, 1], bax[c, 2], math.cos(th), math.sin(th)
     O0, O1, O2 = _chain_point(q, bq, b0, bk, bax, BR, b, 0.0, 0.0, 0.0)
     a0, a1, a2 = bax[b, 0], bax[b, 1], bax[b, 2]
     wp0 = wp1 = wp2 = 0.0
@@ -715,7 +711,7 @@ def rows_accel(q, v, G, acc):
     nb = bq.shape[0]
     mo = np.empty((nb, 15))
     for b in range(nb):
-        _body_motion(q, v, bq, b0, bk, bax, b, mo[b])
+        _body_motion(q, v, bq, b0, bk, bax, BR, b, mo[b])
     zero = np.zeros(15)
     nsp = sp.shape[0]
     VT = np.empty((nsp, 6))

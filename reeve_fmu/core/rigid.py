@@ -170,8 +170,48 @@ def _turn(a0, a1, a2, c, s, v0, v1, v2):
 
 
 @njit(cache=True, inline="always")
-def _x(a, b):
-    return np.array((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
+def _cr(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True, inline="always")
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True, inline="always")
+def _axpy(s, a, b):
+    """s a + b."""
+    return (s * a[0] + b[0], s * a[1] + b[1], s * a[2] + b[2])
+
+
+@njit(cache=True, inline="always")
+def _about(a, c, s, p, x):
+    """x turned by (cos c, sin s) about the axis a through p."""
+    r = _turn(a[0], a[1], a[2], c, s, x[0] - p[0], x[1] - p[1], x[2] - p[2])
+    return (p[0] + r[0], p[1] + r[1], p[2] + r[2])
+
+
+@njit(cache=True, inline="always")
+def _vec(f, i):
+    return (f[i], f[i + 1], f[i + 2])
+
+
+@njit(cache=True, inline="always")
+def _jw(J, rot, u):
+    """R J R^T u for R = R_parent R_own, rot = (parent axis, cos, sin, own axis, cos, sin); J row-major."""
+    pa0, pa1, pa2, cp, sp, ca0, ca1, ca2, cc, sc = rot
+    b = _turn(pa0, pa1, pa2, cp, -sp, u[0], u[1], u[2])
+    b = _turn(ca0, ca1, ca2, cc, -sc, b[0], b[1], b[2])
+    jb = (J[0] * b[0] + J[1] * b[1] + J[2] * b[2], J[3] * b[0] + J[4] * b[1] + J[5] * b[2],
+          J[6] * b[0] + J[7] * b[1] + J[8] * b[2])
+    r = _turn(ca0, ca1, ca2, cc, sc, jb[0], jb[1], jb[2])
+    return _turn(pa0, pa1, pa2, cp, sp, r[0], r[1], r[2])
 
 
 @njit(cache=True)
@@ -182,72 +222,55 @@ def chain_terms(K, q, v, M, Q):
     velocity per unit rate of coordinate i, M[i, j] += m J_i.J_j + W_i.J_w W_j and
     Q[i] += m g.J_i - m J_i.a_q - W_i.(J_w al_q + w x J_w w): a_q = w_p x (w_p x r_p) + 2 w_p x u_rel +
     w_r x (w_r x r_c) the centre's acceleration at zero coordinate accelerations (centripetal, Coriolis),
-    al_q = w_p x w_r; J_w = R J R^T the world inertia tensor."""
+    al_q = w_p x w_r; J_w = R J R^T the world inertia tensor. Scalars and tuples only (no arrays: it
+    runs in every residual)."""
+    zero = (0.0, 0.0, 0.0)
     for k in range(K.ch_q.shape[0]):
         f = K.ch_f[k]
         ip, ic = K.ch_q[k, 0], K.ch_q[k, 1]
-        pa, pp = f[CH_PA:CH_PA + 3], f[CH_PP:CH_PP + 3]
-        ca, cp = f[CH_CA:CH_CA + 3], f[CH_CP:CH_CP + 3]
+        pa, pp, ca, cp = _vec(f, CH_PA), _vec(f, CH_PP), _vec(f, CH_CA), _vec(f, CH_CP)
         m = f[CH_M]
-        # own joint in the parent's frame at the scene's pose: the centre y, the turn (cc, sc) about ca
-        cc, sc = 1.0, 0.0
-        y = f[CH_X0:CH_X0 + 3].copy()
-        if f[CH_CK] == 0.0:
+        rev_p, rev_c = f[CH_PK] == 0.0, f[CH_CK] == 0.0
+        # own joint in the parent's frame at the scene's pose, then the parent's motion
+        cc, sc, cpa, spa = 1.0, 0.0, 1.0, 0.0
+        y = _vec(f, CH_X0)
+        if rev_c:
             cc, sc = math.cos(q[ic]), math.sin(q[ic])
-            r0, r1, r2 = _turn(ca[0], ca[1], ca[2], cc, sc, y[0] - cp[0], y[1] - cp[1], y[2] - cp[2])
-            y[0], y[1], y[2] = cp[0] + r0, cp[1] + r1, cp[2] + r2
+            y = _about(ca, cc, sc, cp, y)
         else:
-            y += q[ic] * ca
-        # the parent's motion: turn (cp_, sp_) about pa through pp, or slide along pa
-        x = y.copy()
-        xp = cp.copy()                       # the own joint's pivot, world
-        cpa, spa = 1.0, 0.0
-        if f[CH_PK] == 0.0:
+            y = _axpy(q[ic], ca, y)
+        if rev_p:
             cpa, spa = math.cos(q[ip]), math.sin(q[ip])
-            for z in (x, xp):
-                r0, r1, r2 = _turn(pa[0], pa[1], pa[2], cpa, spa, z[0] - pp[0], z[1] - pp[1], z[2] - pp[2])
-                z[0], z[1], z[2] = pp[0] + r0, pp[1] + r1, pp[2] + r2
+            x, xp = _about(pa, cpa, spa, pp, y), _about(pa, cpa, spa, pp, cp)
         else:
-            x += q[ip] * pa
-            xp += q[ip] * pa
-        aw = np.empty(3)                     # own axis, world
-        aw[0], aw[1], aw[2] = _turn(pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2])
-        Jv = np.zeros((2, 3))
-        Wv = np.zeros((2, 3))
-        if f[CH_PK] == 0.0:
-            Jv[0] = _x(pa, x - pp)
-            Wv[0] = pa
-        else:
-            Jv[0] = pa
-        if f[CH_CK] == 0.0:
-            Jv[1] = _x(aw, x - xp)
-            Wv[1] = aw
-        else:
-            Jv[1] = aw
-        wp = Wv[0] * v[ip]
-        wr = Wv[1] * v[ic]
-        w = wp + wr
-        urel = Jv[1] * v[ic]
-        aq = 2.0 * _x(wp, urel) + _x(wr, _x(wr, x - xp))
-        if f[CH_PK] == 0.0:
-            aq += _x(wp, _x(wp, x - pp))
-        alq = _x(wp, wr)
-        # world inertia tensor: R = R_parent R_own applied to the tensor's columns and rows
-        Jw = f[CH_J:CH_J + 9].copy().reshape(3, 3)
-        for rep in range(2):                 # Jw <- R Jw R^T: turn the columns, transpose, twice
-            for col in range(3):
-                u0, u1, u2 = _turn(ca[0], ca[1], ca[2], cc, sc, Jw[0, col], Jw[1, col], Jw[2, col])
-                u0, u1, u2 = _turn(pa[0], pa[1], pa[2], cpa, spa, u0, u1, u2)
-                Jw[0, col], Jw[1, col], Jw[2, col] = u0, u1, u2
-            Jw = Jw.T.copy()
-        h = Jw @ w
-        e = Jw @ alq + _x(w, h)
-        g = f[CH_G:CH_G + 3]
-        idx = (ip, ic)
-        for i in range(2):
-            Q[idx[i]] += m * (g[0] * Jv[i, 0] + g[1] * Jv[i, 1] + g[2] * Jv[i, 2]) - m * (Jv[i] @ aq) - Wv[i] @ e
-            for j in range(2):
-                M[idx[i], idx[j]] += m * (Jv[i] @ Jv[j]) + Wv[i] @ (Jw @ Wv[j])
+            x, xp = _axpy(q[ip], pa, y), _axpy(q[ip], pa, cp)
+        aw = _turn(pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2])       # own axis, world
+        Jp, Wp = (_cr(pa, _sub(x, pp)), pa) if rev_p else (pa, zero)
+        Jc, Wc = (_cr(aw, _sub(x, xp)), aw) if rev_c else (aw, zero)
+        vp, vc = v[ip], v[ic]
+        wp = (Wp[0] * vp, Wp[1] * vp, Wp[2] * vp)
+        wr = (Wc[0] * vc, Wc[1] * vc, Wc[2] * vc)
+        w = (wp[0] + wr[0], wp[1] + wr[1], wp[2] + wr[2])
+        cor = _cr(wp, (Jc[0] * vc, Jc[1] * vc, Jc[2] * vc))
+        aq = _axpy(2.0, cor, _cr(wr, _cr(wr, _sub(x, xp))))
+        if rev_p:
+            cen = _cr(wp, _cr(wp, _sub(x, pp)))
+            aq = (aq[0] + cen[0], aq[1] + cen[1], aq[2] + cen[2])
+        alq = _cr(wp, wr)
+        # world inertia tensor J_w = R J R^T, R = R_parent R_own (_jw applies it to a vector)
+        Jm = f[CH_J:CH_J + 9]
+        rot = (pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2], cc, sc)
+        h = _jw(Jm, rot, w)
+        e = _axpy(1.0, _jw(Jm, rot, alq), _cr(w, h))
+        JWp, JWc = _jw(Jm, rot, Wp), _jw(Jm, rot, Wc)
+        g = _vec(f, CH_G)
+        Q[ip] += m * _dot(g, Jp) - m * _dot(Jp, aq) - _dot(Wp, e)
+        Q[ic] += m * _dot(g, Jc) - m * _dot(Jc, aq) - _dot(Wc, e)
+        M[ip, ip] += m * _dot(Jp, Jp) + _dot(Wp, JWp)
+        M[ic, ic] += m * _dot(Jc, Jc) + _dot(Wc, JWc)
+        mpc = m * _dot(Jp, Jc) + _dot(Wp, JWc)
+        M[ip, ic] += mpc
+        M[ic, ip] += mpc
 
 
 @njit(cache=True)
