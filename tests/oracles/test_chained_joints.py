@@ -17,7 +17,7 @@ from reeve_fmu.core.scene import SceneError, load_scene, loads_scene, parse_scen
 from reeve_fmu.core.solver import Simulator
 from tests.support.checks import check, check_min
 
-I_JIB, M_T, R0, W = 4.0e6, 400.0, 10.0, 0.2
+I_JIB, M_T, R0, W, F_T = 4.0e6, 400.0, 10.0, 0.2, -100.0
 
 RAIL = f"""
 [scene]
@@ -40,7 +40,7 @@ name = "trolley"
 mass = {M_T}
 position = [{R0}, 0.0, 39.6]
 joint = {{ kind = "prismatic", parent = "jib", axis = [1.0, 0.0, 0.0] }}
-motion = {{ kind = "{{trolley}}", t_start = 1000.0 }}
+motion = {{trolley}}
 [[bodies]]
 name = "weight"
 mass = 10.0
@@ -58,7 +58,9 @@ T_RAMP = 0.5 + 0.5 / 5.0 + W / 0.5          # the slew reaches W here (jerk phas
 
 
 def _rail(trolley):
-    return loads_scene(RAIL.replace("{trolley}", trolley), "rail.toml")
+    motion = {"profile": '{ kind = "profile", t_start = 1000.0 }', "free": '{ kind = "free" }',
+              "force": f'{{ kind = "torque", torque = [[0.0, {F_T}], [100.0, {F_T}]] }}'}[trolley]
+    return loads_scene(RAIL.replace("{trolley}", motion), "rail.toml")
 
 
 def test_locked_trolley_on_the_slewing_jib_holding_force_and_slewing_torque():
@@ -79,24 +81,30 @@ def test_locked_trolley_on_the_slewing_jib_holding_force_and_slewing_torque():
           2e-12)
 
 
-def test_free_trolley_slides_out_as_cosh_on_the_slewing_jib():
-    """A free trolley (no rope, no force) on a frictionless radial rail of a jib slewing at the prescribed
-    speed: r'' = w(t)^2 r (the rail takes the Coriolis force). During the spin-up the radial equation is
-    integrated here (scipy, rtol 1e-12); from T_RAMP on w is constant and r = r1 cosh(w (t - t1)) +
-    (v1 / w) sinh(w (t - t1)): 10 m -> 27 m in 8 s."""
-    res = Simulator(build_model(_rail("free"))).run(9.0, 0.01)
-    sol = solve_ivp(lambda t, y: (y[1], JIB_PROFILE(t)[1] ** 2 * y[0]), (0.0, T_RAMP), (R0, 0.0), rtol=1e-12,
+@pytest.mark.parametrize("motion, force, travel", [("free", 0.0, 15.0), ("force", F_T, 3.0)])
+def test_free_trolley_slides_out_as_cosh_on_the_slewing_jib(motion, force, travel):
+    """A free trolley (no rope) on a frictionless radial rail of a jib slewing at the prescribed speed,
+    without a force or pulled inwards by a constant travel force F (its force table, motion.kind =
+    "torque"): r'' = w(t)^2 r + F / m (the rail takes the Coriolis force). During the spin-up the radial
+    equation is integrated here (scipy, rtol 1e-12); from T_RAMP on w is constant and
+    r = -F / (m w^2) + (r1 + F / (m w^2)) cosh(w (t - t1)) + (v1 / w) sinh(w (t - t1)): without the force
+    r0 cosh(w t) after a step start, 10 m -> 27 m in 8 s."""
+    res = Simulator(build_model(_rail(motion))).run(9.0, 0.01)
+    a = force / M_T
+    sol = solve_ivp(lambda t, y: (y[1], JIB_PROFILE(t)[1] ** 2 * y[0] + a), (0.0, T_RAMP), (R0, 0.0), rtol=1e-12,
                     atol=1e-14, dense_output=True)
     r1, v1 = sol.y[:, -1]
     t = res.time
+    rp = -a / W ** 2                         # the particular solution at constant w
     rr = np.where(t < T_RAMP, sol.sol(np.minimum(t, T_RAMP))[0],
-                  r1 * np.cosh(W * (t - T_RAMP)) + v1 / W * np.sinh(W * (t - T_RAMP)))
+                  rp + (r1 - rp) * np.cosh(W * (t - T_RAMP)) + v1 / W * np.sinh(W * (t - T_RAMP)))
     r = R0 + res["trolley.travel"]
-    check_min("travel [m]", r[-1] - R0, 15.0)
-    # measured 7.8e-6 m over 17 m of travel: the generalized-alpha step's O(h^2) error on the exponential growth
-    check("trolley radius - r'' = w^2 r [m]", r - rr, 5e-5)
-    # measured 5.7e-14 N (round-off)
-    check("joint force of a free trolley [N]", res["trolley.joint_force"], 5e-13)
+    check_min("travel [m]", r[-1] - R0, travel)
+    # measured 7.8e-6 m (free, 17 m of travel) and 5.0e-6 m (force, 3.5 m): the generalized-alpha step's
+    # O(h^2) error on the exponential growth
+    check("trolley radius - r'' = w^2 r + F / m [m]", r - rr, 5e-5)
+    # measured 5.7e-14 N (free) and 2.8e-14 N (force) (round-off)
+    check("joint force - the force table [N]", res["trolley.joint_force"] - force, 2.5e-13)
 
 
 def _rot(axis, ang):
