@@ -310,7 +310,8 @@ def test_closed_form_row_jacobian_matches_central_differences_at_random_poses():
               build_model(loads_scene(_beam_scene(), "beam.toml")),
               build_model(loads_scene(_slew_scene(), "slew.toml")),
               build_model(load_scene("scenes/tower_crane.toml")),            # a trolley on the slewing jib
-              build_model(load_scene("scenes/luffing_crane_slewing.toml"))]  # a boom on the superstructure
+              build_model(load_scene("scenes/luffing_crane_slewing.toml")),  # a boom on the superstructure
+              build_model(loads_scene(GANTRY, "gantry.toml"))]              # an arm on a travelling gantry
     for m in scenes:
         K = m.K
         G_ = B.geometry(K)
@@ -348,7 +349,8 @@ def test_closed_form_row_acceleration_matches_the_second_difference():
     from reeve_fmu.core import bodies as B
     rng = np.random.default_rng(3)
     for m in (build_model(load_scene("scenes/slewing_crane.toml")), build_model(loads_scene(_beam_scene(), "beam.toml")),
-              build_model(load_scene("scenes/tower_crane.toml")), build_model(load_scene("scenes/luffing_crane_slewing.toml"))):
+              build_model(load_scene("scenes/tower_crane.toml")), build_model(load_scene("scenes/luffing_crane_slewing.toml")),
+              build_model(loads_scene(GANTRY, "gantry.toml"))):
         K = m.K
         G_ = B.geometry(K)
         nr = K.nl_rk.shape[0]
@@ -362,6 +364,42 @@ def test_closed_form_row_acceleration_matches_the_second_difference():
             # round-off of the second difference itself (s rows of ~100 m divided by NL_EPS^2)
             check('row acceleration: closed form - second difference', acc - ref, 3e-6 * np.max(np.abs(ref)),
                   reason="round-off of the second difference, which differs by row and pose")
+
+
+# an arm turning on a gantry that travels (a revolute joint on a prismatic one), a rope over its tip
+GANTRY = """
+[scene]
+model = "spatial"
+sheave_contact = "rigid"
+[initial]
+statics = "none"
+[[bodies]]
+name = "gantry"
+mass = 2000.0
+position = [0.0, 0.0, 5.0]
+joint = { kind = "prismatic", axis = [1.0, 0.0, 0.0] }
+[[bodies]]
+name = "arm"
+mass = 500.0
+inertia = [[50.0, 0.0, 30.0], [0.0, 400.0, 0.0], [30.0, 0.0, 380.0]]
+position = [2.0, 0.0, 5.0]
+joint = { kind = "revolute", parent = "gantry", axis = [0.0, -1.0, 0.0], pivot = [0.0, 0.0, 5.0] }
+[[bodies]]
+name = "weight"
+mass = 100.0
+position = [4.3, 0.0, 0.0]
+free = ["x", "y", "z"]
+[[sheaves]]
+name = "tip"
+body = "arm"
+center = [2.0, 0.0, 0.0]
+radius = 0.3
+[[ropes]]
+name = "rope"
+EA = 1e6
+rhoA = 0.5
+route = [{ anchor = "ground", at = [-5.0, 0.0, 5.3] }, { sheave = "tip", wrap = "cw" }, { anchor = "weight", at = [0.0, 0.0, 0.0] }]
+"""
 
 
 def _rodrigues(axis, ang):
@@ -416,15 +454,16 @@ def _chain_lagrangian(sc, child, qp, qc, vp, vc, h=1e-30):
 
 
 @pytest.mark.parametrize("path, child", [("scenes/tower_crane.toml", "trolley"),
-                                         ("scenes/luffing_crane_slewing.toml", "boom")])
+                                         ("scenes/luffing_crane_slewing.toml", "boom"), ("gantry", "arm")])
 def test_chain_terms_match_the_lagrangian_of_the_composed_pose(path, child):
     """rigid.chain_terms (Newton-Euler projected on the parent's and the own joint coordinate) against
     the Lagrange equations of the child's kinetic and gravity energy written here from its composed pose
     (rotation matrices, differences): a trolley sliding on a slewing jib (Coriolis and centrifugal
     forces) and a boom with a full inertia tensor luffing on a slewing superstructure (gyroscopic
-    terms), at random poses and rates."""
+    terms) and an arm with a full inertia tensor turning on a travelling gantry, at random poses and
+    rates."""
     from reeve_fmu.core.rigid import chain_terms
-    sc = load_scene(path)
+    sc = loads_scene(GANTRY, "gantry.toml") if path == "gantry" else load_scene(path)
     m = build_model(sc)
     ip, ic = m.K.ch_q[0]
     rng = np.random.default_rng(5)
