@@ -533,10 +533,12 @@ def _chained_inertia(r: _Reader, b, path, kind, axis, pivot):
     """A body on a joint on a moving body turns with its parent about other axes than its own joint's:
     its inertia is the tensor about its centre of mass (scene axes; default 0, a point mass). A revolute
     one needs a positive moment about its joint axis (the tensor's plus m d^2)."""
-    if "inertia" not in b:
-        J = ((0.0,) * 3,) * 3
-    else:
-        J = _inertia_tensor(r, b, path) if np.any(np.asarray(b["inertia"], float) != 0.0) else ((0.0,) * 3,) * 3
+    v = b.get("inertia", 0.0)
+    try:
+        zero = not np.any(np.asarray(v, float) != 0.0)
+    except (TypeError, ValueError):
+        zero = False                     # _inertia_tensor names the key
+    J = ((0.0,) * 3,) * 3 if zero else _inertia_tensor(r, b, path)
     if kind == "revolute":
         a = np.asarray(axis, float)
         d = np.asarray(b.get("position", (0.0, 0.0, 0.0)), float) - np.asarray(pivot, float)

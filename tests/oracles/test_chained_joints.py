@@ -225,6 +225,10 @@ FREE = 'free = ["x", "y", "z"]'
     (TROLLEY + '\nmotion = { kind = "profile", distance = 5.0 }', FREE, "jib", "bodies[1].motion.distance",
      "run off its rail"),
     (TROLLEY, FREE, "trolley", "sheaves[0].body", "mount it on 'jib'"),
+    (TROLLEY + '\ninertia = "heavy"', FREE, "jib", "bodies[1].inertia", "must be [Ixx, Iyy, Izz]"),
+    (TROLLEY + '\ninertia = 50.0', FREE, "jib", "bodies[1].inertia", "must be [Ixx, Iyy, Izz]"),
+    (TROLLEY.replace('"prismatic"', '"revolute"').replace("range = [-3.0, 4.0]", "pivot = [5.0, 0.0, 9.8]"), FREE,
+     "jib", "bodies[1].inertia", "positive moment of inertia about its axis"),
     (TROLLEY, FREE, "hook2", "sheaves[0].body", "unknown body"),
 ])
 def test_bad_chains_name_the_key(trolley, hook, winch_body, key, words):
