@@ -6,10 +6,12 @@ under load), best of `--repeat` runs after a warm-up, statics excluded, outputs 
 * `cubic`: the same with cubic elements, two per span (the first sway mode of every span: the jib
   span's 6.43 Hz within 1e-4 of the taut string, tests/core/test_cubic_tangents.py); target >= 5x;
 * `8fall`: scenes/crane_8fall_hoist.toml when it exists (the 8-fall dynamic hoist); target >= 1x;
-* `tower`, `trolley`, `luffing`: scenes/tower_crane.toml (slew 0.6 rad while the winch on the slewing
-  jib hoists 5 m), tower_crane_trolley.toml (trolley travel 10 m + hoist), luffing_crane.toml (luff
-  0.15 rad + hoist, the winch on the boom), one linear element per span; target >= 50x. With
-  `--cases linear,tower,trolley,luffing` the slewing crane is the baseline of the same run;
+* `tower`, `trolley`, `luffing`, `luffing_slew`: scenes/tower_crane.toml (slew 0.6 rad while the
+  trolley, a joint on the jib, travels 10 m and the winch on the slewing jib hoists 5 m),
+  tower_crane_trolley.toml (trolley travel 10 m + hoist), luffing_crane.toml (luff 0.15 rad + hoist,
+  the winch on the boom), luffing_crane_slewing.toml (slew 0.5 rad + luff 0.15 rad on the slewing
+  superstructure + hoist), one linear element per span; target >= 50x. With
+  `--cases linear,tower,trolley,luffing,luffing_slew` the slewing crane is the baseline of the same run;
 * the 2:1 elevator trip (benchmarks/trip_2to1_compare.py compares it with another checkout).
 
 `--other CHECKOUT` measures the cases in that checkout too, alternately in fresh interpreters (warm
@@ -17,7 +19,7 @@ numba caches), and prints this / other ratios of CPU time per simulated second.
 
     python benchmarks/crane_speed.py [--t-end 20] [--repeat 3] [--other CHECKOUT] [--cubic-elements 2]
                                      [--cases linear,cubic,8fall] [--json docs/img/crane_speed.json]
-    python benchmarks/crane_speed.py --cases linear,tower,trolley,luffing --json docs/img/crane_speed_tower.json
+    python benchmarks/crane_speed.py --cases linear,tower,trolley,luffing,luffing_slew --json docs/img/crane_speed_tower.json
 """
 from pathlib import Path
 import argparse
@@ -54,7 +56,8 @@ print(json.dumps(dict(cpu_s=best, rtf={t_end} / best, n_dof=m.nq, steps=int(st.i
 """
 CASES = {"linear": ("slewing_crane.toml", False, 50.0), "cubic": ("slewing_crane.toml", True, 5.0),
          "8fall": ("crane_8fall_hoist.toml", False, 1.0), "tower": ("tower_crane.toml", False, 50.0),
-         "trolley": ("tower_crane_trolley.toml", False, 50.0), "luffing": ("luffing_crane.toml", False, 50.0)}
+         "trolley": ("tower_crane_trolley.toml", False, 50.0), "luffing": ("luffing_crane.toml", False, 50.0),
+         "luffing_slew": ("luffing_crane_slewing.toml", False, 50.0)}
 
 
 def run_case(root: Path, case: str, t_end: float, repeat: int, n_cubic: int = 2) -> dict:

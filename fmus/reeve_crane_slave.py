@@ -1,11 +1,12 @@
 """FMU entry of the crane plant (FMI 2.0 co-simulation): `reeve-fmu build --scene <crane scene>` ->
 CranePlant.fmu.
 
-Inputs  motor.torque [N.m] (hoist motor on the reel, positive hoists) and per axis (a body on a joint:
-        slew, luff, travel; reeve_fmu.components.craneplant.crane_axes) <axis>.torque [N.m] (force
-        [N] for a prismatic joint) or <axis>.speed [rad/s, m/s] (the fixed parameter <axis>.input
-        selects: 0 torque/force, 1 speed; the other input is ignored), all held over the
-        communication step (the speed as a linear ramp from its previous value).
+Inputs  motor.torque [N.m] or hoist.speed [rad/s] (hoist motor on the reel, positive hoists; the fixed
+        parameter hoist.input selects: 0 torque, 1 speed) and per axis (a body on a joint: slew, luff,
+        travel; reeve_fmu.components.craneplant.crane_axes) <axis>.torque [N.m] (force [N] for a
+        prismatic joint) or <axis>.speed [rad/s, m/s] (the fixed parameter <axis>.input selects: 0
+        torque/force, 1 speed; the other input is ignored), all held over the communication step
+        (a speed as a linear ramp from its previous value).
 Outputs the engine's outputs of the scene (payload position/velocity, jib angle/speed/joint torque,
         rope forces <sheave>.tension_in/out, ...) plus payload.swing_radial, payload.swing_tangential
         and payload.yaw (reeve_fmu.components.craneplant, docs/crane.md).
@@ -16,7 +17,7 @@ step returns fmi2Discard; further steps are refused until the master restores a 
 """
 import json
 
-from reeve_fmu.fmu.crane import CRANE_CONFIG, SLEW_MODES, axis_input_names, crane_inputs
+from reeve_fmu.fmu.crane import CRANE_CONFIG, HOIST_INPUTS, SLEW_MODES, axis_input_names, crane_inputs
 from reeve_fmu.fmu.slave import DefaultExperiment, Fmi2Status, ReeveSlave
 
 
@@ -38,6 +39,8 @@ class CranePlantSlave(ReeveSlave):
         for name, (typ, desc) in inputs.items():
             start = cfg["holding_torque"] if name == "motor.torque" else 0.0
             self.add_real(name, "input", declared_type=typ, start=start, description=desc)
+        self.add_integer("hoist.input", "parameter", "fixed", start=0, min=0, max=1,
+                         description=f"hoist input: 0 = {HOIST_INPUTS[0]}, 1 = {HOIST_INPUTS[1]}")
         for a in self._axes:
             n, (first, second) = a["name"], axis_input_names(a)
             self.add_integer(f"{n}.input", "parameter", "fixed", start=a.get("start_input", 0), min=0, max=1,
@@ -59,7 +62,8 @@ class CranePlantSlave(ReeveSlave):
 
         modes = {a["name"]: SLEW_MODES[int(self.values[f"{a['name']}.input"])] for a in self._axes}
         self._cmd = [axis_input_names(a)[SLEW_MODES.index(modes[a["name"]])] for a in self._axes]
-        self.crane = CranePlant(self.resource_path(self.config["scene"]), modes)
+        self._hoist = HOIST_INPUTS[int(self.values["hoist.input"])]
+        self.crane = CranePlant(self.resource_path(self.config["scene"]), modes, SLEW_MODES[int(self.values["hoist.input"])])
         if list(self.crane.output_names) != self._names:
             raise RuntimeError("the crane model's outputs differ from the declared ones (resources out of date?)")
         for w in self.crane.warnings:
@@ -72,7 +76,7 @@ class CranePlantSlave(ReeveSlave):
 
     def step(self, t, dt):
         v = self.values
-        self._write(self.crane.step(dt, v["motor.torque"], [v[c] for c in self._cmd]))
+        self._write(self.crane.step(dt, v[self._hoist], [v[c] for c in self._cmd]))
         return True
 
     def get_hidden_state(self):

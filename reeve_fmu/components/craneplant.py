@@ -3,15 +3,17 @@
 `CranePlant` wraps `Plant` for a scene with a hoist drive (`[drive] sheave`, the reel), bodies on
 joints (slewing jib, luffing boom, trolley) and a hoist rope that ends on a free rigid body (the payload):
 
-* inputs: the hoist motor torque (the drive's `motor.torque` convention: positive hoists) and, per
-  body on a joint, one *axis* input, a torque (force) or a speed of that joint (chosen per axis when
-  the plant is built). The axes are named by role (`crane_axes`): `slew` (revolute about the
-  vertical), `luff` (revolute about a horizontal axis), `travel` (prismatic); a second joint of the
-  same role is named after its body;
+* inputs: the hoist motor torque (the drive's `motor.torque` convention: positive hoists) or, with
+  hoist="speed", the hoist motor speed (the drum ramps to it over each step), and, per body on a joint
+  (also one on a joint on a moving body: a trolley on the slewing jib), one *axis* input, a torque
+  (force) or a speed of that joint (chosen per axis when the plant is built). The axes are named by
+  role (`crane_axes`): `slew` (revolute about the vertical), `luff` (revolute about a horizontal
+  axis), `travel` (prismatic); a second joint of the same role is named after its body;
 * outputs: the engine's outputs of the scene (payload position and velocity, rotation vector, jib
-  angle/speed/joint torque, rope forces `<sheave>.tension_in/out`, ...) without `motor.torque`, plus
-  three derived angles (`DERIVED`). The plant starts at rest with the holding torque applied
-  (`holding_torque()`), and `motor.angle`/`motor.speed` are positive when hoisting;
+  angle/speed/joint torque, rope forces `<sheave>.tension_in/out`, ...) with `motor.torque` named
+  `hoist.torque` (the torque input, or the torque the speed input needs), plus three derived angles
+  (`DERIVED`). The plant starts at rest with the holding torque applied (`holding_torque()`), and
+  `motor.angle`/`motor.speed`/`hoist.torque` are positive when hoisting;
 
   - `payload.swing_radial`, `payload.swing_tangential` [rad]: the direction of the line from the
     suspension point S to the payload's centre of mass, as angles from the downward vertical measured
@@ -21,7 +23,8 @@ joints (slewing jib, luffing boom, trolley) and a hoist rope that ends on a free
     centre of mass in the initial equilibrium (so both angles start at 0); e_r is the horizontal
     direction from a revolute frame's joint axis to S (outwards; for a prismatic frame the horizontal
     direction of its rail), e_t = e_z x e_r (the direction S moves in a positive slew), e_z up
-    (against gravity). A load slewed at constant speed w hangs outwards
+    (against gravity); a frame on a joint on a moving body carries S through both joints, e_r
+    pointing away from its parent's axis. A load slewed at constant speed w hangs outwards
     at tan(swing_radial) = w^2 r / g (r: radius of its centre of mass) and lags (negative
     swing_tangential) while the slew accelerates;
   - `payload.yaw` [rad]: heading of the payload's body x axis in the horizontal plane, relative to
@@ -35,7 +38,7 @@ import numpy as np
 
 from ..core.scene import Scene, SceneError, load_scene
 from ..core.solver import SolverError
-from .plant import Plant, with_joint_input
+from .plant import Plant, with_hoist_speed, with_joint_input
 
 SLEW_INPUTS = ("torque", "speed")      # the modes of an axis input (its Integer parameter <axis>.input: 0, 1)
 DERIVED = ("payload.swing_radial", "payload.swing_tangential", "payload.yaw")
@@ -128,14 +131,17 @@ class CranePlant:
     ramps, see plant.JointInput) and returns the outputs (`output_names`); `axes` is one value per
     axis in `input_names` order (a single number for a one-axis crane)."""
 
-    def __init__(self, scene: Scene | str, inputs="torque", **params):
+    def __init__(self, scene: Scene | str, inputs="torque", hoist="torque", **params):
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
         self.parts = parts = crane_parts(scene)
         self.axes = parts["axes"]
         self.modes = _modes(self.axes, inputs)
+        if hoist not in SLEW_INPUTS:
+            raise ValueError(f"hoist.input must be one of {SLEW_INPUTS}, got {hoist!r}")
+        self.hoist_mode = hoist
         self.slew_input = self.modes[self.axes[0]["name"]]
-        sc = scene
+        sc = with_hoist_speed(scene) if hoist == "speed" else scene
         for a in self.axes:
             sc = with_joint_input(sc, a["body"], self.modes[a["name"]])
         try:
@@ -161,10 +167,12 @@ class CranePlant:
         self.hoist_sign = 1.0 if hold >= 0.0 else -1.0
         self._hold = abs(hold)
         self.plant.start_with_torque(hold)
+        self._gain = float(self.plant.model.K.mot_gain)    # motor angle per unit of the drum's coordinate
         names = list(self.plant.output_names)
-        self._flip = [names.index(n) for n in ("motor.angle", "motor.speed") if n in names]
-        self._keep = [i for i, n in enumerate(names) if n != "motor.torque"]
-        self.output_names = tuple(names[i] for i in self._keep) + DERIVED
+        self._flip = [names.index(n) for n in ("motor.angle", "motor.speed", "motor.torque") if n in names]
+        # the motor torque is an input name: its output (the torque input, or the torque the hoist
+        # speed input needs) is hoist.torque
+        self.output_names = tuple("hoist.torque" if n == "motor.torque" else n for n in names) + DERIVED
         self._setup_geometry(self.plant.scene, names)
         self._y = self._outputs(self.plant._y)
 
@@ -178,19 +186,23 @@ class CranePlant:
         frame = bodies[p["frame"]]
         g = np.asarray(scene.gravity, float)
         self._ez = ez = -g / np.linalg.norm(g)
-        self._prismatic = frame.joint == "prismatic"
-        self._axis, self._pivot = np.asarray(frame.joint_axis, float), np.asarray(frame.pivot, float)
         tip = next(s for s in scene.sheaves if s.name == p["tip"])
         centre = np.asarray(tip.center, float) + (np.asarray(frame.position, float) if tip.body == frame.name else 0.0)
         pay = p["payload"]
         self._i_pos = [names.index(f"{pay}.position.{c}") for c in "xyz"]
         self._i_rot = [names.index(f"{pay}.rotation.{c}") for c in "xyz"]
-        self._i_ang = names.index(f"{frame.name}.{'travel' if self._prismatic else 'angle'}")
         y0 = self.plant._y
         com = y0[self._i_pos]
-        # S: above the initial centre of mass at the tip axle's height (relative to the pivot, at angle 0)
+        # S: above the initial centre of mass at the tip axle's height
         S = com + ez * ((centre - com) @ ez)
         p["suspension"] = S.tolist()      # at t = 0 (the FMU's configuration carries it: place_position)
+        self._chain = None
+        if frame.parent is not None:      # the frame on a joint on a moving body (a trolley on the jib)
+            self._setup_chain(scene, frame, bodies[frame.parent], names, S)
+            return
+        self._prismatic = frame.joint == "prismatic"
+        self._axis, self._pivot = np.asarray(frame.joint_axis, float), np.asarray(frame.pivot, float)
+        self._i_ang = names.index(f"{frame.name}.{'travel' if self._prismatic else 'angle'}")
         if self._prismatic:
             self._S0 = S - self._axis * float(y0[self._i_ang])
             er = self._axis - ez * (self._axis @ ez)
@@ -204,6 +216,30 @@ class CranePlant:
         if np.linalg.norm(self._S0 - ez * (self._S0 @ ez)) < 1e-9:
             raise SceneError(f"{scene.source}: the payload hangs on the joint axis of {frame.name!r}: "
                              f"the radial swing direction is undefined")
+
+    def _setup_chain(self, scene, frame, parent, names, S) -> None:
+        """Suspension point and outward direction of a frame body on a joint on a moving body: S fixed
+        to the frame (its scene-pose position S_ref), turned or moved by the frame's joint and then by its
+        parent's; outwards is away from the parent's axis (a revolute parent), else along its rail."""
+        def joint(b):
+            return (b.joint == "prismatic", np.asarray(b.joint_axis, float), np.asarray(b.pivot, float),
+                    names.index(f"{b.name}.{'travel' if b.joint == 'prismatic' else 'angle'}"))
+        self._chain = (joint(frame), joint(parent))
+        y0 = self.plant._y
+        x = S
+        for prism, a, piv, i in reversed(self._chain):     # undo the parent's motion, then the frame's
+            x = x - a * float(y0[i]) if prism else piv + _rotation(a, -float(y0[i])) @ (x - piv)
+        self._S0 = x
+
+    def _chain_frame(self, y):
+        ez = self._ez
+        S = self._S0
+        for prism, a, piv, i in self._chain:               # the frame's joint, then the parent's
+            S = S + a * float(y[i]) if prism else piv + _rotation(a, float(y[i])) @ (S - piv)
+        prism, a, piv, i = self._chain[1]
+        er = self._chain[0][1] if prism else S - piv
+        er = er - ez * (er @ ez)
+        return S, er / np.linalg.norm(er)
 
     def _frame(self, q):
         """Suspension point S and the horizontal outward direction e_r at frame coordinate q."""
@@ -219,7 +255,7 @@ class CranePlant:
         y = y.copy()
         y[self._flip] *= self.hoist_sign
         ez = self._ez
-        S, er = self._frame(float(y[self._i_ang]))
+        S, er = self._chain_frame(y) if self._chain is not None else self._frame(float(y[self._i_ang]))
         et = np.cross(ez, er)
         d = y[self._i_pos] - S
         down = -(d @ ez)
@@ -231,18 +267,19 @@ class CranePlant:
         ey = np.cross(ez, ex)
         derived = (math.atan2(d @ er, down), math.atan2(d @ et, down),
                    math.atan2(x_body @ ey, x_body @ ex))
-        return np.concatenate((y[self._keep], derived))
+        return np.concatenate((y, derived))
 
     @property
     def t(self) -> float:
         return self.plant.t
 
     def step(self, dt: float, hoist_torque: float, axes) -> np.ndarray:
-        """Advance by dt with the hoist motor torque [N m] (positive hoists) and the axis inputs
-        (torque [N m] / force [N] or speed [rad/s, m/s], `input_names` order) held; returns the
-        outputs. ValueError naming the input for a bad value (not finite, or a speed that would
-        take a joint with a range past its end within the step), SolverError if the solver stops
-        (state left at the last good step)."""
+        """Advance by dt with the hoist input (motor torque [N m], or with hoist="speed" the motor speed
+        [rad/s] the drum ramps to over the step; positive hoists) and the axis inputs (torque [N m] /
+        force [N] or speed [rad/s, m/s], `input_names` order) held; returns the outputs. ValueError
+        naming the input for a bad value (not finite, or a speed that would take a joint with a range
+        past its end within the step), SolverError if the solver stops (state left at the last good
+        step)."""
         vals = (axes,) if np.ndim(axes) == 0 else tuple(axes)
         st = self.plant.state
         for i, a in self._ranges:
@@ -252,7 +289,13 @@ class CranePlant:
             if not lo <= x <= hi:
                 raise ValueError(f"{self.input_names[i]} = {v!r} would take {a['body']}'s joint to {x:.6g}, "
                                  f"outside its range [{lo:g}, {hi:g}] (joint.range of the scene)")
-        y = self.plant.step(dt, self.hoist_sign * hoist_torque, 0.0, vals)
+        if self.hoist_mode == "speed":
+            w = float(hoist_torque)
+            if not math.isfinite(w):
+                raise ValueError(f"hoist.speed must be finite, got {w}")
+            y = self.plant.step(dt, 0.0, 0.0, vals, hoist_speed=self.hoist_sign * w / self._gain)
+        else:
+            y = self.plant.step(dt, self.hoist_sign * hoist_torque, 0.0, vals)
         self._y = self._outputs(y)
         return self._y
 

@@ -31,7 +31,8 @@ from .elevator import car_at, check_load, elevator_spec, with_load
 def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = None,
                 rope_damping: float | None = None, brake_torque: float | None = None,
                 motor_inertia: float | None = None, car_body: str = "car") -> Scene:
-    """The scene with an external motor-torque drive and the given parameter overrides."""
+    """The scene with an external motor-torque drive (or the hoist speed input, drive.kind
+    "speed-input": with_hoist_speed) and the given parameter overrides."""
     if scene.drive.sheave is None:
         raise SceneError(f"{scene.source}: [drive.sheave] a plant needs a driven sheave")
     for name, value in (("car.load", car_load), ("rope.EA", rope_EA), ("rope.damping", rope_damping),
@@ -49,7 +50,7 @@ def plant_scene(scene: Scene, *, car_load: float = 0.0, rope_EA: float | None = 
         bodies[idx[0]] = replace(b, mass=b.mass + car_load)
     ropes = [replace(r, EA=r.EA if rope_EA is None else rope_EA,
                      damping=r.damping if rope_damping is None else rope_damping) for r in scene.ropes]
-    drive = replace(scene.drive, kind="external",
+    drive = replace(scene.drive, kind="speed-input" if scene.drive.kind == "speed-input" else "external",
                     motor_inertia=scene.drive.motor_inertia if motor_inertia is None else motor_inertia)
     brake = scene.brake if brake_torque is None else replace(scene.brake, torque=brake_torque)
     return replace(scene, bodies=tuple(bodies), ropes=tuple(ropes), drive=drive, brake=brake)
@@ -70,15 +71,27 @@ def with_joint_input(scene: Scene, body: str, kind: str) -> Scene:
     return replace(scene, bodies=tuple(bodies))
 
 
+def with_hoist_speed(scene: Scene) -> Scene:
+    """The scene with its driven sheave (the hoist drum) following a Plant speed input: the drum's rope
+    coordinate is held like a speed-input joint (Plant.step's hoist_speed ramps it over each step)."""
+    if scene.drive.sheave is None:
+        raise SceneError(f"{scene.source}: [drive.sheave] a hoist speed input needs a driven sheave")
+    return replace(scene, drive=replace(scene.drive, kind="speed-input"))
+
+
 class JointInput:
     """One joint driven by a Plant input. speed: each step writes a one-segment profile into the
     State's prescribed-joint table (the rate ramps linearly from its value at the step start to
     the input at the step end: continuous rate, bounded acceleration, the angle its exact
-    integral); torque: the joint's torque table in the State becomes the constant input."""
+    integral); torque: the joint's torque table in the State becomes the constant input. A body=None
+    input is the hoist speed input (with_hoist_speed): coordinate j, the drum's rope coordinate."""
 
-    def __init__(self, model, body):
-        self.body, self.kind = body.name, body.motion.kind.split("-")[0]
-        self.j = model.q_names.index(f"{body.name}.{'angle' if body.joint == 'revolute' else 'travel'}")
+    def __init__(self, model, body, j=None):
+        if body is None:
+            self.body, self.kind, self.j = "hoist", "speed", j
+        else:
+            self.body, self.kind = body.name, body.motion.kind.split("-")[0]
+            self.j = model.q_names.index(f"{body.name}.{'angle' if body.joint == 'revolute' else 'travel'}")
         K = model.K
         self.k = list(K.jp_dof if self.kind == "speed" else K.jt_dof).index(self.j)
 
@@ -117,6 +130,8 @@ class Plant:
         self._joints = [JointInput(self.model, b) for b in self.scene.bodies
                         if b.joint is not None and b.motion.kind.endswith("-input")]
         self.joint_inputs = tuple(f"{ji.body}.{ji.kind}" for ji in self._joints)
+        self._hoist = (JointInput(self.model, None, self.model.drive_dof)
+                       if self.scene.drive.kind == "speed-input" else None)
         self.state: State = self.sim.initial_state()
         self._event_index = None      # step_to_event's output indices, found on first use
         self.warnings += self.sim.warnings
@@ -126,11 +141,12 @@ class Plant:
     def t(self) -> float:
         return self.state.t
 
-    def step(self, dt: float, torque: float, brake_command: float, joints=None) -> np.ndarray:
+    def step(self, dt: float, torque: float, brake_command: float, joints=None, hoist_speed=None) -> np.ndarray:
         """Advance by dt (> 0) with motor torque [N m] and brake command (1 = release, 0 = apply)
-        held, and the joint inputs `joints` (see the class); returns the outputs. Raises ValueError
-        for bad inputs, SolverError if the solver stops (the state is then left at the last good
-        step)."""
+        held, and the joint inputs `joints` (see the class); with the hoist speed input
+        (with_hoist_speed) `hoist_speed` is the drum's rope-coordinate rate at the step's end [m/s]
+        (the torque is then ignored). Returns the outputs. Raises ValueError for bad inputs,
+        SolverError if the solver stops (the state is then left at the last good step)."""
         torque, brake_command = float(torque), float(brake_command)
         if not (dt > 0.0 and dt - dt == 0.0 and torque - torque == 0.0 and brake_command - brake_command == 0.0):
             # (x - x == 0.0 is False exactly for NaN and +-inf: one test per step for all inputs)
@@ -142,6 +158,11 @@ class Plant:
         st = self.state
         if joints is not None:
             self._set_joints(st, dt, joints)
+        if self._hoist is not None:
+            x = float(hoist_speed if hoist_speed is not None else st.v[self._hoist.j])
+            if not math.isfinite(x):
+                raise ValueError(f"hoist.speed must be finite, got {x}")
+            self._hoist.set(st, dt, x)
         self._y = self.sim.step(st, st.t + dt, torque, brake_command).copy()
         return self._y
 

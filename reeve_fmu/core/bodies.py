@@ -115,6 +115,42 @@ def _rotate(R, b, v0, v1, v2):
 
 
 @njit(cache=True, inline="always")
+def _on(bq, bk, i_body, b):
+    """True if a point of body i_body moves with body b: it is b, or a body on a joint on b (kind 3)."""
+    return i_body == b or (i_body >= 0 and bk[i_body] == 3 and bq[i_body, 7] == b)
+
+
+@njit(cache=True, inline="always")
+def _axis_w(bq, bk, BR, b, v0, v1, v2):
+    """A vector fixed to body b (axes at its scene pose) in world axes: turned by the body's rotation,
+    and a body on a joint on a moving body (kind 3) by its parent's too (a prismatic parent: none)."""
+    if b < 0 or bk[b] == 1:
+        return v0, v1, v2
+    v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+    if bk[b] == 3 and bk[bq[b, 7]] != 1:
+        v0, v1, v2 = _rotate(BR, bq[b, 7], v0, v1, v2)
+    return v0, v1, v2
+
+
+@njit(cache=True, inline="always")
+def _chain_point(q, bq, b0, bk, bax, BR, b, p0, p1, p2):
+    """World position of the point at offset p from the reference point of a kind-3 body b (scene
+    pose): its own joint (revolute about bax[b] through b0[b], or sliding along it), then its parent's
+    (revolute about its axis through its pivot, or sliding)."""
+    y0, y1, y2 = _rotate(BR, b, p0, p1, p2)
+    y0, y1, y2 = y0 + b0[b, 0], y1 + b0[b, 1], y2 + b0[b, 2]
+    if bq[b, 0] >= 0:
+        u = q[bq[b, 0]]
+        y0, y1, y2 = y0 + u * bax[b, 0], y1 + u * bax[b, 1], y2 + u * bax[b, 2]
+    p = bq[b, 7]
+    if bk[p] == 1:
+        u = q[bq[p, 0]]
+        return y0 + u * bax[p, 0], y1 + u * bax[p, 1], y2 + u * bax[p, 2]
+    r0, r1, r2 = _rotate(BR, p, y0 - b0[p, 0], y1 - b0[p, 1], y2 - b0[p, 2])
+    return b0[p, 0] + r0, b0[p, 1] + r1, b0[p, 2] + r2
+
+
+@njit(cache=True, inline="always")
 def rot_coefs(p0, p1, p2):
     """Coefficients of the rotation vector phi (angle th = |phi|): R = I + s1 P + a P^2 (Rodrigues),
     T = I + a P + b P^2 (phi_dot -> world angular velocity), with P = phi^, and ca = a'(th) / th,
@@ -232,7 +268,9 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     Body b: bq[b] = q indices of (x, y, z, angle, rotation vector) (-1: fixed at b0[b]); bk[b] = 0: reference point
     (x, y, z) turned by the angle about the unit axis bax[b] (planar theta: -y; revolute joint: its
     axis, the reference point its pivot); bk[b] = 1: prismatic joint, reference b0[b] + q[bq[b, 0]] bax[b];
-    bk[b] = 2: spatial rigid body, (x, y, z) turned by the rotation vector bq[b, 4:7].
+    bk[b] = 2: spatial rigid body, (x, y, z) turned by the rotation vector bq[b, 4:7]; bk[b] = 3: a body
+    on a joint on the moving body bq[b, 7] (_chain_point: revolute angle bq[b, 3] about bax[b] through
+    b0[b], or prismatic travel bq[b, 0] along bax[b], in the parent's axes at the scene's pose).
     Point i sits on body pb[i] (-1: ground) at offset po[i] from the reference point (axes at angle 0);
     span k runs from point sp[k, 0] to sp[k, 1] with sg[k] = (RA, sA, RB, sB) and the sheave axes
     sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
@@ -250,16 +288,19 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
             else:
                 BR[b, 0], BR[b, 1], BR[b, 2] = 0.0, 0.0, 1.0
         else:
-            th = q[bq[b, 3]] if bq[b, 3] >= 0 else b0[b, 3]
+            th = q[bq[b, 3]] if bq[b, 3] >= 0 else (0.0 if bk[b] == 3 else b0[b, 3])
             BR[b, 0], BR[b, 1], BR[b, 2] = bax[b, 0], bax[b, 1], bax[b, 2]
         BR[b, 3], BR[b, 4] = math.cos(th), math.sin(th)
     for i in range(pb.shape[0]):
         b = pb[i]
-        if only >= 0 and b != only:
+        if only >= 0 and not _on(bq, bk, b, only):
             continue
         if b < 0:
             for k in range(3):
                 P[i, k] = po[i, k]
+            continue
+        if bk[b] == 3:
+            P[i, 0], P[i, 1], P[i, 2] = _chain_point(q, bq, b0, bk, bax, BR, b, po[i, 0], po[i, 1], po[i, 2])
             continue
         if bk[b] == 1:
             u = q[bq[b, 0]]
@@ -276,13 +317,10 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     aA = AX[0]
     aB = AX[1]
     for k in range(sp.shape[0]):
-        if only >= 0 and pb[sp[k, 0]] != only and pb[sp[k, 1]] != only:
+        if only >= 0 and not _on(bq, bk, pb[sp[k, 0]], only) and not _on(bq, bk, pb[sp[k, 1]], only):
             continue
         for e in range(2):
-            b = pb[sp[k, e]]
-            v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
-            if b >= 0 and bk[b] != 1:
-                v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+            v0, v1, v2 = _axis_w(bq, bk, BR, pb[sp[k, e]], sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2])
             w = aA if e == 0 else aB
             w[0], w[1], w[2] = v0, v1, v2
         tangent_spatial(P, sp[k, 0], sp[k, 1], sg[k, 0], sg[k, 1], sg[k, 2], sg[k, 3], aA, aB, ANG[k], TW[k])
@@ -294,10 +332,7 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
         else:
             k_in, k_out = rk[r, 1], rk[r, 2]
             ip = int(rf[r, 3])
-            b = pb[ip]
-            v0, v1, v2 = sa[k_in, 3], sa[k_in, 4], sa[k_in, 5]
-            if b >= 0 and bk[b] != 1:
-                v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
+            v0, v1, v2 = _axis_w(bq, bk, BR, pb[ip], sa[k_in, 3], sa[k_in, 4], sa[k_in, 5])
             aB[0], aB[1], aB[2] = v0, v1, v2
             ang = _wrap_angle(P[ip], aB, rf[r, 1], TW[k_in, 3:6], TW[k_out, 0:3])
             f[r] = q[rk[r, 3]] + rf[r, 2] + rf[r, 0] * ang
@@ -334,6 +369,14 @@ def _twist(q, bq, b0, bk, bax, BR, b, j):
     v0 = v1 = v2 = w0 = w1 = w2 = 0.0
     if bk[b] == 1:                      # prismatic: slides along its axis
         return bax[b, 0], bax[b, 1], bax[b, 2], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    if bk[b] == 3:                      # own joint of a body on a moving body: its axis in world axes
+        a0, a1, a2 = bax[b, 0], bax[b, 1], bax[b, 2]
+        if bk[bq[b, 7]] != 1:
+            a0, a1, a2 = _rotate(BR, bq[b, 7], a0, a1, a2)
+        if bq[b, 0] == j:
+            return a0, a1, a2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        O0, O1, O2 = _chain_point(q, bq, b0, bk, bax, BR, b, 0.0, 0.0, 0.0)
+        return 0.0, 0.0, 0.0, a0, a1, a2, O0, O1, O2
     O0 = q[bq[b, 0]] if bq[b, 0] >= 0 else b0[b, 0]
     O1 = q[bq[b, 1]] if bq[b, 1] >= 0 else b0[b, 1]
     O2 = q[bq[b, 2]] if bq[b, 2] >= 0 else b0[b, 2]
@@ -422,11 +465,8 @@ def _tangent_rate(P, iA, iB, RA, RB, aA, aB, onA, onB, tw, T, dT):
 
 
 @njit(cache=True, inline="always")
-def _world_axis(sa, k, e, pb, bk, BR, b):
-    v0, v1, v2 = sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2]
-    if b >= 0 and bk[b] != 1:
-        v0, v1, v2 = _rotate(BR, b, v0, v1, v2)
-    return v0, v1, v2
+def _world_axis(sa, k, e, bq, bk, BR, b):
+    return _axis_w(bq, bk, BR, b, sa[k, 3 * e], sa[k, 3 * e + 1], sa[k, 3 * e + 2])
 
 
 @njit(cache=True)
@@ -447,13 +487,13 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
         tw[:] = _twist(q, bq, b0, bk, bax, BR, b, cols[k])
         for s in range(nsp):
             iA, iB = sp[s, 0], sp[s, 1]
-            onA, onB = pb[iA] == b, pb[iB] == b
+            onA, onB = _on(bq, bk, pb[iA], b), _on(bq, bk, pb[iB], b)
             if not (onA or onB):
                 for m in range(6):
                     dTW[s, m] = 0.0
                 continue
-            aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
-            aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+            aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, bq, bk, BR, pb[iA])
+            aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, bq, bk, BR, pb[iB])
             _tangent_rate(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, onA, onB, tw, TW[s], dTW[s])
         for r in range(rk.shape[0]):
             if rk[r, 0] == ROW_TANGENT:
@@ -464,10 +504,10 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
                 continue
             k_in, k_out = rk[r, 1], rk[r, 2]
             ip = int(rf[r, 3])
-            n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+            n0, n1, n2 = _world_axis(sa, k_in, 1, bq, bk, BR, pb[ip])
             sgn = rf[r, 1]
             n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
-            c0, c1, c2 = _moved(P, ip, pb[ip] == b, tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8])
+            c0, c1, c2 = _moved(P, ip, _on(bq, bk, pb[ip], b), tw[0], tw[1], tw[2], tw[3], tw[4], tw[5], tw[6], tw[7], tw[8])
             x0, x1, x2 = TW[k_out, 0] - P[ip, 0], TW[k_out, 1] - P[ip, 1], TW[k_out, 2] - P[ip, 2]
             g = ((n1 * x2 - n2 * x1) * (dTW[k_out, 0] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_out, 1] - c1)
                  + (n0 * x1 - n1 * x0) * (dTW[k_out, 2] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
@@ -483,14 +523,17 @@ def _cross(a0, a1, a2, b0, b1, b2):
 
 
 @njit(cache=True)
-def _body_motion(q, v, bq, b0, bk, bax, b, out):
+def _body_motion(q, v, bq, b0, bk, bax, BR, b, out):
     """Rigid motion of body b at velocities v: out = (reference point O, its velocity, omega, the
-    part of d omega / dt that is not from accelerations); a point P moves with velocity
-    u_O + omega x (P - O) and, at zero coordinate accelerations, acceleration
-    domega x (P - O) + omega x (omega x (P - O))."""
-    for m in range(12):
+    part of d omega / dt that is not from accelerations, O's acceleration at zero coordinate
+    accelerations); a point P moves with velocity u_O + omega x (P - O) and, at zero coordinate
+    accelerations, acceleration a_O + domega x (P - O) + omega x (omega x (P - O))."""
+    for m in range(15):
         out[m] = 0.0
     if b < 0:
+        return
+    if bk[b] == 3:
+        _chain_motion(q, v, bq, b0, bk, bax, BR, b, out)
         return
     if bk[b] == 1:
         for m in range(3):
@@ -519,6 +562,42 @@ def _body_motion(q, v, bq, b0, bk, bax, b, out):
     out[11] = pd * (ca * x2 + cb * y2) + bb * z2
 
 
+@njit(cache=True)
+def _chain_motion(q, v, bq, b0, bk, bax, BR, b, out):
+    """_body_motion of a kind-3 body (on a joint on the moving body p = bq[b, 7]): O its reference point
+    (its joint's pivot, or the slider's point), omega = w_p + w_r (parent's, own), domega = w_p x w_r;
+    u_O = w_p x (O - pivot_p) (or p's slide) + the own slide a u', a_O = w_p x (w_p x (O - pivot_p))
+    + 2 w_p x a u' (Coriolis). BR: the body rotations of rows_eval at q."""
+    p = bq[b, 7]
+    O0, O1, O2 = _chain_point(q, bq, b0, bk, bax, BR, b, 0.0, 0.0, 0.0)
+    a0, a1, a2 = bax[b, 0], bax[b, 1], bax[b, 2]
+    wp0 = wp1 = wp2 = 0.0
+    if bk[p] == 1:
+        up = v[bq[p, 0]]
+        u0, u1, u2 = bax[p, 0] * up, bax[p, 1] * up, bax[p, 2] * up
+        c0 = c1 = c2 = 0.0
+    else:
+        a0, a1, a2 = _rotate(BR, p, a0, a1, a2)
+        wp = v[bq[p, 3]]
+        wp0, wp1, wp2 = bax[p, 0] * wp, bax[p, 1] * wp, bax[p, 2] * wp
+        u0, u1, u2 = _cross(wp0, wp1, wp2, O0 - b0[p, 0], O1 - b0[p, 1], O2 - b0[p, 2])
+        c0, c1, c2 = _cross(wp0, wp1, wp2, u0, u1, u2)
+    out[0], out[1], out[2] = O0, O1, O2
+    if bq[b, 0] >= 0:       # own slide: u_rel = a u'
+        ur = v[bq[b, 0]]
+        s0, s1, s2 = _cross(wp0, wp1, wp2, a0 * ur, a1 * ur, a2 * ur)
+        u0, u1, u2 = u0 + a0 * ur, u1 + a1 * ur, u2 + a2 * ur
+        c0, c1, c2 = c0 + 2.0 * s0, c1 + 2.0 * s1, c2 + 2.0 * s2
+        wr0 = wr1 = wr2 = 0.0
+    else:
+        wr = v[bq[b, 3]]
+        wr0, wr1, wr2 = a0 * wr, a1 * wr, a2 * wr
+    out[3], out[4], out[5] = u0, u1, u2
+    out[6], out[7], out[8] = wp0 + wr0, wp1 + wr1, wp2 + wr2
+    out[9], out[10], out[11] = _cross(wp0, wp1, wp2, wr0, wr1, wr2)
+    out[12], out[13], out[14] = c0, c1, c2
+
+
 @njit(cache=True, inline="always")
 def _point_motion(P, i, mo):
     """(velocity, convective acceleration) of point P[i] on a body with motion mo (_body_motion)."""
@@ -526,7 +605,7 @@ def _point_motion(P, i, mo):
     c0, c1, c2 = _cross(mo[6], mo[7], mo[8], r0, r1, r2)
     e0, e1, e2 = _cross(mo[6], mo[7], mo[8], c0, c1, c2)
     f0, f1, f2 = _cross(mo[9], mo[10], mo[11], r0, r1, r2)
-    return mo[3] + c0, mo[4] + c1, mo[5] + c2, e0 + f0, e1 + f1, e2 + f2
+    return mo[3] + c0, mo[4] + c1, mo[5] + c2, e0 + f0 + mo[12], e1 + f1 + mo[13], e2 + f2 + mo[14]
 
 
 @njit(cache=True)
@@ -630,10 +709,10 @@ def rows_accel(q, v, G, acc):
     (rows_accel_fd: the same by a second difference along v.)"""
     bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
     nb = bq.shape[0]
-    mo = np.empty((nb, 12))
+    mo = np.empty((nb, 15))
     for b in range(nb):
-        _body_motion(q, v, bq, b0, bk, bax, b, mo[b])
-    zero = np.zeros(12)
+        _body_motion(q, v, bq, b0, bk, bax, BR, b, mo[b])
+    zero = np.zeros(15)
     nsp = sp.shape[0]
     VT = np.empty((nsp, 6))
     AT = np.empty((nsp, 6))
@@ -641,8 +720,8 @@ def rows_accel(q, v, G, acc):
     aB = np.empty(3)
     for s in range(nsp):
         iA, iB = sp[s, 0], sp[s, 1]
-        aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, pb, bk, BR, pb[iA])
-        aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, pb, bk, BR, pb[iB])
+        aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, bq, bk, BR, pb[iA])
+        aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, bq, bk, BR, pb[iB])
         _tangent_accel(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, mo[pb[iA]] if pb[iA] >= 0 else zero,
                        mo[pb[iB]] if pb[iB] >= 0 else zero, TW[s], VT[s], AT[s])
     for r in range(rk.shape[0]):
@@ -656,7 +735,7 @@ def rows_accel(q, v, G, acc):
         k_in, k_out = rk[r, 1], rk[r, 2]
         ip = int(rf[r, 3])
         m = mo[pb[ip]] if pb[ip] >= 0 else zero
-        n0, n1, n2 = _world_axis(sa, k_in, 1, pb, bk, BR, pb[ip])
+        n0, n1, n2 = _world_axis(sa, k_in, 1, bq, bk, BR, pb[ip])
         sgn = rf[r, 1]
         n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
         uc0, uc1, uc2, ac0, ac1, ac2 = _point_motion(P, ip, m)
@@ -762,7 +841,7 @@ def wrap_weight(K, W, Q, q, energy):
         for k in range(cols.shape[0]):
             Q[cols[k]] += gc * J[r, k]
             b = K.nl_colbody[k]
-            if pb[ip] == b:
+            if _on(K.nl_bq, K.nl_bk, pb[ip], b):
                 v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, W.nl_BR, b,
                                                             cols[k])
                 c0, c1, c2 = _moved(P, ip, True, v0, v1, v2, w0, w1, w2, O0, O1, O2)

@@ -55,6 +55,8 @@ KERNEL_FIELDS = (
     ("jg_dof", "int[]"), ("jg_A", "float[]"), ("jg_B", "float[]"),
     # spatial rigid bodies (rigid.rigid_terms): rotation-vector indices, inertia tensors in body axes
     ("rb_q", "int[,]"), ("rb_J", "float[,,]"),
+    # bodies on a joint on a moving body (rigid.chain_terms): (parent's, own) joint coordinates, constants
+    ("ch_q", "int[,]"), ("ch_f", "float[,]"),
     # torsion spans (elements/torsion.torsion_terms; nl_on bit 4): element, twist coordinates (-1: fixed
     # at tq_phic), frame bodies and vectors, law parameters, transport-angle branch at q0 (State.tq_dref
     # follows it)

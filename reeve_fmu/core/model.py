@@ -156,7 +156,7 @@ def _build(scene: Scene) -> Model:
     outs = output_table(bs, drive, {name: k for k, name in enumerate(crp["name"])}, mot_crp)
     K = kernel_arrays(bs, arr, drive, crp, outs, mot_crp)
     eqs, unknowns = statics_sets(bs, drive)
-    inputs = ("motor.torque", "brake.command") if scene.drive.kind == "external" else ()
+    inputs = ("motor.torque", "brake.command") if scene.drive.kind in ("external", "speed-input") else ()
     return Model(scene=scene, nd=bs.nd, K=K, KJ=compiled_kernel(K), q_names=tuple(bs.q_names),
                  q_kind=tuple(bs.q_kind), q0=np.array(bs.q0, float), B=arr.B, Bpar=arr.Bpar, c0=arr.c0,
                  par0=bs.par0, output_names=tuple(outs.names), input_names=inputs, sheave_dof=bs.sheave_dof,

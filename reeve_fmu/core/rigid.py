@@ -152,3 +152,147 @@ def rigid_terms(K, q, v, M, Q):
                     for r in range(3):
                         acc += T[i, m] * Jw[i, r] * T[r, n]
                 M[K.rb_q[k, m], K.rb_q[k, n]] += acc
+
+
+# Columns of Kernel.ch_f, one row per body on a joint on a moving body (builder/bodies.chain_fields):
+# parent's kind (0 revolute, 1 prismatic), axis, pivot; own kind, axis, pivot (scene's pose); centre of
+# mass at the scene's pose; mass; gravity; inertia tensor about the centre of mass (scene axes, 9)
+CH_PK, CH_PA, CH_PP, CH_CK, CH_CA, CH_CP, CH_X0, CH_M, CH_G, CH_J = 0, 1, 4, 7, 8, 11, 14, 17, 18, 21
+CH_SIZE = 30
+
+
+@njit(cache=True, inline="always")
+def _turn(a0, a1, a2, c, s, v0, v1, v2):
+    """v turned by the angle (cos c, sin s) about the unit axis a (Rodrigues)."""
+    d = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
+    return (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * d, v1 * c + (a2 * v0 - a0 * v2) * s + a1 * d,
+            v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
+
+
+@njit(cache=True, inline="always")
+def _cr(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True, inline="always")
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, inline="always")
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True, inline="always")
+def _axpy(s, a, b):
+    """s a + b."""
+    return (s * a[0] + b[0], s * a[1] + b[1], s * a[2] + b[2])
+
+
+@njit(cache=True, inline="always")
+def _about(a, c, s, p, x):
+    """x turned by (cos c, sin s) about the axis a through p."""
+    r = _turn(a[0], a[1], a[2], c, s, x[0] - p[0], x[1] - p[1], x[2] - p[2])
+    return (p[0] + r[0], p[1] + r[1], p[2] + r[2])
+
+
+@njit(cache=True, inline="always")
+def _vec(f, i):
+    return (f[i], f[i + 1], f[i + 2])
+
+
+@njit(cache=True, inline="always")
+def _jw(J, rot, u):
+    """R J R^T u for R = R_parent R_own, rot = (parent axis, cos, sin, own axis, cos, sin); J row-major."""
+    pa0, pa1, pa2, cp, sp, ca0, ca1, ca2, cc, sc = rot
+    b = _turn(pa0, pa1, pa2, cp, -sp, u[0], u[1], u[2])
+    b = _turn(ca0, ca1, ca2, cc, -sc, b[0], b[1], b[2])
+    jb = (J[0] * b[0] + J[1] * b[1] + J[2] * b[2], J[3] * b[0] + J[4] * b[1] + J[5] * b[2],
+          J[6] * b[0] + J[7] * b[1] + J[8] * b[2])
+    r = _turn(ca0, ca1, ca2, cc, sc, jb[0], jb[1], jb[2])
+    return _turn(pa0, pa1, pa2, cp, sp, r[0], r[1], r[2])
+
+
+@njit(cache=True)
+def chain_terms(K, q, v, M, Q):
+    """Mass, weight and velocity terms of the bodies on a joint on a moving body (a trolley on a slewing
+    jib, a boom luffing on a slewing superstructure), by projecting Newton-Euler on the two joint
+    coordinates (parent's p, own c). With J_i the velocity of the centre of mass and W_i the angular
+    velocity per unit rate of coordinate i, M[i, j] += m J_i.J_j + W_i.J_w W_j and
+    Q[i] += m g.J_i - m J_i.a_q - W_i.(J_w al_q + w x J_w w): a_q = w_p x (w_p x r_p) + 2 w_p x u_rel +
+    w_r x (w_r x r_c) the centre's acceleration at zero coordinate accelerations (centripetal, Coriolis),
+    al_q = w_p x w_r; J_w = R J R^T the world inertia tensor. Scalars and tuples only (no arrays: it
+    runs in every residual)."""
+    zero = (0.0, 0.0, 0.0)
+    for k in range(K.ch_q.shape[0]):
+        f = K.ch_f[k]
+        ip, ic = K.ch_q[k, 0], K.ch_q[k, 1]
+        pa, pp, ca, cp = _vec(f, CH_PA), _vec(f, CH_PP), _vec(f, CH_CA), _vec(f, CH_CP)
+        m = f[CH_M]
+        rev_p, rev_c = f[CH_PK] == 0.0, f[CH_CK] == 0.0
+        # own joint in the parent's frame at the scene's pose, then the parent's motion
+        cc, sc, cpa, spa = 1.0, 0.0, 1.0, 0.0
+        y = _vec(f, CH_X0)
+        if rev_c:
+            cc, sc = math.cos(q[ic]), math.sin(q[ic])
+            y = _about(ca, cc, sc, cp, y)
+        else:
+            y = _axpy(q[ic], ca, y)
+        if rev_p:
+            cpa, spa = math.cos(q[ip]), math.sin(q[ip])
+            x, xp = _about(pa, cpa, spa, pp, y), _about(pa, cpa, spa, pp, cp)
+        else:
+            x, xp = _axpy(q[ip], pa, y), _axpy(q[ip], pa, cp)
+        aw = _turn(pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2])       # own axis, world
+        Jp, Wp = (_cr(pa, _sub(x, pp)), pa) if rev_p else (pa, zero)
+        Jc, Wc = (_cr(aw, _sub(x, xp)), aw) if rev_c else (aw, zero)
+        vp, vc = v[ip], v[ic]
+        wp = (Wp[0] * vp, Wp[1] * vp, Wp[2] * vp)
+        wr = (Wc[0] * vc, Wc[1] * vc, Wc[2] * vc)
+        w = (wp[0] + wr[0], wp[1] + wr[1], wp[2] + wr[2])
+        cor = _cr(wp, (Jc[0] * vc, Jc[1] * vc, Jc[2] * vc))
+        aq = _axpy(2.0, cor, _cr(wr, _cr(wr, _sub(x, xp))))
+        if rev_p:
+            cen = _cr(wp, _cr(wp, _sub(x, pp)))
+            aq = (aq[0] + cen[0], aq[1] + cen[1], aq[2] + cen[2])
+        alq = _cr(wp, wr)
+        # world inertia tensor J_w = R J R^T, R = R_parent R_own (_jw applies it to a vector)
+        Jm = f[CH_J:CH_J + 9]
+        rot = (pa[0], pa[1], pa[2], cpa, spa, ca[0], ca[1], ca[2], cc, sc)
+        h = _jw(Jm, rot, w)
+        e = _axpy(1.0, _jw(Jm, rot, alq), _cr(w, h))
+        JWp, JWc = _jw(Jm, rot, Wp), _jw(Jm, rot, Wc)
+        g = _vec(f, CH_G)
+        Q[ip] += m * _dot(g, Jp) - m * _dot(Jp, aq) - _dot(Wp, e)
+        Q[ic] += m * _dot(g, Jc) - m * _dot(Jc, aq) - _dot(Wc, e)
+        M[ip, ip] += m * _dot(Jp, Jp) + _dot(Wp, JWp)
+        M[ic, ic] += m * _dot(Jc, Jc) + _dot(Wc, JWc)
+        mpc = m * _dot(Jp, Jc) + _dot(Wp, JWc)
+        M[ip, ic] += mpc
+        M[ic, ip] += mpc
+
+
+@njit(cache=True)
+def chain_potential(K, q):
+    """Gravity potential -m g.x of the bodies on a joint on a moving body (their centres of mass x)."""
+    V = 0.0
+    for k in range(K.ch_q.shape[0]):
+        f = K.ch_f[k]
+        ip, ic = K.ch_q[k, 0], K.ch_q[k, 1]
+        pa, pp, ca, cp = f[CH_PA:CH_PA + 3], f[CH_PP:CH_PP + 3], f[CH_CA:CH_CA + 3], f[CH_CP:CH_CP + 3]
+        x0, x1, x2 = f[CH_X0], f[CH_X0 + 1], f[CH_X0 + 2]
+        if f[CH_CK] == 0.0:
+            r0, r1, r2 = _turn(ca[0], ca[1], ca[2], math.cos(q[ic]), math.sin(q[ic]), x0 - cp[0], x1 - cp[1],
+                               x2 - cp[2])
+            x0, x1, x2 = cp[0] + r0, cp[1] + r1, cp[2] + r2
+        else:
+            x0, x1, x2 = x0 + q[ic] * ca[0], x1 + q[ic] * ca[1], x2 + q[ic] * ca[2]
+        if f[CH_PK] == 0.0:
+            r0, r1, r2 = _turn(pa[0], pa[1], pa[2], math.cos(q[ip]), math.sin(q[ip]), x0 - pp[0], x1 - pp[1],
+                               x2 - pp[2])
+            x0, x1, x2 = pp[0] + r0, pp[1] + r1, pp[2] + r2
+        else:
+            x0, x1, x2 = x0 + q[ip] * pa[0], x1 + q[ip] * pa[1], x2 + q[ip] * pa[2]
+        V -= f[CH_M] * (f[CH_G] * x0 + f[CH_G + 1] * x1 + f[CH_G + 2] * x2)
+    return V

@@ -44,6 +44,8 @@ class Body:
     pivot: tuple = (0.0, 0.0, 0.0)   # m, a point on a revolute joint's axis
     motion: "Motion | None" = None   # how the joint coordinate moves
     joint_range: tuple | None = None  # (min, max) of the joint coordinate (rail, luffing limits)
+    parent: str | None = None        # the body the joint is on (None: the ground); axis, pivot, position
+    #                                  and a tensor inertia in scene axes at the scene's pose
 
 
 MOTION_KINDS = ("free", "profile", "torque", "speed-input", "torque-input")
@@ -125,7 +127,7 @@ class Torsion:
 
 @dataclass(frozen=True)
 class Drive:
-    kind: str = "none"               # none | speed | torque | external
+    kind: str = "none"               # none | speed | torque | external (| speed-input: set by the Plant)
     sheave: str | None = None
     roping: float = 1.0              # load speed = rim speed / roping (speed profiles are load speeds)
     profile: str = "s-curve"         # s-curve | table (kind = speed)
@@ -205,7 +207,7 @@ SCHEMA_KEYS = {
     "solver": {"method", "step", "rho_inf", "newton_tol", "rtol", "atol", "min_span"},
     "initial": {"statics"},
     "bodies": {"name", "mass", "position", "free", "damping", "angular_damping", "inertia", "joint", "motion"},
-    "joint": {"kind", "axis", "pivot", "range"},
+    "joint": {"kind", "axis", "pivot", "range", "parent"},
     "motion": {"kind", "distance", "v_max", "a_max", "jerk", "t_start", "torque", "damping"},
     "sheaves": {"name", "center", "radius", "body", "inertia", "axis", "kind", "stored", "slip", "mu", "groove",
                 "undercut_angle", "groove_angle", "creep"},
@@ -428,7 +430,30 @@ def _parse_bodies(r: _Reader, data, names, model="axial-1d") -> list:
                            free=tuple(a for a in BODY_COORDS if a in free),
                            damping=r.number(b, path, "damping", 0.0, nonneg=True), inertia=inertia,
                            angular_damping=r.number(b, path, "angular_damping", 0.0, nonneg=True)))
+    _check_parents(r, bodies)
     return bodies
+
+
+def _check_parents(r: _Reader, bodies) -> None:
+    """joint.parent names a body on a joint to the ground: chains are ground -> parent -> child (a
+    jib and its trolley, a superstructure and its boom), nothing deeper and no cycles."""
+    by_name = {b.name: (i, b) for i, b in enumerate(bodies)}
+    for i, b in enumerate(bodies):
+        if b.parent is None:
+            continue
+        key = f"bodies[{i}].joint.parent"
+        if b.parent == b.name:
+            r.fail(key, f"body {b.name!r} cannot be its own parent")
+        if b.parent not in by_name:
+            r.fail(key, f"unknown body {b.parent!r}; bodies: {', '.join(sorted(by_name))}")
+        p = by_name[b.parent][1]
+        if p.joint is None:
+            r.fail(key, f"the parent {p.name!r} has no joint: a joint's parent is a body on a joint to the "
+                        f"ground (or omit 'parent': a joint to the ground)")
+        if p.parent is not None:
+            r.fail(key, f"the parent {p.name!r} is itself on a joint on {p.parent!r}: chains are two deep "
+                        f"at most (ground -> {p.parent!r} -> {p.name!r}); put {b.name!r} on {p.parent!r} "
+                        f"or on the ground")
 
 
 def _inertia_tensor(r: _Reader, b, path):
@@ -472,8 +497,17 @@ def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
     if model == "axial-1d":
         r.fail(f"{path}.joint", "joints need model = 'planar' or 'spatial'")
     pivot = r.vector(jt, f"{path}.joint", "pivot", required=kind == "revolute", default=(0.0, 0.0, 0.0))
-    inertia = r.number(b, path, "inertia", 0.0, nonneg=True)
-    if kind == "revolute" and not inertia > 0.0:
+    parent = r.string(jt, f"{path}.joint", "parent", None)
+    if parent == "ground":
+        parent = None
+    if parent is not None:
+        if model != "spatial":
+            r.fail(f"{path}.joint.parent", f"a joint on a moving body needs model = 'spatial', the scene's "
+                                           f"model is {model!r}")
+        inertia = _chained_inertia(r, b, path, kind, axis, pivot)
+    else:
+        inertia = r.number(b, path, "inertia", 0.0, nonneg=True)
+    if kind == "revolute" and parent is None and not inertia > 0.0:
         r.fail(f"{path}.inertia", f"a revolute joint needs a positive moment of inertia about its axis "
                                   f"[kg m^2] (including m d^2 of the centre of mass), got {inertia:g}")
     mo = r.table(b.get("motion", {}), f"{path}.motion", SCHEMA_KEYS["motion"])
@@ -492,7 +526,29 @@ def _parse_joint_body(r: _Reader, b, path, name, model) -> Body:
     return Body(name=name, mass=r.number(b, path, "mass", positive=True, required=True),
                 position=r.vector(b, path, "position", default=(0.0, 0.0, 0.0)),
                 free=("angle",) if kind == "revolute" else ("travel",), inertia=inertia, joint=kind,
-                joint_axis=axis, pivot=pivot, motion=motion, joint_range=rng)
+                joint_axis=axis, pivot=pivot, motion=motion, joint_range=rng, parent=parent)
+
+
+def _chained_inertia(r: _Reader, b, path, kind, axis, pivot):
+    """A body on a joint on a moving body turns with its parent about other axes than its own joint's:
+    its inertia is the tensor about its centre of mass (scene axes; default 0, a point mass). A revolute
+    one needs a positive moment about its joint axis (the tensor's plus m d^2)."""
+    v = b.get("inertia", 0.0)
+    try:
+        zero = not np.any(np.asarray(v, float) != 0.0)
+    except (TypeError, ValueError):
+        zero = False                     # _inertia_tensor names the key
+    J = ((0.0,) * 3,) * 3 if zero else _inertia_tensor(r, b, path)
+    if kind == "revolute":
+        a = np.asarray(axis, float)
+        d = np.asarray(b.get("position", (0.0, 0.0, 0.0)), float) - np.asarray(pivot, float)
+        m = b.get("mass", 0.0)
+        m = float(m) if isinstance(m, (int, float)) and not isinstance(m, bool) else 0.0
+        if not a @ np.asarray(J) @ a + m * float(np.cross(a, d) @ np.cross(a, d)) > 0.0:
+            r.fail(f"{path}.inertia", "a revolute joint needs a positive moment of inertia about its axis: "
+                                      "give the tensor about the centre of mass [kg m^2] or put the centre "
+                                      "of mass off the axis")
+    return J
 
 
 def _joint_range(r: _Reader, jt, path, kind, motion):
@@ -580,6 +636,9 @@ def _check_winch_body(r: _Reader, key, kind, b) -> None:
     if "rotation" in b.free:
         r.fail(key, f"a {kind} on body {b.name!r}, a spatial rigid body ('rotation' in free), is not "
                     f"available: mount it on a body with a joint or free translations")
+    if b.parent is not None:
+        r.fail(key, f"a {kind} on body {b.name!r}, which is on a joint on {b.parent!r}, is not available: "
+                    f"mount it on {b.parent!r} (a counter-jib winch, a superstructure's winch)")
 
 
 def _check_overlaps(r: _Reader, sheaves):

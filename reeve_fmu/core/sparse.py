@@ -113,7 +113,7 @@ def dense_groups(K) -> np.ndarray:
         cols.append(np.tile(qs, len(qs)))
     i0, j0 = np.nonzero(K.M0)
     rows.append(i0), cols.append(j0)
-    for b in np.asarray(K.rb_q):
+    for b in list(np.asarray(K.rb_q)) + list(np.asarray(K.ch_q)):
         qs = np.asarray(b)[np.asarray(b) >= 0]
         rows.append(np.repeat(qs, len(qs))), cols.append(np.tile(qs, len(qs)))
     P = sp.csr_matrix((np.ones(sum(len(r) for r in rows), bool), (np.concatenate(rows), np.concatenate(cols))),

@@ -22,7 +22,7 @@ from .kernel import (CREEP, CR_KAPPA_END, CR_KAPPA_MID, CR_RATE_END, CR_SIGMA, C
                      CUBIC, JOINTS, MULTI_D, NL_ROWS, TORSION, UE_BRAKE_E, UE_CREEP, UE_STRIDE, UE_TORQUE,
                      new_work)
 from .profiles import profile_eval
-from .rigid import rigid_terms
+from .rigid import chain_potential, chain_terms, rigid_terms
 
 ST_OK, ST_NEWTON, ST_LENGTH, ST_NAN = 0, 1, 2, 3
 
@@ -121,6 +121,8 @@ _cubic_at = gated(CUBIC, cubic_element_at)
 _linear_nd_at = gated(MULTI_D, linear_element_at)
 _nl_update = gated(NL_ROWS, nl_update)
 _rigid_terms = gated(JOINTS, rigid_terms)
+_chain_terms = gated(JOINTS, chain_terms)
+_chain_potential = gated(JOINTS, chain_potential, lambda K, q: 0.0)
 _torsion_terms = gated(TORSION, torsion_terms)
 
 
@@ -333,8 +335,9 @@ def assemble_ws(K, W, c, q, v, t, u):
     if nl:   # after the loop, so the 1D/translating element loop carries no extra branch
         _nl_convect(K, K, W, MEs, QEs, Q, q)
     q_terms(K, W, q, v, t, u)
-    if flags & 2:   # spatial rigid bodies: rotational mass matrix and gyroscopic terms
+    if flags & 2:   # spatial rigid bodies, joints on moving bodies: configuration-dependent mass, gyroscopic terms
         _rigid_terms(K, K, q, v, M, Q)
+        _chain_terms(K, K, q, v, M, Q)
     if flags & 4:   # axial-torsion coupling of torsion ropes (after nl_update: the frames' rotations)
         _torsion_terms(K, K, W, QE, q, Q)
     Md = W.Md
@@ -457,7 +460,7 @@ def outputs_ws(K, W, c, q, v, qdd, q_ref, t, u, y, fresh, kaps):
             lo = min(a, b)
             y[k] = hi / lo if lo > 0.0 else math.inf
         elif kind == 5:
-            if K.drive_kind == 1:
+            if K.drive_kind == 1 or K.drive_kind == 4:
                 # reaction of the prescribed sheave coordinate: tau = -R (M qdd - Q)_sigma
                 j = K.out_i[k]
                 r = -Q[j]
@@ -540,6 +543,8 @@ def energy_u(K, S, c, q, v, u):
     for k in range(K.jg_dof.shape[0]):
         x = q[K.jg_dof[k]]
         Vg += K.jg_B[k] * math.cos(x) - K.jg_A[k] * math.sin(x)
+    if K.nl_on & 2:
+        Vg += _chain_potential(K, K, q)
     n_el = K.el_idx.shape[0]
     QE = np.empty((n_el, ne))
     VE = np.empty((n_el, ne))

@@ -30,14 +30,18 @@ CRANE_CONFIG = "reeve_crane.json"    # resource of the crane plant FMU (crane_co
 CRANE_SCENE = "scene.toml"
 SLEW_MODES = ("torque", "speed")     # the crane plant's Integer parameter slew.input: 0, 1
 
-HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists), held over the step")
+HOIST_INPUT = ("motor.torque", "Torque", "hoist motor air-gap torque on the reel (positive hoists; used when "
+                                         "hoist.input = 0), held over the step")
+HOIST_SPEED = ("hoist.speed", "AngularVelocity", "hoist motor speed (positive hoists; used when hoist.input = 1); "
+                                                 "the drum's rate ramps linearly to it over the step")
+HOIST_INPUTS = (HOIST_INPUT[0], HOIST_SPEED[0])   # in the order of hoist.input's values (0 torque, 1 speed)
 
 
 def crane_inputs(axes: Sequence[Mapping]) -> dict:
-    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque, then per
-    axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its speed; the Integer
-    parameter <axis>.input chooses which one the plant uses."""
-    out = {HOIST_INPUT[0]: HOIST_INPUT[1:]}
+    """The crane plant's inputs, name -> (declared type, description): the hoist motor torque and
+    speed, then per axis (craneplant.crane_axes) its torque (force for a prismatic joint) and its
+    speed; the Integer parameters hoist.input and <axis>.input choose which one the plant uses."""
+    out = {HOIST_INPUT[0]: HOIST_INPUT[1:], HOIST_SPEED[0]: HOIST_SPEED[1:]}
     for a in axes:
         n, b = a["name"], a["body"]
         rev = a["joint"] == "revolute"
@@ -108,6 +112,10 @@ def crane_output_specs(names: Sequence[str], sheaves: Sequence[str], parts: Mapp
             spec.update(type="Force", depends=obj in sheaves, description=f"rope force at the {side} tangent point of {obj}")
         elif q in ("tension_start", "tension_end"):
             spec.update(type="Force", description=f"rope force at the {q[8:]} of rope {obj}")
+        elif n == "hoist.torque":
+            spec.update(type="Torque", depends=True,
+                        description="hoist motor torque: the torque input, or the torque the speed input needs "
+                                    "(positive hoists)")
         elif n in ("motor.angle", "motor.speed"):
             spec.update(type="Angle" if q == "angle" else "AngularVelocity",
                         description=f"hoist motor {q} (positive hoists)")
@@ -345,3 +353,76 @@ def place_position(plant_fmu, distance: float, axis: Optional[str] = None) -> tu
     up = start - S0
     up /= np.linalg.norm(up)                 # the vertical (the load hangs below S)
     return start, start + move - up * (move @ up)
+
+
+def speed_cycle(scene, *, lift: Optional[float] = None, moves: Optional[Mapping[str, float]] = None,
+                length: Optional[float] = None, t_start: float = 1.0, settle: float = 15.0) -> tuple[dict, float]:
+    """A pick and place by the crane plant's speed inputs alone (hoist.input = 1, every <axis>.input =
+    1): hoist `lift` m up (default: the scene's hoist travel), then move every axis at once by `moves`
+    (axis name -> rad or m; default: each axis's body motion distance in the scene), then lower `lift`,
+    each from the end of the one before, `settle` s after. The moves are shaped against residual sway as
+    in pick_and_place, for the hoisted pendulum length (`length`: pendulum_length(scene)). Returns
+    ({input name: its speed as a function of time, hoist.speed in motor rad/s}, end time)."""
+    from ..components.craneplant import crane_parts
+    from ..core.profiles import scurve, scurve_phases
+    from ..core.scene import load_scene
+
+    scene = load_scene(scene) if not hasattr(scene, "sheaves") else scene
+    dv = scene.drive
+    R = next(s.radius for s in scene.sheaves if s.name == dv.sheave) / dv.roping
+    lift = abs(dv.distance) if lift is None else float(lift)
+    bodies = {b.name: b for b in scene.bodies}
+    axes = crane_parts(scene)["axes"]
+    moves = {a["name"]: bodies[a["body"]].motion.distance for a in axes} if moves is None else dict(moves)
+    T = 2.0 * math.pi * math.sqrt(max(length - lift, 1.0) / 9.81) if length is not None else None
+
+    def move(d, t0, v_max, a_max, jerk):
+        if T is not None:
+            v_max = abs(d) / (1.5 * T)
+            a_max, jerk = v_max / T, v_max / T / (0.1 * T)
+        p = scurve(d, v_max, a_max, jerk, t_start=t0)
+        return p, t0 + sum(scurve_phases(d, v_max, a_max, jerk)[0])
+
+    up, t1 = scurve(lift, dv.v_max, dv.a_max, dv.jerk, t_start=t_start), t_start + sum(
+        scurve_phases(lift, dv.v_max, dv.a_max, dv.jerk)[0])
+    prof, t2 = {}, t1
+    for a in axes:
+        mo = bodies[a["body"]].motion
+        prof[f"{a['name']}.speed"], te = move(moves.get(a["name"], 0.0), t1, mo.v_max, mo.a_max, mo.jerk)
+        t2 = max(t2, te)
+    down = scurve(-lift, dv.v_max, dv.a_max, dv.jerk, t_start=t2)
+    t3 = t2 + sum(scurve_phases(lift, dv.v_max, dv.a_max, dv.jerk)[0])
+    speeds = {k: (lambda t, p=p: p(t)[1]) for k, p in prof.items()}
+    # the hoist: up, then down (rope speed / R: the motor speed, positive hoists)
+    speeds["hoist.speed"] = lambda t: (up(t)[1] + down(t)[1]) / R
+    return speeds, t3 + settle
+
+
+def cosimulate_speeds(plant_fmu, speeds: Mapping, *, step: float = 5e-3, t_end: float = 30.0,
+                      record: Sequence[str] = ("payload.swing_radial", "payload.swing_tangential")) -> TimeSeries:
+    """Drive a crane plant FMU by its speed inputs alone (hoist.input = 1 and every <axis>.input = 1):
+    `speeds` maps an input name (hoist.speed, <axis>.speed) to a function of time; each step
+    (communication step `step`) sets every speed to its value at the step's end (the plant ramps to it)
+    and records `record` and the inputs after it. An input the plant lacks is a ValueError naming it and
+    the plant's inputs."""
+    from .runner import SlaveHandle
+
+    n = int(math.floor(t_end / step + 1e-9))
+    with SlaveHandle.open(plant_fmu, "crane") as h:
+        axes = plant_axes(h)
+        known = ["hoist.speed"] + [f"{a['name']}.speed" for a in axes]
+        bad = sorted(set(speeds) - set(known))
+        if bad:
+            raise ValueError(f"{Path(plant_fmu).name} has no input {bad[0]!r}; its speed inputs: {known}")
+        h.setup(0.0, t_end, start_values={"hoist.input": 1, **{f"{a['name']}.input": 1 for a in axes}})
+        rows = []
+        for k in range(n):
+            t = k * step
+            h.set_many({name: float(f(t + step)) for name, f in speeds.items()})
+            status = h.do_step(t, step)
+            if status != 0:
+                log = "; ".join(m.message for m in h.messages)
+                raise RuntimeError(f"{Path(plant_fmu).name}: doStep at t = {t:g} s returned {status}: {log}")
+            rows.append(h.get_many(list(record) + list(speeds)))
+    cols = np.array(rows, float).T if rows else np.zeros((len(record) + len(speeds), 0))
+    return TimeSeries(np.arange(n) * step + step, dict(zip(list(record) + list(speeds), cols)))

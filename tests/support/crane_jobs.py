@@ -198,7 +198,7 @@ def state_roundtrip(plant_fmu, axis):
 
 
 def bad_inputs(tower_fmu, trolley_fmu, drive_fmu):
-    """Errors that name the variable: an input of an axis the scene lacks (trolley on the slewing tower
+    """Errors that name the variable: an input of an axis the scene lacks (a luffing boom on the tower
     crane), an axis the plant lacks in cosimulate_crane, <axis>.input out of [0, 1], and a trolley speed
     that would run the trolley off its rail (joint.range)."""
     _host()
@@ -208,12 +208,12 @@ def bad_inputs(tower_fmu, trolley_fmu, drive_fmu):
     out = {}
     with SlaveHandle.open(tower_fmu, "tower") as h:
         try:
-            h.set("travel.speed", 0.1)
+            h.set("luff.speed", 0.1)
             out["missing"] = None
         except KeyError as e:
             out["missing"] = str(e)
     try:
-        cosimulate_crane(tower_fmu, drive_fmu, t_end=0.01, axis="travel")
+        cosimulate_crane(tower_fmu, drive_fmu, t_end=0.01, axis="luff")
         out["axis"] = None
     except ValueError as e:
         out["axis"] = str(e)
@@ -229,3 +229,77 @@ def bad_inputs(tower_fmu, trolley_fmu, drive_fmu):
         out["range_log"] = [m.message for m in h.messages]
         out["travel"] = h.get("trolley.travel")
     return out
+
+
+def all_speeds(plant_fmu):
+    """The tower crane FMU driven by speed inputs alone (hoist.input = slew.input = travel.input = 1):
+    the angles and the travel against the trapezoidal integrals of the inputs, and get/set/serialize
+    state (rewind and a new instance from the serialized state re-step bit-identically)."""
+    _host()
+    from reeve_fmu.fmu.runner import SlaveHandle
+
+    names = ("hoist.speed", "slew.speed", "travel.speed")
+    outs = ["motor.angle", "jib.angle", "trolley.travel", "payload.position.z", "payload.swing_tangential",
+            "hoist.torque", "jib.joint_torque", "trolley.joint_force"]
+    modes = {"hoist.input": 1, "slew.input": 1, "travel.input": 1}
+
+    def speeds(k):
+        return dict(zip(names, (2.0 * math.sin(k / 40.0), 0.02 * math.sin(k / 90.0), 0.3 * math.sin(k / 60.0))))
+
+    def run(h, k0, n):
+        rows = []
+        for k in range(k0, k0 + n):
+            h.set_many(speeds(k + 1))
+            assert h.do_step(k * 5e-3, 5e-3) == 0
+            rows.append(h.get_many(outs))
+        return rows
+    with SlaveHandle.open(plant_fmu, "crane") as h:
+        h.setup(0.0, start_values=modes)
+        first = run(h, 0, 200)
+        s = h.get_state()
+        blob = h.serialize_state(s)
+        a = run(h, 200, 60)
+        h.set_state(s)
+        b = run(h, 200, 60)
+        errors = [str(m) for m in h.errors(2)]
+    with SlaveHandle.open(plant_fmu, "crane2") as h2:
+        h2.setup(0.0, start_values=modes)
+        h2.set_state(h2.deserialize_state(blob))
+        c = run(h2, 200, 60)
+    integral = [[0.0, 0.0, 0.0]]
+    for k in range(1, 201):
+        prev, now = speeds(k - 1) if k > 1 else dict.fromkeys(names, 0.0), speeds(k)
+        integral.append([x + 0.5 * (prev[n] + now[n]) * 5e-3 for x, n in zip(integral[-1], names)])
+    return {"first": first, "integral": integral[1:], "a": a, "b": b, "c": c, "errors": errors}
+
+
+def all_axes_cycle(plant_fmu, scene):
+    """cosim/crane_cycle.py's all-axes cycle (reeve_fmu.fmu.crane.speed_cycle, cosimulate_speeds): hoist,
+    slew and trolley travel together, lower, by the plant's speed inputs; the payload's path, the place
+    position (the start moved along the rail by the travel and turned by the slew) and the axes' ends."""
+    _host()
+    import numpy as np
+
+    from reeve_fmu.components.craneplant import _rotation
+    from reeve_fmu.core.scene import load_scene
+    from reeve_fmu.fmu.crane import cosimulate_speeds, pendulum_length, speed_cycle
+
+    path = os.path.join(REPO, "scenes", f"{scene}.toml")
+    sc = load_scene(path)
+    L = pendulum_length(sc)
+    speeds, t_end = speed_cycle(sc, length=L)
+    rec = ("payload.position.x", "payload.position.y", "payload.position.z", "payload.swing_radial",
+           "payload.swing_tangential", "jib.angle", "trolley.travel", "motor.angle")
+    res = cosimulate_speeds(plant_fmu, speeds, t_end=t_end, record=rec)
+    pos = np.array([res[f"payload.position.{c}"] for c in "xyz"])
+    jib = next(b for b in sc.bodies if b.name == "jib")
+    tr = next(b for b in sc.bodies if b.name == "trolley")
+    p = np.asarray(jib.pivot)
+    start = pos[:, 0]
+    place = p + _rotation(jib.joint_axis, jib.motion.distance) @ (start + tr.motion.distance * np.asarray(tr.joint_axis) - p)
+    T = 2.0 * math.pi * math.sqrt(max(L - (pos[2, -1] - start[2]), 1.0) / G)
+    last = res.time >= res.time[-1] - T
+    return {"start": start.tolist(), "place": place.tolist(), "end": pos[:, -1].tolist(),
+            "last_period": pos[:, last].tolist(), "jib_end": float(res["jib.angle"][-1]),
+            "travel_end": float(res["trolley.travel"][-1]), "motor_end": float(res["motor.angle"][-1]),
+            "max_swing": float(np.abs(np.array([res["payload.swing_radial"], res["payload.swing_tangential"]])).max())}

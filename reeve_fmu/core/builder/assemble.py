@@ -9,7 +9,7 @@ from ..kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZ
                       CT_WIN, CT_WOUT, Kernel)
 from ..sparse import dense_groups
 from ..traction import equivalent_friction
-from .bodies import rigid_fields
+from .bodies import chain_fields, rigid_fields
 from .coordinates import Arrays
 from .elimination import Drive
 from .outputs import Outputs
@@ -35,6 +35,7 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
     dv = scene.drive
     rope_of_el = [scene.ropes[ir] for (_, _, ir, _) in bs.elements]
     buffers = scene.buffers
+    rigid = {**rigid_fields(scene, bs.body_dofs), **chain_fields(scene, bs.body_dofs, bs.g)}
     K = Kernel(
         nd=bs.nd, nq=len(bs.q_names),
         B_ptr=np.array(arr.ptr, np.int64), B_idx=np.array(arr.idx, np.int64), B_val=np.array(arr.val, float),
@@ -70,8 +71,7 @@ def kernel_arrays(bs: BuildState, arr: Arrays, d: Drive, crp: dict, o: Outputs, 
         crp_el_out=np.array(crp["el_out"], np.int64), crp_R=np.array(crp["R"], float),
         crp_J=np.array(crp["J"], float), crp_kind=np.array(crp["kind"], np.int64),
         mot_crp=int(mot_crp), crp_vreg=CREEP_VREG, crp_tab=np.zeros((0, CT_SIZE)),
-        **_flagged(arr.nl, d.joints, rigid_fields(scene, bs.body_dofs), torsion_fields(bs)), **d.joints,
-        **rigid_fields(scene, bs.body_dofs), **torsion_fields(bs),
+        **_flagged(arr.nl, d.joints, rigid, torsion_fields(bs)), **d.joints, **rigid, **torsion_fields(bs),
     )
     return K._replace(nl_grp=dense_groups(K), crp_tab=creep_table(K))
 
@@ -104,7 +104,7 @@ def _flagged(nl: dict, joints: dict, rigid: dict, torsion: dict) -> dict:
     bodies, bit 4 with torsion spans: the 1D and translating models then read one flag per residual
     and skip all of it."""
     nl = dict(nl)
-    if any(len(joints[k]) for k in ("jp_dof", "jt_dof", "jg_dof")) or len(rigid["rb_q"]):
+    if any(len(joints[k]) for k in ("jp_dof", "jt_dof", "jg_dof")) or len(rigid["rb_q"]) or len(rigid["ch_q"]):
         nl["nl_on"] = int(nl["nl_on"]) | 2
     if len(torsion["tq_el"]):
         nl["nl_on"] = int(nl["nl_on"]) | 4

@@ -61,6 +61,8 @@ def add_body_inertia(bs: BuildState) -> None:
     about the centre of mass (theta) or the joint axis (angle); the rotation vector's mass matrix
     is not constant (core/rigid.rigid_terms)."""
     for b in bs.scene.bodies:
+        if b.parent is not None:
+            continue    # a joint on a moving body: its mass and weight are core/rigid.chain_terms'
         for ax, j in bs.body_dofs[b.name].items():
             if ax in ("theta", "rx", "ry", "rz") and b.angular_damping > 0:
                 bs.springs.append((j, 0.0, b.angular_damping))
@@ -77,6 +79,27 @@ def add_body_inertia(bs: BuildState) -> None:
             bs.F0[j] = bs.F0.get(j, 0.0) + b.mass * bs.g[AXES.index(ax)]
             if b.damping > 0:
                 bs.springs.append((j, 0.0, b.damping))
+
+
+def chain_fields(scene, body_dofs, g) -> dict:
+    """Kernel fields of the bodies on a joint on a moving body (core/rigid.chain_terms): ch_q = (parent's
+    joint coordinate, own joint coordinate); ch_f (rigid.CH_* columns) = kinds (0 revolute, 1
+    prismatic), axes and pivots at the scene's pose, centre of mass, mass, gravity, inertia tensor."""
+    from ..rigid import CH_SIZE
+    ch = [b for b in scene.bodies if b.parent is not None]
+    bodies = {b.name: b for b in scene.bodies}
+    q = np.zeros((len(ch), 2), np.int64)
+    f = np.zeros((len(ch), CH_SIZE))
+    for k, b in enumerate(ch):
+        p = bodies[b.parent]
+        q[k] = [body_dofs[n][ax] for n, ax in ((p.name, _joint_coord(p)), (b.name, _joint_coord(b)))]
+        f[k] = np.r_[p.joint == "prismatic", p.joint_axis, p.pivot, b.joint == "prismatic", b.joint_axis,
+                     b.pivot, b.position, b.mass, g, np.asarray(b.inertia, float).ravel()]
+    return dict(ch_q=q, ch_f=f)
+
+
+def _joint_coord(b) -> str:
+    return "angle" if b.joint == "revolute" else "travel"
 
 
 def rigid_fields(scene, body_dofs) -> dict:

@@ -12,7 +12,9 @@ from ..profiles import Profile, scurve, speed_table
 from ..scene import Scene, SceneError
 from .state import BuildState
 
-DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3}
+# speed-input: the Plant's hoist speed input (components/plant.py); the driven coordinate is held like a
+# speed-input joint (a State's jp_prof row the Plant writes each step)
+DRIVE_CODES = {"none": 0, "speed": 1, "torque": 2, "external": 3, "speed-input": 4}
 
 
 @dataclass
@@ -52,16 +54,19 @@ def drive_setup(bs: BuildState) -> Drive:
                 d.profile = speed_table(dv.table)
         elif dv.kind == "torque":
             d.torque_table = np.array(dv.torque, float).T.copy()
-    d.joints = joint_tables(bs.scene, bs.body_dofs, bs.g, bs.springs)
+    held = [(d.dof, bs.q0[d.dof])] if dv.kind == "speed-input" else []
+    d.joints = joint_tables(bs.scene, bs.body_dofs, bs.g, bs.springs, held)
     d.free = [j for j in range(len(bs.q_names)) if j not in d.presc and j not in d.joints["jp_dof"]]
     return d
 
 
-def joint_tables(scene, body_dofs, g, springs):
+def joint_tables(scene, body_dofs, g, springs, held=()):
     """Kernel arrays of the joints: S-curve profiles of prescribed joints (jp_*), torque tables
     (jt_*), the gravity moment of revolute bodies A cos(angle) + B sin(angle) (jg_*). Joint damping
-    is appended to springs."""
-    jp, jt, jg = [], [], []
+    is appended to springs. held: (coordinate, value) pairs held at rest like a speed-input joint (the
+    hoist speed input's drum)."""
+    jp = [(j, np.array([[0.0, 1e300], [x0] * 2, [0.0] * 2, [0.0] * 2, [0.0] * 2])) for j, x0 in held]
+    jt, jg = [], []
     for b in scene.bodies:
         if b.joint is None:
             continue
@@ -77,7 +82,7 @@ def joint_tables(scene, body_dofs, g, springs):
             jt.append((j, np.array(mo.torque, float).T))
         elif mo.kind == "torque-input":  # a constant table the Plant overwrites each step
             jt.append((j, np.zeros((2, 1))))
-        if b.joint == "revolute":
+        if b.joint == "revolute" and b.parent is None:   # on a moving body: rigid.chain_terms
             # potential -m g . R(angle) d0 of the centre of mass, d0 from the pivot (Rodrigues)
             a, d0 = np.asarray(b.joint_axis), np.asarray(b.position) - np.asarray(b.pivot)
             A = b.mass * (g @ np.cross(a, d0))

@@ -13,8 +13,13 @@ from ..bodies import ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef, geometry, row
 def body_frame(b):
     """(kind, axis, reference point at t = 0, coordinate -> slot) of a scene body for rows_eval:
     planar theta turns about -y through the centre of mass; a revolute joint turns about its axis
-    through its pivot; a prismatic joint (kind 1) slides along its axis."""
+    through its pivot; a prismatic joint (kind 1) slides along its axis; a joint on a moving body is kind
+    3 (bodies._chain_point; its parent in slot 7 of nl_bq)."""
     joint = getattr(b, "joint", None)
+    if joint is not None and getattr(b, "parent", None) is not None:
+        rev = joint == "revolute"
+        return (3, np.asarray(b.joint_axis, float), np.asarray(b.pivot if rev else b.position, float),
+                {"angle": 3} if rev else {"travel": 0})
     if joint == "revolute":
         return 0, np.asarray(b.joint_axis, float), np.asarray(b.pivot, float), {"angle": 3}
     if joint == "prismatic":
@@ -51,6 +56,9 @@ class NonlinearRows:
     def _body(self, name):
         if name is None or name == "ground":
             return -1
+        parent = getattr(next(b for b in self.scene.bodies if b.name == name), "parent", None)
+        if parent is not None:
+            self._body(parent)          # a joint on a moving body: its parent is a kernel body too
         if name not in self.bodies:
             self.bodies[name] = len(self.bodies)
         return self.bodies[name]
@@ -101,14 +109,17 @@ class NonlinearRows:
     def _cols(self):
         """q indices of every registered body coordinate and the body tables of rows_eval."""
         nb = len(self.bodies)
-        bq, b0 = -np.ones((nb, 7), np.int64), np.zeros((nb, 4))
+        bq, b0 = -np.ones((nb, 8), np.int64), np.zeros((nb, 4))
         bk, bax = np.zeros(nb, np.int64), np.zeros((nb, 3))
+        parents = {b.name: getattr(b, "parent", None) for b in self.scene.bodies}
         for name, ib in self.bodies.items():
             kind, axis, ref, slots = self.frames[name]
             bk[ib], bax[ib], b0[ib, :3] = kind, axis, ref
             for ax, j in self.body_dofs[name].items():
                 bq[ib, slots[ax]] = j
-        cols = sorted({int(j) for j in bq.ravel() if j >= 0})
+            if parents[name] is not None:
+                bq[ib, 7] = self.bodies[parents[name]]
+        cols = sorted({int(j) for j in bq[:, :7].ravel() if j >= 0})
         return bq, b0, bk, bax, cols
 
     def finalize(self, nd, row_of, q0, B, c0, el_idx, el_map, el_coef):
@@ -122,8 +133,11 @@ class NonlinearRows:
         rf = np.array([[s[4], s[5], s[6], s[7]] + (list(s[9]) + [s[10]] if len(s) > 9 else [0.0] * 4)
                        for s in specs], float).reshape(nr, 8)
         col_k = {j: k for k, j in enumerate(cols)}
-        colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib]) for j in cols], np.int64)
-        body_cols = {ib: [col_k[int(j)] for j in bq[ib] if j >= 0] for ib in range(len(self.bodies))}
+        colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib, :7]) for j in cols], np.int64)
+        body_cols = {ib: [col_k[int(j)] for j in bq[ib, :7] if j >= 0] for ib in range(len(self.bodies))}
+        for ib in range(len(self.bodies)):
+            if bk[ib] == 3:             # a body on a moving body moves with its parent's coordinate too
+                body_cols[ib] = body_cols[ib] + body_cols[int(bq[ib, 7])]
 
         def span_cols(k):
             out = []

@@ -37,7 +37,13 @@ def _end_frame(bs: BuildState, stop, t):
 def add_torsion(bs: BuildState) -> None:
     """Twist coordinates and the span table of every torsion rope (after add_rope: its elements)."""
     bs.torsion = []
+    chained = {b.name for b in bs.scene.bodies if b.parent is not None}
     for ir, rope in enumerate(bs.scene.ropes):
+        on = sorted({bs.sheaves[st.sheave].body if st.sheave is not None else st.anchor
+                     for st in rope.route} & chained)
+        if rope.torsion is not None and on:
+            raise SceneError(f"{bs.scene.source}: [ropes[{ir}].torsion] a rope with torsion over a body on a joint "
+                             f"on a moving body ({', '.join(on)}) is not available")
         if rope.torsion is None:
             continue
         _add_rope_torsion(bs, ir, rope)
