@@ -135,6 +135,45 @@ def _write_stopped(out: Path, case, exc, output_dt) -> None:
           f"up to then -> {out}/results.csv, results.png, summary.json", file=sys.stderr)
 
 
+def _start_sis_run(case, step):
+    """The trip with the shaft information system, run in process by a fresh interpreter on the other
+    core (studies.trip.run_case): (pool, future), or (None, None) where no process can be started
+    (then it runs here, after the co-simulation)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .studies.trip import run_case
+    try:
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        return pool, pool.submit(run_case, case, step=step, sis=True)
+    except (OSError, RuntimeError):
+        return None, None
+
+
+def _stop_sis_run(sis_run) -> None:
+    """The co-simulation failed: the levelling run is not needed; do not wait for it at exit."""
+    pool = sis_run[0] if sis_run else None
+    if pool is not None:
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _sis_result(sis_run, case, step):
+    from concurrent.futures.process import BrokenProcessPool
+
+    from .studies.trip import run_case
+    pool, future = sis_run
+    if future is not None:
+        try:
+            return future.result()
+        except (BrokenProcessPool, OSError):
+            pass                        # the second process died (memory, a signal): run it here
+        finally:
+            pool.shutdown(wait=True)
+    return run_case(case, step=step, sis=True)
+
+
 def cli_demo(args) -> int:
     from .components.drive import SIS_PARAMETERS, trip_end_time
     from .fmu import cosim
@@ -173,6 +212,8 @@ def cli_demo(args) -> int:
           + " / ".join(f"{p:.1f}" for p in pre) + " N·m from the plant's holding torque; drive sized: "
           f"torque.max {drive_values['torque.max']:.0f} N·m, torque.power_max "
           f"{drive_values['torque.power_max'] / 1e3:.1f} kW)")
+    # the levelling comparison's in-process trip runs in a second process while the FMUs co-simulate
+    sis_run = _start_sis_run(case, step) if getattr(args, "levelling", "both") != "encoder" else None
     print("instantiating the FMUs")
     bar = progress = None
     if not getattr(args, "no_progress", False):
@@ -187,8 +228,9 @@ def cli_demo(args) -> int:
     try:
         res = cosim.cosimulate(plant_fmu, drive_fmu, step=step, t_end=t_end, plant_values=case.plant_values,
                                drive_values=drive_values, progress=progress)
-    except CosimError as exc:
-        if exc.result is not None:     # keep what was computed up to the failed step, then exit 3
+    except BaseException as exc:
+        _stop_sis_run(sis_run)
+        if isinstance(exc, CosimError) and exc.result is not None:   # keep what was computed, exit 3
             _write_stopped(out, case, exc, output_dt)
         raise
     finally:
@@ -199,8 +241,8 @@ def cli_demo(args) -> int:
     verdicts = list(summary.pop("verdicts"))
     sis = None
     lev_rows = None
-    if getattr(args, "levelling", "both") != "encoder":
-        rs = run_case(case, step=step, sis=True)
+    if sis_run is not None:
+        rs = _sis_result(sis_run, case, step)
         ss = summarize_case(case, rs.time, rs.columns, rs.info)
         sis = (rs.time, rs.columns)
         verdicts[2:2] = [v.as_dict() for v in levelling_verdicts(ss["stopping_error_mm"], " (with SIS)")]

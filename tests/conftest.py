@@ -118,6 +118,13 @@ SLOW_FILES = frozenset({
     "tests/fmu/test_fmu_machinery.py", "tests/fmu/test_fmu_portable.py", "tests/fmu/test_plant_fmu.py",
     "tests/hil/test_hil.py", "tests/hil/test_hil_network.py",
     "tests/studies/test_lagrangian.py", "tests/studies/test_physical_fuzz.py",
+    "tests/fmu/test_fmu_init_errors.py",
+})
+# single tests that take most of what is left of a warm quick run: the dense Newton matrix of a
+# 16-element cubic elevator by differences, a Dask cluster started for one sweep
+SLOW_TESTS = frozenset({
+    "tests/core/test_sparse.py::test_sparse_path_equals_dense_path[elevator_planar_cubic_16el]",
+    "tests/studies/test_studies.py::test_sweep_on_a_local_cluster_records_failed_runs",
 })
 
 
@@ -125,7 +132,7 @@ SLOW_FILES = frozenset({
 def pytest_collection_modifyitems(session, config, items):
     _COLLECTED.update(item.nodeid for item in items)
     for item in items:
-        if item.nodeid.split("::")[0] in SLOW_FILES:
+        if item.nodeid.split("::")[0] in SLOW_FILES or item.nodeid in SLOW_TESTS:
             item.add_marker(pytest.mark.slow)
 
 
@@ -137,7 +144,7 @@ class _XdistRecords:
 
 
 def pytest_configure(config):
-    config.addinivalue_line("markers", "slow: outside the quick tier (-m 'not slow'; tests/conftest.py SLOW_FILES)")
+    config.addinivalue_line("markers", "slow: outside the quick tier (-m 'not slow'; tests/conftest.py SLOW_FILES, SLOW_TESTS)")
     if config.pluginmanager.hasplugin("xdist") and _is_controller(config):
         config.pluginmanager.register(_XdistRecords(), "reeve-tolerances")
 

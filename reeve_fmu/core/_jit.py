@@ -188,6 +188,9 @@ CPU_TARGET = None  # the CPU numba compiles for: "generic" (portable caches), or
 
 if _numba is not None:
     CPU_TARGET = _generic_target()
+    if os.environ.get("REEVE_FMU_KEEP_CHUNKS", "1") != "0":
+        from ._stackchunks import during_compiles   # a quarter less CPU per cold compile (see there)
+        during_compiles()
     if os.environ.get("REEVE_FMU_RECORD_KERNELS"):
         _record_index_reads(os.environ["REEVE_FMU_RECORD_KERNELS"])
 
