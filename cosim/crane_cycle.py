@@ -135,7 +135,8 @@ def all_axes(a, plant) -> int:
     return 0
 
 
-def plot_all_axes(res, axes, png, scene):
+def _swing_figure(res):
+    """Three stacked panels, the payload's swing angles in the first: (figure, axes, time)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -147,6 +148,11 @@ def plot_all_axes(res, axes, png, scene):
     ax[0].plot(t, np.degrees(res["payload.swing_tangential"]), label="tangential (slew direction)")
     ax[0].set_ylabel("payload swing [deg]")
     ax[0].legend(loc="best")
+    return fig, ax, t
+
+
+def plot_all_axes(res, axes, png, scene):
+    fig, ax, t = _swing_figure(res)
     for a in axes:
         ax[1].plot(t, res[f"{a['name']}.speed"], label=f"{a['name']}.speed [{'rad/s' if a['joint'] == 'revolute' else 'm/s'}]")
     ax[1].plot(t, res["hoist.speed"] / 10.0, label="hoist.speed / 10 [rad/s]")
@@ -167,17 +173,9 @@ def plot_all_axes(res, axes, png, scene):
 
 
 def plot(res, png, slew_input, scene):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
 
-    t = res.time
-    fig, ax = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    ax[0].plot(t, np.degrees(res["payload.swing_radial"]), label="radial (outwards)")
-    ax[0].plot(t, np.degrees(res["payload.swing_tangential"]), label="tangential (slew direction)")
-    ax[0].set_ylabel("payload swing [deg]")
-    ax[0].legend(loc="best")
+    fig, ax, t = _swing_figure(res)
     ax[1].plot(t, res["axis.speed"], label="axis speed")
     ax[1].plot(t, res[f"slew.{slew_input}"] if slew_input == "speed" else res["axis.speed"] * np.nan,
                "--", label="axis speed command")
