@@ -16,7 +16,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import parse_scene
-from reeve_fmu.core.solver import Simulator
+from reeve_fmu.core.solver import Simulator, SolverError
 from reeve_fmu.studies.verdicts import scene_verdicts
 from tests.support.checks import check
 
@@ -175,3 +175,39 @@ def test_crane_hook_let_go_on_a_slack_rope(tonly):
         assert slack.status == "WARN" and "hoist.tension_start 0.000-0.3" in slack.note, slack.line()
         assert vs["snap load after slack (hoist)"].status == "PASS"
         assert not [v.line() for v in vs.values() if v.status == "FAIL"]
+
+
+STRUT = '''
+[scene]
+name = "strut"
+model = "axial-1d"
+[initial]
+statics = "rope-length"
+[[bodies]]
+name = "mass"
+mass = 10.0
+position = [0.0, 0.0, 1.0]
+free = ["z"]
+[[ropes]]
+name = "rope"
+EA = 1e6
+rhoA = 0.01
+length = 1.0
+route = [ { anchor = "ground", at = [0.0, 0.0, 0.0] }, { anchor = "mass", at = [0.0, 0.0, 0.0] } ]
+'''
+
+
+def test_a_rope_that_would_have_to_push_in_the_statics_is_an_error():
+    """A mass resting on a rope below it: only a strut holds it. The default (tension-only) rope's
+    initial statics stops with an error naming the rope and span; a bilateral rope holds the mass
+    as a strut and reports that push as a negative force, its axial force EA eps = -(m g + rhoA L g / 2)
+    (the element's mean: the mass on top, half the rope's weight)."""
+    sc = parse_scene(tomllib.loads(STRUT), "strut.toml")
+    with pytest.raises(SolverError) as exc:
+        Simulator(build_model(sc)).initial_state()
+    assert "rope 'rope' span 0 would be in compression" in str(exc.value), str(exc.value)
+    sc = parse_scene(tomllib.loads(STRUT.replace("length = 1.0", "length = 1.0\ntension_only = false")), "strut.toml")
+    sim = Simulator(build_model(sc))
+    y = dict(zip(sim.model.output_names, sim.outputs(sim.initial_state())))
+    check("strut force / -(m g + rhoA L g / 2) - 1", y["rope.tension_end"] / -(10.0 * G + 0.005 * G) - 1.0, 5e-12,
+          reason="the statics converge to round-off")
