@@ -9,7 +9,7 @@ zero-length wraps (docs/theory.md §2.3, §6 item 5).
     mass            closed form, exact material mass rhoA*l
     Q_v             dT/dq - dM/dt qdot, material part + boundary part B_e
     gravity         potential form V = -rhoA l g.(r1+r2)/2  (+ rhoA l C for 1D lines off the origin)
-    elastic         engineering strain eps = lambda - 1, N = EA eps, optional tension-only
+    elastic         engineering strain eps = lambda - 1, N = EA eps; tension-only (default) or bilateral
     damping         Kelvin-Voigt N_d = EA nu deps/dt from a Rayleigh function (no boundary terms)
 """
 from __future__ import annotations
