@@ -126,7 +126,7 @@ STATICS_RESIDUAL = {
     "elevator_2to1.toml": 3e-7,
     "emergency_stop.toml": 1e-4,              # 64 elements per span
     "hanging_rope.toml": 4e-12,
-    "slack_hard_stop.toml": 2.5e-7,
+    "slack_hard_stop.toml": 2.4e-7,
     "traction_en81.toml": 1.2e-11,
     "vanishing_span.toml": 3e-7,
 }
