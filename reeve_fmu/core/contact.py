@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from ._jit import gated, njit
-from .elements.linear import SLACK_STRAIN, chord
+from .elements.linear import SLACK_STRAIN, chord, smooth_positive
 from .kernel import (CR_ANGLE, CR_KAPPA_MID, CR_RATE, CR_SIGMA, CR_WOUND, CT_EA, CT_IN, CT_IR, CT_OUT, CT_S,
                      CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, CUBIC, INFO_CREEP, MULTI_D, UE_BRAKE_E, UE_BRAKE_Z,
                      UE_CREEP, UE_MOTOR_Q, UE_SLIP, UE_STRIDE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z)
@@ -35,14 +35,12 @@ def _elastoplastic(z, zmax):
 
 @njit(cache=True, inline="always")
 def _carried_strain(tonly, e, ed):
-    """A linear element's strain e (rate ed) as its tension carries it: e itself, or for a
-    tension-only rope (tonly != 0) the smoothed positive part of axial_law."""
+    """A rope element's strain e (rate ed) as its tension carries it: e itself, or for a
+    tension-only rope (tonly != 0) its positive part N/EA of axial_law (e itself where taut)."""
     if tonly == 0:
         return e, ed
-    d = SLACK_STRAIN
-    r = math.sqrt(e * e + d * d)
-    sp = e + r if e >= 0.0 else d * d / (r - e)
-    return 0.5 * sp, 0.5 * (1.0 + e / r) * ed
+    p, s = smooth_positive(e, SLACK_STRAIN)
+    return p, s * ed
 
 
 # The groove strain: the strain of the rope of an element where it meets a sheave, as it lies on the
@@ -51,8 +49,8 @@ def _carried_strain(tonly, e, ed):
 # the rope is strained rhoA (g.t) l / (2 EA) more and at its end as much less: exact for a rope at rest
 # on any mesh, and what the creep kinematics need where a long heavy span meets the groove. w is that
 # coefficient at the end, +-rhoA g / (2 EA) (kernel.CT_WIN / CT_WOUT). A cubic element's strain is
-# |d| - 1 at its node. For a tension-only rope: the strain its tension carries (linear: the smoothed
-# positive part of axial_law; cubic: max(eps, 0)); a slack rope arrives on the groove unstrained, its
+# |d| - 1 at its node. For a tension-only rope: the strain its tension carries (the positive part of
+# axial_law); a slack rope arrives on the groove unstrained, its
 # chord strain (negative while the span sags or piles up) is no strain of the rope.
 # They read the creep table and the element arrays, not kernel fields, and compute on scalars: numba
 # keeps reference-count calls (atomic) for every kernel field a compiled function reads and at the
@@ -87,10 +85,7 @@ def groove_strain_linear(d0, d1, d2, v0, v1, v2, l, ld, w0, w1, w2, tonly):
 def groove_strain_cubic(d0, d1, d2, v0, v1, v2, tonly):
     """Groove strain and rate of a cubic element at its node: slope d (d2 = 0 in 2D), its rate v."""
     n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-    e = n - 1.0
-    if tonly != 0 and not e > 0.0:
-        return 0.0, 0.0
-    return e, (d0 * v0 + d1 * v1 + d2 * v2) / n
+    return _carried_strain(tonly, n - 1.0, (d0 * v0 + d1 * v1 + d2 * v2) / n)
 
 
 _groove_cubic = gated(CUBIC, groove_strain_cubic, lambda d0, d1, d2, v0, v1, v2, tonly: (0.0, 0.0), inline=True)

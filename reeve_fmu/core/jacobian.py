@@ -33,7 +33,7 @@ from ._jit import njit
 from .contact import creep_kappa, creep_terms, creep_wound, static_end_tension
 from .elements.cubic import cubic_element_at, cubic_mass, cubic_qv
 from .elements.cubic_jac import cubic_stiffness, gravity_jac
-from .elements.linear import SLACK_STRAIN, chord, linear_element_at, slack_law
+from .elements.linear import axial_law_d, chord, linear_element_at
 from .elements.linear_jac import linear_inertia
 from .kernel import UE_BRAKE_E, UE_BRAKE_Z, UE_CREEP, UE_MOTOR_Q, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z
 from .sparse import bordered_factor, residual_sparse
@@ -41,22 +41,6 @@ from .system import element_eval, q_terms
 
 FD_STEP = 1e-7     # coordinate step of the element-local differences, x (1 + |q|)
 QL_STEP = 1e-9     # and of the q-level ones (the friction laws saturate within ~1e-5 m)
-
-
-@njit(cache=True, inline="always")
-def axial_law_d(EA, nu, eps, epsdot, tonly):
-    """elements/linear.axial_law and its derivatives:
-    (N, w, N_d, dN/deps, dN_d/deps, dN_d/depsdot)."""
-    if not tonly:
-        return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
-    N, w, taut, r, f, dF = slack_law(EA, nu, eps, epsdot)
-    d = SLACK_STRAIN
-    dtaut = 0.5 * d * d / (r * r * r)
-    sq = math.sqrt(f * f + dF * dF)
-    F = 0.5 * (f + sq)
-    g = 0.5 * (1.0 + f / sq) if sq > 0.0 else 0.5      # dF/df
-    dN = EA * taut
-    return N, w, F - N, dN, g * (dN + EA * nu * epsdot * dtaut) - dN, g * EA * nu * taut
 
 
 @njit(cache=True, inline="always")

@@ -102,7 +102,7 @@ class Rope:
     route: tuple                     # RouteStop ...
     count: int = 1                   # parallel ropes
     damping: float = 0.0             # s, Kelvin-Voigt time constant nu: N = EA (eps + nu deps/dt)
-    tension_only: bool = False
+    tension_only: bool = True        # a wire rope cannot push; False: bilateral (N = EA eps < 0 too)
     length: float | None = None      # m, unstretched length (needed for statics = "rope-length")
     elements_per_span: int = 1
     wrap_model: str = "W1"           # W0: zero-length wraps, W1: constant-material wraps, W2: cubic wrap elements
@@ -680,7 +680,7 @@ def _parse_ropes(r: _Reader, data, names, model, statics, body_names, sheave_nam
                           rhoA=r.number(rp, path, "rhoA", positive=True, required=True),
                           route=tuple(stops), count=r.integer(rp, path, "count", 1),
                           damping=r.number(rp, path, "damping", 0.0, nonneg=True),
-                          tension_only=r.boolean(rp, path, "tension_only", False), length=length,
+                          tension_only=r.boolean(rp, path, "tension_only", True), length=length,
                           elements_per_span=r.integer(rp, path, "elements_per_span", 1),
                           wrap_model=r.string(rp, path, "wrap_model", "W1", ("W0", "W1", "W2")),
                           wrap_elements=r.integer(rp, path, "wrap_elements", 2),

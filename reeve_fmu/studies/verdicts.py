@@ -111,7 +111,7 @@ def _slack_verdict(t, c, tens) -> Verdict:
         k = int(np.argmin(c[name]))
         return Verdict("slack rope (minimum rope force)", FAIL, low, 0.0, "N", src,
                        f"compressed at {name}, t = {float(np.asarray(t)[k]):.3f} s: the rope model pushed "
-                       "(a bilateral rope; tension_only = true lets it go slack)")
+                       "(a bilateral rope, tension_only = false; the default tension-only rope goes slack)")
     if low > 0.0:
         return Verdict("slack rope (minimum rope force)", PASS, low, 0.0, "N", src, f"at {name}")
     parts = []
@@ -422,7 +422,7 @@ def ride_verdicts(s) -> list:
 
 def _compression(t, c):
     """(force, column, time) of the most compressed rope of a record, None when no rope force is below
-    zero. The ropes are bilateral unless tension_only: a negative force is a state no rope reaches."""
+    zero. Only a bilateral rope (tension_only = false) reports one: a state no wire rope reaches."""
     low = None
     for n in _tension_columns(c):
         x = np.asarray(c[n], float)

@@ -340,3 +340,53 @@ def test_taut_span_transverse_frequency(nd):
     # rhoA per unstretched length: the stretched span carries rhoA/(1 + eps0) per metre
     check('f1 - (math.sqrt(T * (1 + eps0) / rhoA) / (2 * Ls))', f1 - (math.sqrt(T * (1 + eps0) / rhoA) / (2 * Ls)), 3e-5 * np.max(np.abs((math.sqrt(T * (1 + eps0) / rhoA) / (2 * Ls)))))
     assert f[trans[0]] < f[[i for i in range(len(f)) if i not in trans][0]]   # below the first axial mode
+
+
+@pytest.mark.parametrize("nd", [2, 3])
+def test_tension_only_band_stiffness_and_damping_jacobian(nd):
+    """A straight cubic element strained within the tension-only law's band (|eps| < SLACK_STRAIN) and
+    moving so that the damping is clipped at some Gauss points: cubic_jac.cubic_stiffness (elastic,
+    bending, Kelvin-Voigt: -dQ/dq, -dQ/dv) against central differences of the element's force with rhoA
+    = 0, and the element is the bilateral one bit for bit once stretched beyond the band."""
+    from reeve_fmu.core.elements.cubic_jac import cubic_stiffness
+    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d
+    EA, EI, nu, l = 3.0e6, 2.5, 1e-2, 1.3
+    ne = 4 * nd + 2
+    rng = np.random.default_rng(40 + nd)
+    t = rng.normal(size=nd)
+    t /= np.linalg.norm(t)
+    n = np.zeros(nd)
+    n[0], n[1] = -t[1], t[0]
+    n /= np.linalg.norm(n)
+
+    def force(q, v, tonly=True):
+        return element(nd, q, v, EA=EA, EI=EI, nu=nu, tonly=tonly)[1]
+    worst = {"q": 0.0, "v": 0.0}
+    for e0 in (-0.6 * d, 0.2 * d, 0.7 * d):
+        st = 1.0 + e0          # uniform stretch, a small bend (curvature) through the slopes
+        qe = np.concatenate([np.zeros(nd), st * t + 1e-7 * n, [0.0], st * l * t, st * t - 1e-7 * n, [l]])
+        ve = np.zeros(ne)
+        ve[nd:2 * nd] = 3e-5 * t       # the slope at node 1 shortens, at node 2 lengthens the rope
+        ve[3 * nd + 1:4 * nd + 1] = -3e-5 * t
+        ve[2 * nd] = 0.1               # and the rope runs through
+        ve[4 * nd + 1] = 0.1
+        for part, bq, gv in (("q", 1.0, 0.0), ("v", 0.0, 1.0)):
+            JE = np.zeros((ne, ne))
+            cubic_stiffness(nd, EA, EI, nu, True, qe, ve, bq, gv, JE, np.zeros((2 * nd, ne)), np.zeros((2 * nd, 2 * nd)),
+                            np.zeros((ne, ne)), np.zeros((ne, ne)), np.zeros((9, ne)))
+            # q: Richardson-extrapolated central differences (the law bends within d); v: central
+            h = 1e-3 * d if part == "q" else 1e-8
+
+            def diff(b, hb):
+                dq = np.zeros(ne)
+                dq[b] = hb
+                if part == "q":
+                    return -(force(qe + dq, ve) - force(qe - dq, ve)) / (2 * hb)
+                return -(force(qe, ve + dq) - force(qe, ve - dq)) / (2 * hb)
+            ref = np.array([(4.0 * diff(b, 0.5 * h) - diff(b, h)) / 3.0 for b in range(ne)]).T
+            worst[part] = max(worst[part], np.max(np.abs(JE - ref)) / np.max(np.abs(ref)))
+    check("band: -dQ/dq against differences / max", worst["q"], 1e-6, reason=SPREAD)
+    check("band: -dQ/dv against differences / max", worst["v"], 1e-8, reason=SPREAD)
+    qe = np.concatenate([np.zeros(nd), 1.01 * t, [0.0], 1.01 * l * t, 1.01 * t, [l]])
+    ve = np.zeros(ne)
+    assert np.array_equal(force(qe, ve), force(qe, ve, tonly=False))

@@ -52,6 +52,7 @@ free = ["x", "z"]
 name = "rope"
 EA = 2.0e5
 rhoA = 0.5
+tension_only = false      # from the unstretched line its strain swings back to 0 (no slack law here)
 EI = 2.0
 element = "cubic"
 elements_per_span = 4

@@ -118,16 +118,15 @@ def test_every_single_key_mutation_is_handled():
 
 
 # bound of max |acceleration| (m/s^2) at the start of each shipped scene (the run records the residual
-# and fails a bound more than 10x above it, tests/support/checks.py). Tension-only ropes
-# (buffer_impact, slack_hard_stop) start near, not at, equilibrium: the statics is solved with the
-# bilateral law, and the smoothed tension-only law differs from it by ~EA delta.
+# and fails a bound more than 10x above it, tests/support/checks.py). The statics is solved with the
+# bilateral law, which the (default) tension-only law is exactly on a taut rope.
 STATICS_RESIDUAL = {
-    "buffer_impact.toml": 2e-2,
+    "buffer_impact.toml": 4e-8,
     "elevator_1to1_highrise.toml": 1.5e-8,
     "elevator_2to1.toml": 3e-7,
     "emergency_stop.toml": 1e-4,              # 64 elements per span
     "hanging_rope.toml": 4e-12,
-    "slack_hard_stop.toml": 6e-2,
+    "slack_hard_stop.toml": 2.4e-7,
     "traction_en81.toml": 1.2e-11,
     "vanishing_span.toml": 3e-7,
 }

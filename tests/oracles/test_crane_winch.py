@@ -213,7 +213,8 @@ def test_winch_spin_turns_its_body():
     m = build_model(parse_scene(tomllib.loads(SPIN), "spin.toml"))
     res = Simulator(m).run(2.0, 0.01)
     spin = -res["drum.speed"]                  # relative to the beam, about the drum's axis (cw wrap)
-    check_min("drum spin relative to the beam [rad/s]", np.max(np.abs(spin)), 0.1)
+    # measured 1.11 rad/s: the motor pays the rope out slack and spins up its drum nearly freely
+    check_min("drum spin relative to the beam [rad/s]", np.max(np.abs(spin)), 0.5)
     # measured 3.0e-6 of J x the largest spin (the rope's own momentum, 1e-4 kg/m)
     check("angular momentum / (J spin)", (10.0 * res["beam.angular_velocity"] + 1.0 * spin) / np.max(np.abs(spin)),
           2.9e-5)

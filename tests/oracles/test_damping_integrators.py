@@ -25,7 +25,10 @@ G = 9.81
 def _oscillator(nu):
     sc = load_scene(ROOT / "scenes" / "hanging_rope.toml")
     rp = sc.ropes[0]
-    sc = sc.with_overrides(statics="none", ropes=(rp.__class__(**{**rp.__dict__, "damping": nu}),))
+    # bilateral: released from its unstretched length the rope's strain swings back to 0, where a
+    # tension-only rope would go slack and the oscillator not be linear
+    rope = rp.__class__(**{**rp.__dict__, "damping": nu, "tension_only": False})
+    sc = sc.with_overrides(statics="none", ropes=(rope,))
     m_end = sc.bodies[0].mass
     L, EA, rhoA = 50.0, rp.EA, rp.rhoA
     M = m_end + rhoA * L / 3                 # consistent mass at the free node

@@ -54,6 +54,7 @@ name = "rope"
 EA = 2e4
 rhoA = 0.6
 elements_per_span = 2
+tension_only = false     # started unstretched: its strain swings back to 0 (the slack law's kink)
 route = [
   {{ anchor = "ground", at = [-0.25, 0.0, 0.5] }},
   {{ sheave = "block_sheave", wrap = "ccw" }},

@@ -177,6 +177,9 @@ def atwood_dict(side: float, wrap_model: str, EA: float | None = None) -> dict:
     for b in d["bodies"]:
         b["position"][2] = -side          # hanging material length on each side = side
     d["ropes"][0]["wrap_model"] = wrap_model
+    # bilateral: the exact laws here are of an elastic (or, EA 1e9 N, rigid: strain 1e-7, inside the
+    # tension-only law's 1e-6 blend band) rope, started unstretched, whose strain comes back to 0
+    d["ropes"][0]["tension_only"] = False
     if EA is not None:
         d["ropes"][0]["EA"] = EA
     return d
@@ -482,6 +485,7 @@ def test_two_to_one_kinematics_rigid_limit():
     the rope's axial vibration alone is of order 1e-3 of 1.6 m/s)."""
     d = scene_dict(SCENES / "elevator_2to1.toml")
     d["ropes"][0]["EA"] *= 1e6
+    d["ropes"][0]["tension_only"] = False    # strains of 1e-9, inside the tension-only law's 1e-6 band
     for stop in d["ropes"][0]["route"]:
         stop.pop("hitch_stiffness", None)
         stop.pop("hitch_damping", None)

@@ -28,7 +28,8 @@ Everything follows from the element's energies written in xi, including their de
     damping      Kelvin-Voigt on the axial strain, Rayleigh function D = 1/2 l int EA nu epsdot^2 dxi
                  with the material strain rate epsdot = t.(d r_s/dt|_xi - w r_ss),
                  w = (1-xi) s1dot + xi s2dot; Q_d = -dD/dqdot (no boundary terms, docs/theory.md §3.3)
-    tension-only optional: w_axial = 0 where eps <= 0 (pointwise)
+    tension-only (the default): the axial force and energy of linear.axial_law at each Gauss point
+                 (N = EA eps where taut, 0 where slack, a C2 blend over |eps| < SLACK_STRAIN)
 
 With s1dot = s2dot = 0 and s fixed the element is the standard gradient-deficient ANCF cable: the
 e-e block of M is the classical cable matrix, Q_v has zero e-rows (tests/core/test_cubic.py).
@@ -45,6 +46,7 @@ import math
 import numpy as np
 
 from .._jit import njit
+from .linear import axial_law
 
 # Gauss-Legendre on [0, 1]
 _G4 = np.polynomial.legendre.leggauss(4)
@@ -332,11 +334,8 @@ def cubic_elastic(nd, EA, EI, nu, tonly, qe, ve, Q):
             tbd += a[k] * (rsd - w * b[k])
         lam = math.sqrt(A)
         eps = lam - 1.0
-        slack = tonly and eps <= 0.0
-        N = 0.0 if slack else EA * eps
-        wv = 0.0 if slack else 0.5 * EA * eps * eps
         epsd = tbd / lam
-        Nd = 0.0 if slack else EA * nu * epsd
+        N, wv, Nd = axial_law(EA, nu, eps, epsd, tonly)
         K = A * B - C * C
         if K < 0.0:
             K = 0.0

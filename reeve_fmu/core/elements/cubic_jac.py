@@ -25,6 +25,7 @@ import numpy as np
 
 from .._jit import njit
 from .cubic import GW5, GX5, _shape
+from .linear import axial_law_d
 
 
 @njit(cache=True, inline="always")
@@ -53,19 +54,20 @@ def gravity_jac(nd, rhoA, g, qe, bq, JE):
 
 
 @njit(cache=True, inline="always")
-def _w_hessian(nd, EA, EI, slack, a, b, A, B, C, lam, N, Hz, gz):
-    """Gradient gz (2 nd) and Hessian Hz (2 nd x 2 nd) of w(a, b) (module doc) in z = (a, b)."""
+def _w_hessian(nd, dN, EI, a, b, A, B, C, lam, N, Hz, gz):
+    """Gradient gz (2 nd) and Hessian Hz (2 nd x 2 nd) of w(a, b) (module doc) in z = (a, b); N and
+    dN the axial force and its slope dN/deps (linear.axial_law_d)."""
     for i in range(2 * nd):
         gz[i] = 0.0
         for j in range(2 * nd):
             Hz[i, j] = 0.0
-    if not slack:
+    if N != 0.0 or dN != 0.0:
         for k in range(nd):
             tk = a[k] / lam
             gz[k] += N * tk
             for m in range(nd):
                 tm = a[m] / lam
-                Hz[k, m] += (EA - N / lam) * tk * tm + (N / lam if k == m else 0.0)
+                Hz[k, m] += (dN - N / lam) * tk * tm + (N / lam if k == m else 0.0)
     if EI != 0.0:
         K = A * B - C * C
         A2 = A * A
@@ -144,13 +146,13 @@ def cubic_stiffness(nd, EA, EI, nu, tonly, qe, ve, bq, gv, JE, Z, Hz, Hy, Dy, V)
             C += a[k] * b[k]
         lam = math.sqrt(A)
         eps = lam - 1.0
-        slack = tonly and eps <= 0.0
-        N = 0.0 if slack else EA * eps
-        _w_hessian(nd, EA, EI, slack, a, b, A, B, C, lam, N, Hz, gz)
+        ed = _strain_rate(nd, s1, s2, off, xi, ve, alp, a, b, al, lam, G) if damp else 0.0
+        N, w, Nd, dN, dNe, dNed = axial_law_d(EA, nu, eps, ed, tonly)
+        _w_hessian(nd, dN, EI, a, b, A, B, C, lam, N, Hz, gz)
         _add_elastic(nd, ne, s2, off, l, W, alp1, bet1, Z, Hz, Hy, gz, all_, bll)
-        if damp and not slack:
-            _add_damping(nd, ne, s1, s2, off, l, xi, W * EA * nu, ve, alp, bet, alp1, a, b, al, bl, all_, lam,
-                         G, V[8], Dy, JE, gv)
+        if damp and (Nd != 0.0 or dNe != 0.0 or dNed != 0.0):
+            _add_damping(nd, ne, s1, s2, off, l, xi, W * dNed, W * Nd, W * dNe, ve, alp, bet, alp1, a, b,
+                         al, bl, all_, lam, G, V[8], Dy, JE, gv)
     for i in range(ne):
         yi, si = (s2, -1.0) if i == s1 else (i, 1.0)
         for j in range(ne):
@@ -194,9 +196,11 @@ def _add_elastic(nd, ne, s2, off, l, W, alp1, bet1, Z, Hz, Hy, gz, all_, bll):
 
 
 @njit(cache=True, inline="always")
-def _add_damping(nd, ne, s1, s2, off, l, xi, c, ve, alp, bet, alp1, a, b, al, bl, all_, lam, G, dE, Dy, JE, gv):
-    """Kelvin-Voigt force -Q_d = l W EA nu epsdot G, epsdot = G.v: adds gv l c G G^T to JE (v part) and
-    the q part to Dy (y-indexed columns). c = W EA nu."""
+def _strain_rate(nd, s1, s2, off, xi, ve, alp, a, b, al, lam, G):
+    """The material strain rate epsdot = G.v at the Gauss point; fills G (module doc)."""
+    ne = G.shape[0]
+    for i in range(ne):
+        G[i] = 0.0
     for k in range(nd):
         tk = a[k] / lam
         for j in range(4):
@@ -212,9 +216,30 @@ def _add_damping(nd, ne, s1, s2, off, l, xi, c, ve, alp, bet, alp1, a, b, al, bl
     ed = 0.0
     for i in range(ne):
         ed += G[i] * ve[i]
+    return ed
+
+
+@njit(cache=True, inline="always")
+def _add_damping(nd, ne, s1, s2, off, l, xi, c, fN, ce, ve, alp, bet, alp1, a, b, al, bl, all_, lam, G, dE,
+                 Dy, JE, gv):
+    """Kelvin-Voigt force -Q_d = l W N_d G (G from _strain_rate, epsdot = G.v): adds gv l c G G^T to JE
+    (v part) and the q part to Dy (y-indexed columns). c = W dN_d/depsdot, fN = W N_d,
+    ce = W dN_d/deps (linear.axial_law_d; bilateral: c = W EA nu, fN = c epsdot, ce = 0)."""
     for i in range(ne):
         for j in range(ne):
             JE[i, j] += gv * l * c * G[i] * G[j]
+    if ce != 0.0:     # N_d through the strain: l ce G (deps/dy), deps/dy = t.da/dy
+        tal = 0.0
+        for k in range(nd):
+            tal += a[k] * al[k] / lam
+        for arow in range(ne):
+            ga = G[arow]
+            if ga == 0.0:
+                continue
+            for k in range(nd):
+                for j in range(4):
+                    Dy[arow, off[j] + k] += l * ce * ga * alp[j] * a[k] / lam
+            Dy[arow, s2] += l * ce * ga * tal
     # dG/dy contracted with v (dE) and times epsdot (epsd DG): rows of DG built one at a time
     # P = I - t t^T; dt/dx_{i,m} = alpha_i P[:, m] / lam, dt/dl = P al / lam
     tal = 0.0
@@ -224,7 +249,7 @@ def _add_damping(nd, ne, s1, s2, off, l, xi, c, ve, alp, bet, alp1, a, b, al, bl
     for i in range(ne):
         dE[i] = 0.0
     for arow in range(ne):
-        _dg_row(nd, s1, s2, off, arow, xi, alp, alp1, bet, a, b, al, bl, all_, lam, tal, c * l * ed, ve[arow],
+        _dg_row(nd, s1, s2, off, arow, xi, alp, alp1, bet, a, b, al, bl, all_, lam, tal, fN * l, ve[arow],
                 Dy, dE)
     for arow in range(ne):
         ga = G[arow]
@@ -232,7 +257,7 @@ def _add_damping(nd, ne, s1, s2, off, l, xi, c, ve, alp, bet, alp1, a, b, al, bl
             continue
         for yc in range(ne):
             Dy[arow, yc] += c * l * dE[yc] * ga
-        Dy[arow, s2] += c * ed * ga
+        Dy[arow, s2] += fN * ga
 
 
 @njit(cache=True, inline="always")

@@ -9,7 +9,7 @@ zero-length wraps (docs/theory.md §2.3, §6 item 5).
     mass            closed form, exact material mass rhoA*l
     Q_v             dT/dq - dM/dt qdot, material part + boundary part B_e
     gravity         potential form V = -rhoA l g.(r1+r2)/2  (+ rhoA l C for 1D lines off the origin)
-    elastic         engineering strain eps = lambda - 1, N = EA eps, optional tension-only
+    elastic         engineering strain eps = lambda - 1, N = EA eps; tension-only (default) or bilateral
     damping         Kelvin-Voigt N_d = EA nu deps/dt from a Rayleigh function (no boundary terms)
 """
 from __future__ import annotations
@@ -22,7 +22,7 @@ from .._jit import njit
 
 
 
-SLACK_STRAIN = 1e-6   # smoothing width of the tension-only law (strain): ~ N per MN of EA when slack
+SLACK_STRAIN = 1e-6   # half-width d of the tension-only law's blend band (strain)
 
 
 @njit(cache=True, inline="always")
@@ -36,35 +36,70 @@ def chord(QE, ie, nd):
 
 
 @njit(cache=True, inline="always")
-def axial_law(EA, nu, eps, epsdot, tonly):
-    """Axial force of a rope section: (N elastic, w energy density, N_d damping part).
-
-    Bilateral: N = EA eps, w = EA eps^2/2, N_d = EA nu deps/dt (exact linear law).
-    Tension-only (slack ropes): the kink of max(., 0) makes Newton cycle between the slack and the
-    taut branch, so it is smoothed over SLACK_STRAIN: N = EA sp(eps), sp(x) = (x + sqrt(x^2+d^2))/2,
-    with the matching energy w = EA [eps^2 + eps sqrt(eps^2+d^2) + d^2 asinh(eps/d)]/4 (conservative);
-    the total force N + N_d (damper active only on a taut rope) is smoothly clipped at zero, a rope
-    cannot push."""
-    if not tonly:
-        return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot
-    N, w, taut, r, f, dF = slack_law(EA, nu, eps, epsdot)
-    F = 0.5 * (f + math.sqrt(f * f + dF * dF))
-    return N, w, F - N
+def smooth_positive(x, d):
+    """(p, dp/dx): the positive part of x blended over |x| < d by a C2 polynomial. p = x exactly
+    (the same float) for x >= d, 0 for x <= -d, d y^3 (2 - y) with y = (x + d)/(2 d) between; its
+    slope 3 y^2 - 2 y^3 runs from 0 to 1 with zero curvature at both ends, and p >= max(x, 0)."""
+    if x >= d:
+        return x, 1.0
+    if x <= -d:
+        return 0.0, 0.0
+    y = (x + d) / (2.0 * d)
+    y2 = y * y
+    return d * y2 * y * (2.0 - y), y2 * (3.0 - 2.0 * y)
 
 
 @njit(cache=True, inline="always")
-def slack_law(EA, nu, eps, epsdot):
-    """The tension-only branch of axial_law before the clip: (N, w, taut = dsp/deps, r, the unclipped
-    total force f, the clip's width dF)."""
+def axial_law_d(EA, nu, eps, epsdot, tonly):
+    """Axial force of a rope section and its derivatives: (N elastic, w energy density, N_d damping
+    part, dN/deps, dN_d/deps, dN_d/depsdot).
+
+    Bilateral (tonly false): N = EA eps, w = EA eps^2/2, N_d = EA nu deps/dt.
+    Tension-only: N = EA p(eps), p = smooth_positive over d = SLACK_STRAIN (a bare max(., 0) makes
+    Newton cycle between the slack and the taut branch), with its energy w = EA int p deps:
+    EA eps^2/2 for eps >= d, EA d^2 (y^4 - 2 y^5/5 - 1/10) in the band, -EA d^2/10 below (C2 in eps).
+    The damper acts in proportion to the spring's slope p', and the total force
+    f = N + EA nu p' deps/dt is smoothly clipped at 0 (a rope cannot push) over a width
+    N EA d / (N + 2 EA d): at most EA d and at most N/2, so a force without damping (f = N) is never
+    clipped and the law is conservative with the energy w. Where the rope is taut (eps >= d and
+    f >= EA d) it returns the bilateral expressions: a rope that stays taut runs bit for bit as a
+    bilateral one."""
+    if not tonly:
+        return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
     d = SLACK_STRAIN
-    r = math.sqrt(eps * eps + d * d)
-    # eps + r without cancellation when slack (eps < 0): (eps + r) = d^2 / (r - eps)
-    sp = eps + r if eps >= 0.0 else d * d / (r - eps)
-    N = 0.5 * EA * sp
-    w = 0.25 * EA * (eps * sp + d * d * math.asinh(eps / d))
-    taut = 0.5 * (1.0 + eps / r)
-    f = N + EA * nu * epsdot * taut
-    return N, w, taut, r, f, EA * d
+    dF = EA * d
+    if eps >= d and EA * eps + EA * nu * epsdot >= dF:
+        return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
+    p, s = smooth_positive(eps, d)
+    N = EA * p
+    if eps >= d:
+        w = 0.5 * EA * eps * eps
+        ds = 0.0
+    elif eps > -d:
+        y = (eps + d) / (2.0 * d)
+        y4 = y * y * y * y
+        w = EA * d * d * (y4 - 0.4 * y4 * y - 0.1)
+        ds = 3.0 * y * (1.0 - y) / d      # dp'/deps
+    else:
+        w = -0.1 * EA * d * d
+        ds = 0.0
+    if not N > 0.0:
+        return 0.0, w, 0.0, 0.0, 0.0, 0.0
+    c = EA * nu
+    f = N + c * epsdot * s
+    h = N * dF / (N + 2.0 * dF)                  # the clip's width
+    F, g = smooth_positive(f, h)
+    gh = (F - f * g) / h                         # dF/dh
+    dN = EA * s
+    dh = 2.0 * dF * dF / ((N + 2.0 * dF) * (N + 2.0 * dF)) * dN
+    return N, w, F - N, dN, g * (dN + c * epsdot * ds) + gh * dh - dN, g * c * s
+
+
+@njit(cache=True, inline="always")
+def axial_law(EA, nu, eps, epsdot, tonly):
+    """(N elastic, w energy density, N_d damping part) of axial_law_d."""
+    N, w, Nd, dN, dNe, dNed = axial_law_d(EA, nu, eps, epsdot, tonly)
+    return N, w, Nd
 
 
 @njit(cache=True, inline="always")

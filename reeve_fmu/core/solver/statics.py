@@ -9,7 +9,7 @@ from ..builder.assemble import creep_table
 from ..kernel import IN_BRAKE_E, IN_BRAKE_Z, IN_TRAC_Z, UE_CREEP, UE_STRIDE, UE_TRAC_Z, compiled_kernel
 from ..model import Model, State, new_state
 from ..sparse import build_sparse, colour_columns, jac_shape, newton_matrix_sparse, newton_pattern, unpack_sparse
-from ..system import assemble, set_prescribed, set_prescribed_creep, workspace
+from ..system import assemble, gather, set_prescribed, set_prescribed_creep, workspace
 from .inputs import kernel_inputs, kernel_inputs_at, outputs_at
 from .newton import SPARSE_MIN_FREE
 from .result import SolverError
@@ -109,8 +109,9 @@ class Statics:
         KB = m.K if torsion else m.K._replace(nl_on=m.K.nl_on & 3)
         KS = m.KJ if KB is m.K else compiled_kernel(KB)
         if np.any(m.K.el_tonly):
-            # tension-only ropes have a kink at zero strain, where the geometric guess starts: solve the
-            # statics with the bilateral law and check below that every span ends up in tension
+            # tension-only ropes (the default) bend at zero strain, where the geometric guess starts: solve
+            # the statics with the bilateral law, which the tension-only law is exactly on a span stretched
+            # beyond SLACK_STRAIN, and check below that every span ends up in tension
             KB = KB._replace(el_tonly=np.zeros_like(m.K.el_tonly))
             KS = compiled_kernel(KB._replace(crp_tab=creep_table(KB)))
         q = st.q.copy()
@@ -181,14 +182,18 @@ class Statics:
         st.q[:] = qq
         st.c[:] = c
         if KS is not m.KJ:
-            p = m.B @ qq + c
             nd = m.nd
             o2 = 2 * nd + 1 if m.K.el_type == 1 else nd    # start of r2 in the element layout
-            for ie, idx in enumerate(m.K.el_idx):
+            n_el, ne = m.K.el_idx.shape
+            QE, VE = np.empty((n_el, ne)), np.empty((n_el, ne))
+            for ie in range(n_el):
                 if not m.K.el_tonly[ie] or ie in m.info.get("wrap_elements", ()):
                     continue
-                r1, r2 = p[idx[:nd]], p[idx[o2:o2 + nd]]
-                l = p[idx[-1]] - p[idx[2 * nd]]
+                # the element's coordinates through the state's element maps (those of m.B do not
+                # follow a rotating body's sheaves)
+                gather(KS, st.el_coef, c, qq, zero, ie, QE, VE)
+                r1, r2 = QE[ie, :nd], QE[ie, o2:o2 + nd]
+                l = QE[ie, ne - 1] - QE[ie, 2 * nd]
                 if np.linalg.norm(r2 - r1) < l:
                     ir, k = m.element_span[ie]
                     raise SolverError(f"{m.scene.source}: initial statics: rope {m.scene.ropes[ir].name!r} "
