@@ -253,9 +253,10 @@ def test_slip_onset_ends_a_step_at_the_solver_step_where_the_rope_starts_to_slip
 
 def test_an_empty_drum_ends_a_step_at_the_last_solver_step_before_it():
     """scenes/crane_two_fall_hoist.toml with 0.5 m of rope on the drum (the rope 99.5 m shorter), solver
-    step 1 ms, the hook falling with the motor torque 0: in 1 ms steps (step()) the solver stops at
-    0.177 s, the drum empty; in 10 ms steps (step_to_event) the step from 0.174 s ends early at that
-    last good solver step with the reason, and the next step raises the solver's error."""
+    step 1 ms, the winch released with the motor torque 0: the light drum spins up, its rope goes slack
+    (tension-only) and it pays out the 0.5 m; in 1 ms steps (step()) the solver stops at 0.052 s, the
+    drum empty; in 10 ms steps (step_to_event) the step from 0.05 s ends early at that last good solver
+    step with the reason, and the next step raises the solver's error."""
     from dataclasses import replace
 
     from reeve_fmu.components.plant import Plant
@@ -270,7 +271,7 @@ def test_an_empty_drum_ends_a_step_at_the_last_solver_step_before_it():
     with pytest.raises(SolverError, match="its stored length reached 0 m"):
         for _ in range(1000):
             fine.step(1e-3, 0.0, 1.0)
-    assert abs(fine.state.t - 0.177) < 1e-9
+    assert abs(fine.state.t - 0.052) < 1e-9
     p = Plant(sc)
     events = []
     with pytest.raises(SolverError, match="drum 'drum' \\(its stored length reached 0 m\\)"):
@@ -280,7 +281,7 @@ def test_an_empty_drum_ends_a_step_at_the_last_solver_step_before_it():
             events.append((t0, te, event))
     t0, te, event = events[-1]
     assert abs(te - fine.state.t) < 1e-9 and t0 < te < t0 + 0.01
-    assert event.startswith("the solver stops: t = 0.177000 s: a drum has no stored rope left")
+    assert event.startswith("the solver stops: t = 0.052000 s: a drum has no stored rope left")
     assert p.state.t == te
 
 
