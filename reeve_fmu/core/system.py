@@ -14,7 +14,7 @@ import numpy as np
 from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element_1d_at, linear_element_at, reported_tension
-from .bodies import nl_convect, nl_update, wrap_weight
+from .bodies import SW_WIDTH, nl_convect, nl_update, wrap_weight
 from .contact import (brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at, creep_wound,
                       sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
 from .elements.torsion import torsion_energy, torsion_terms
@@ -133,10 +133,10 @@ def _work(K, S, M, Q):
     nr = K.nl_rk.shape[0]
     return new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
                     np.empty(K.nq), S.el_coef, S.nl_ang, S.tq_dref, S.jp_prof, S.jt_tab, np.zeros(nr), np.zeros(nr),
-                    np.zeros(nr), np.zeros(K.nq), np.zeros((nr, K.nl_cols.shape[0])), np.zeros(nr),
+                    np.zeros(nr), np.zeros(K.nq), np.zeros((3 * nr, K.nl_cols.shape[0])), np.zeros(nr),
                     np.zeros(K.nl_ent.shape), np.zeros((K.nl_pb.shape[0], 3)), np.zeros((K.nl_sp.shape[0], 6)),
                     np.zeros((K.nl_bq.shape[0], 5)), np.zeros((2, 3)), np.zeros(1, np.int64),
-                    np.zeros((K.tq_el.shape[0], 2)))
+                    np.zeros((K.tq_el.shape[0], 2)), np.zeros((nr, SW_WIDTH)))
 
 
 @njit(cache=True)
