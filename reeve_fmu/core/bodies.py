@@ -514,9 +514,12 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
                 dD = 0.0
                 for m in range(3):
                     dD += (TW[k_out, 3 + m] - TW[k_out, m]) / D * (dTW[k_out, 3 + m] - dTW[k_out, m])
-                if J.shape[0] >= 3 * nr:           # dA/dq and dD/dq for wrap_weight's strain energy
+                if J.shape[0] >= 4 * nr:    # dA/dq, dD/dq, rhoA g.dm/dq (span middle m): wrap_weight
                     J[nr + r, k] = J[r, k]
                     J[2 * nr + r, k] = dD
+                    J[3 * nr + r, k] = 0.5 * (rf[r, 4] * (dTW[k_out, 0] + dTW[k_out, 3])
+                                              + rf[r, 5] * (dTW[k_out, 1] + dTW[k_out, 4])
+                                              + rf[r, 6] * (dTW[k_out, 2] + dTW[k_out, 5]))
                 J[r, k] = dl * (D * J[r, k] - A * dD) / ((D + A) * (D + A))
 
 
@@ -836,37 +839,50 @@ def wrap_weight(K, W, Q, q, energy):
     per wrap (l_w = s_out - sigma, c the sheave centre, lw the lumped part). Without it the span
     elements' gravity potential, which counts material leaving a span at the span's mid-height, makes a
     spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q -= dV/dq = rhoA g.c d l_w/dq (the rope
-    moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope). A wrap at its
-    leaving span's strain adds its rope's strain energy (_wrap_strain). energy: return V instead (after
-    nl_update on W)."""
-    rk, rf, P, J, cols, f0, pb = K.nl_rk, K.nl_rf, W.nl_P, W.nl_J, K.nl_cols, W.nl_f0, K.nl_pb
+    moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope).
+    A wrap at its leaving span's strain (l_w = A / lambda, A = R x angle) adds its rope's strain energy
+    (_wrap_strain) and counts its stretch deficit l_w - A at the leaving span's middle m instead of at
+    c, V = -rhoA g.((l_w - lw) c + (l_w - A)(m - c)): the material that moves between the wrap and the
+    span as the span's chord D changes then weighs where the span's element counts it, so a payload
+    hanging from a one-element span carries M g at its end (at c: a force rhoA g.(m - c) A/(D + A)
+    per unit chord, 1.2e-4 of M g on the slewing crane). energy: return V instead (after nl_update
+    on W)."""
+    rk, rf, P, J, cols, f0, pb, TW, SW = K.nl_rk, K.nl_rf, W.nl_P, W.nl_J, K.nl_cols, W.nl_f0, K.nl_pb, W.nl_TW, W.nl_SW
+    nr = rk.shape[0]
     V = 0.0
-    for r in range(rk.shape[0]):
+    for r in range(nr):
         if rk[r, 0] != ROW_WRAP:
             continue
         ip = int(rf[r, 3])
         gc = rf[r, 4] * P[ip, 0] + rf[r, 5] * P[ip, 1] + rf[r, 6] * P[ip, 2]
         dl = f0[r] - q[rk[r, 3]] - rf[r, 7]
         strain = rf[r, RF_EA] > 0.0
+        gm = gc      # the weight's coefficient of d l_w
+        lx = 0.0     # l_w - A
         if strain:
             V += _wrap_strain(K, W, Q, r, energy)
+            ko = rk[r, 2]
+            gm = 0.5 * (rf[r, 4] * (TW[ko, 0] + TW[ko, 3]) + rf[r, 5] * (TW[ko, 1] + TW[ko, 4])
+                        + rf[r, 6] * (TW[ko, 2] + TW[ko, 5]))
+            lx = f0[r] - q[rk[r, 3]] - SW[r, SW_A]
         if energy:
-            V -= dl * gc
+            V -= dl * gc + lx * (gm - gc)
             continue
         if strain:     # l_w = s - sigma also moves with sigma and s2
-            SW = W.nl_SW
             S = SW[r, SW_D] + SW[r, SW_A]
-            Q[rk[r, 3]] += gc * (SW[r, SW_D] / S - 1.0)
+            Q[rk[r, 3]] += gm * (SW[r, SW_D] / S - 1.0)
             if rf[r, RF_J2] >= 0.0:
-                Q[int(rf[r, RF_J2])] += gc * SW[r, SW_A] / S
+                Q[int(rf[r, RF_J2])] += gm * SW[r, SW_A] / S
         for k in range(cols.shape[0]):
-            Q[cols[k]] += gc * J[r, k]
+            Q[cols[k]] += gm * J[r, k]
+            if strain:
+                Q[cols[k]] += lx * J[3 * nr + r, k] - (gm - gc) * J[nr + r, k]
             b = K.nl_colbody[k]
             if pb[ip] == b:
                 v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, W.nl_BR, b,
                                                             cols[k])
                 c0, c1, c2 = _moved(P, ip, True, v0, v1, v2, w0, w1, w2, O0, O1, O2)
-                Q[cols[k]] += dl * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
+                Q[cols[k]] += (dl - lx) * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
     return V
 
 

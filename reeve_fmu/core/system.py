@@ -133,7 +133,7 @@ def _work(K, S, M, Q):
     nr = K.nl_rk.shape[0]
     return new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
                     np.empty(K.nq), S.el_coef, S.nl_ang, S.tq_dref, S.jp_prof, S.jt_tab, np.zeros(nr), np.zeros(nr),
-                    np.zeros(nr), np.zeros(K.nq), np.zeros((3 * nr, K.nl_cols.shape[0])), np.zeros(nr),
+                    np.zeros(nr), np.zeros(K.nq), np.zeros((4 * nr, K.nl_cols.shape[0])), np.zeros(nr),
                     np.zeros(K.nl_ent.shape), np.zeros((K.nl_pb.shape[0], 3)), np.zeros((K.nl_sp.shape[0], 6)),
                     np.zeros((K.nl_bq.shape[0], 5)), np.zeros((2, 3)), np.zeros(1, np.int64),
                     np.zeros((K.tq_el.shape[0], 2)), np.zeros((nr, SW_WIDTH)))

@@ -31,7 +31,8 @@ from ..core.geometry import GeometryError
 from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
-from ..core.system import assemble
+from ..core._jit import njit
+from ..core.system import assemble_ws, workspace
 
 
 class CraneError(ValueError):
@@ -137,6 +138,23 @@ class Crane:
         return float(np.mean([z(top) - z(bot) for top, bot in self.ends]))
 
 
+def _height_arrays(crane: Crane):
+    """_height's arrays for Crane.height: the block's (x, y, z, rx, ry, rz) indices, the weights +-1/n
+    and offsets of the fall ends on the block, and the ground ends' constant part."""
+    bd = crane.model.body_dofs[crane.spec.block]
+    n = len(crane.ends)
+    hw, hE, hc = [], [], 0.0
+    for top, bot in crane.ends:
+        for e, w in ((top, 1.0 / n), (bot, -1.0 / n)):
+            if e[0] is None:
+                hc += w * float(e[1][2])
+            else:
+                hw.append(w)
+                hE.append(np.asarray(e[1], float))
+    return (np.array([bd[a] for a in ("x", "y", "z", "rx", "ry", "rz")], np.int64), np.array(hw, float),
+            np.array(hE, float).reshape(-1, 3), hc)
+
+
 def _rotation_matrix(v):
     th = float(np.linalg.norm(v))
     if th < 1e-300:
@@ -224,10 +242,63 @@ def load_crane(path, sets: dict | None = None) -> Crane:
 
 
 # ------------------------------------------------------------------------------------- statics
+@njit(cache=True)
+def _height(q, hd, hw, hE, hc):
+    """Crane.height in compiled form: hc + sum_i hw[i] z(block point i), z = the block's z + the z row
+    of its rotation (rotation vector q[hd[3:6]], Rodrigues) applied to the offset hE[i]."""
+    p0, p1, p2 = q[hd[3]], q[hd[4]], q[hd[5]]
+    th = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    k0 = k1 = k2 = 0.0
+    sn, cm = 0.0, 0.0
+    if th >= 1e-300:
+        k0, k1, k2 = p0 / th, p1 / th, p2 / th
+        sn, cm = math.sin(th), 1.0 - math.cos(th)
+    h = hc
+    for i in range(hw.shape[0]):
+        e0, e1, e2 = hE[i, 0], hE[i, 1], hE[i, 2]
+        ke = k0 * e0 + k1 * e1 + k2 * e2
+        h += hw[i] * (q[hd[2]] + e2 + sn * (k0 * e1 - k1 * e0) + cm * (k2 * ke - e2))
+    return h
+
+
+@njit(cache=True)
+def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
+    """Statics.residual into r; False if a span vanishes (hgeo: _height's arrays, empty hw: no
+    height row)."""
+    if assemble_ws(K, W, c, q, zero, 0.0, u) < 0:
+        return False
+    Q = W.Q
+    for i in range(eqs.shape[0]):
+        r[i] = Q[eqs[i]] / fscale
+    if r.shape[0] > eqs.shape[0]:
+        hd, hw, hE, hc = hgeo
+        r[eqs.shape[0]] = _height(q, hd, hw, hE, hc) - value
+    return True
+
+
+@njit(cache=True)
+def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
+    """Forward differences of _residual over the unknowns into J (the reference of the closed-form
+    one's test); False if a span vanishes."""
+    for k in range(unk.shape[0]):
+        j = unk[k]
+        qj = q[j]
+        q[j] = qj + 1e-7 * (1.0 + abs(qj))
+        dq = q[j] - qj
+        ok = _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, rp)
+        q[j] = qj
+        if not ok:
+            return False
+        for i in range(r0.shape[0]):
+            J[i, k] = (rp[i] - r0[i]) / dq
+    return True
+
+
 class Statics:
     """Static equilibria of the crane's dynamic model with the drum's rope coordinate free and one
     constraint in its place: a prescribed fall length h, or a prescribed block yaw (its rotation
-    vector's z component). Newton with a forward-difference Jacobian of the assembled forces."""
+    vector's z component). Newton with a forward-difference Jacobian of the assembled forces
+    (compiled: _residual, _fd_jacobian)."""
 
     def __init__(self, crane: Crane, st):
         m = crane.model
@@ -235,41 +306,42 @@ class Statics:
         self.u = crane.sim.kernel_inputs(st)
         self.jd = m.sheave_dof[crane.drum]
         self.jyaw = m.body_dofs[crane.spec.block]["rz"]
-        self.eqs = np.array(m.statics_equations)
+        self.eqs = np.array(m.statics_equations, np.int64)
         self.fscale = max(1.0, float(np.max(np.abs(m.K.F0))))
-        self.M, self.Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
+        self.W = workspace(m.KJ, st.arrays())
         self.zero = np.zeros(m.nq)
+        self.hgeo = _height_arrays(crane)
         self.stats = [0, 0]          # Newton iterations, Jacobians
 
     def unknowns(self, mode):
         free = set(self.eqs) | {self.jd}
-        return np.array(sorted(free - {self.jyaw} if mode == "yaw" else free))
+        return np.array(sorted(free - {self.jyaw} if mode == "yaw" else free), np.int64)
 
     def residual(self, q, mode, value):
         """Scaled forces of the statics equations, then the constraint (height row, m) for mode 'height';
         None if a span vanishes."""
-        if assemble(self.crane.model.KJ, self.st.arrays(), self.st.c, q, self.zero, 0.0, self.u, self.M, self.Q) < 0:
-            return None
-        r = self.Q[self.eqs] / self.fscale
-        return np.append(r, self.crane.height(q) - value) if mode == "height" else r
+        r = np.empty(len(self.eqs) + (mode == "height"))
+        ok = _residual(self.crane.model.KJ, self.W, self.st.c, q, self.zero, self.u, self.eqs, self.fscale,
+                       self.hgeo, float(value), r)
+        return r if ok else None
 
     def jacobian(self, q, unk, mode, value, r0=None):
         r0 = self.residual(q, mode, value) if r0 is None else r0
+        if r0 is None:
+            return None
         J = np.empty((len(r0), len(unk)))
-        for k, j in enumerate(unk):
-            qp = q.copy()
-            qp[j] += 1e-7 * (1.0 + abs(q[j]))
-            rp = self.residual(qp, mode, value)
-            if rp is None:
-                return None
-            J[:, k] = (rp - r0) / (qp[j] - q[j])
+        if not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                            self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
+            return None
         self.stats[1] += 1
         return J
 
-    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5):
+    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, broyden=False):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
-        the tangent solver's warm start is restored on failure or when it jumped (_branch_jump)."""
+        the tangent solver's warm start is restored on failure or when it jumped (_branch_jump).
+        broyden: J follows every Newton step by Broyden's rank-one update and is returned as the
+        Jacobian at q (else a fresh one is differenced there)."""
         ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
@@ -277,15 +349,18 @@ class Statics:
             q[self.jyaw] = value
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
+        dx = r_prev = None
         for it in range(maxit):
             r = self.residual(q, mode, value)
             if r is None or not np.all(np.isfinite(r)):
                 break
+            if broyden and dx is not None:      # J dx = r - r_prev along the last step
+                J = J + np.outer(r - r_prev - J @ dx, dx / (dx @ dx))
             err = float(np.max(np.abs(r)))
             if err < tol:
                 if _branch_jump(ang, self.st.nl_ang):
                     break
-                return q, self.jacobian(q, unk, mode, value, r)
+                return q, (J if broyden and J is not None else self.jacobian(q, unk, mode, value, r))
             if J is None or (it > 0 and err > 0.25 * err_prev and not fresh):
                 J, fresh = self.jacobian(q, unk, mode, value, r), True
                 if J is None:
@@ -300,6 +375,7 @@ class Statics:
             if not np.all(np.isfinite(dx)) or (mode == "height" and abs(dx[np.searchsorted(unk, self.jyaw)]) > max_dyaw):
                 break
             q[unk] += dx
+            r_prev = r
             self.stats[0] += 1
         self.st.nl_ang[:] = ang
         return None, None
@@ -407,9 +483,12 @@ class _Continuation:
                     return False
                 qp = self.q.copy()
                 qp[self.unk] += dh * v
-                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12)
-                if qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step \
-                        and np.linalg.slogdet(Jn)[0] in (sign0, 0):
+                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, broyden=True)
+                ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
+                if ok and np.linalg.slogdet(Jn)[0] not in (sign0, 0):     # Broyden's J: check a fresh one
+                    Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
+                    ok = Jn is not None and np.linalg.slogdet(Jn)[0] in (sign0, 0)
+                if ok:
                     self.q, self.h, self.J = qn, self.h + dh, Jn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
