@@ -806,7 +806,15 @@ def nl_update(K, W, c, q, v):
     strain_far_s(K.nl_rk, K.nl_rf, c, W.nl_SW)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
     acc = W.nl_racc
-    rows_accel(q, v, G, acc)
+    at_rest = True
+    for j in range(v.shape[0]):
+        if v[j] != 0.0:
+            at_rest = False
+            break
+    if at_rest:           # statics: no convective accelerations
+        acc[:] = 0.0
+    else:
+        rows_accel(q, v, G, acc)
     el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, W.el_coef, K.nl_ent, K.nl_rw
     for ie in range(ent.shape[0]):
         for a in range(ent.shape[1]):

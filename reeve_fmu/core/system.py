@@ -344,6 +344,47 @@ def assemble_ws(K, W, c, q, v, t, u):
 
 
 @njit(cache=True)
+def static_forces(K, W, c, q, zero, t, u):
+    """W.Q = the generalized forces at rest (v = zero) without assembling the mass matrix:
+    assemble_ws's Q at v = 0 (the same sums in the same order, less the nonlinear rows' convective
+    terms, which vanish at rest), for a statics that needs no M (studies/crane.py). Returns
+    assemble_ws's status."""
+    nq = K.nq
+    Q = W.Q
+    MEs = W.MEs
+    QEs = W.QEs
+    el_map = K.el_map
+    el_coef = W.el_coef
+    nw = el_map.shape[2]
+    ne = K.el_idx.shape[1]
+    for i in range(nq):
+        Q[i] = K.F0[i]
+    status = 0
+    nl = (K.nl_on & 1) != 0
+    if nl and W.frz[0] == 0:
+        _nl_update(K, K, W, c, q, zero)
+    for ie in range(el_map.shape[0]):
+        st, ok = element_eval(K, el_coef, c, q, zero, ie, W.QE, W.VE, MEs, QEs)
+        if st < 0:
+            status = st
+        if not ok:
+            continue
+        for a in range(ne):
+            for wa in range(nw):
+                ba = el_coef[ie, a, wa]
+                if ba != 0.0:
+                    Q[el_map[ie, a, wa]] += ba * QEs[ie, a]
+    if nl:
+        _wrap_weight(K, K, W, Q, q, False)
+    q_terms(K, W, q, zero, t, u)
+    if K.nl_on & 2:     # rigid bodies' rotational terms (their M part is all it writes at rest)
+        _rigid_terms(K, K, q, zero, W.M, Q)
+    if K.nl_on & 4:
+        _torsion_terms(K, K, W, W.QE, q, Q)
+    return status
+
+
+@njit(cache=True)
 def _nl_convect_all(K, W, MEs, QEs, Q, q):
     """Convective terms of the nonlinear rows (bodies.nl_convect) for every element: QEs[ie] gets
     them as before, and Q the change, scattered like the element forces; then the W1 wraps' rope

@@ -23,6 +23,7 @@ import sys
 import time
 
 import numpy as np
+from scipy.linalg import lu_factor, lu_solve
 
 from ..core.builder.bodies import world
 from ..core.builder.routes import span_tangents, stop_geometry
@@ -32,7 +33,7 @@ from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
 from ..core._jit import njit
-from ..core.system import assemble_ws, workspace
+from ..core.system import static_forces, workspace
 
 
 class CraneError(ValueError):
@@ -265,7 +266,7 @@ def _height(q, hd, hw, hE, hc):
 def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
     """Statics.residual into r; False if a span vanishes (hgeo: _height's arrays, empty hw: no
     height row)."""
-    if assemble_ws(K, W, c, q, zero, 0.0, u) < 0:
+    if static_forces(K, W, c, q, zero, 0.0, u) < 0:
         return False
     Q = W.Q
     for i in range(eqs.shape[0]):
@@ -336,12 +337,12 @@ class Statics:
         self.stats[1] += 1
         return J
 
-    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, broyden=False):
+    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
         the tangent solver's warm start is restored on failure or when it jumped (_branch_jump).
-        broyden: J follows every Newton step by Broyden's rank-one update and is returned as the
-        Jacobian at q (else a fresh one is differenced there)."""
+        keep: a given J that converged within `keep` iterations is returned as the Jacobian at q (the
+        continuation's next predictor); else a fresh one is differenced there."""
         ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
@@ -349,36 +350,47 @@ class Statics:
             q[self.jyaw] = value
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
-        dx = r_prev = None
+        given = J is not None
+        F = lu_factor(J, check_finite=False) if given else None
         for it in range(maxit):
             r = self.residual(q, mode, value)
             if r is None or not np.all(np.isfinite(r)):
                 break
-            if broyden and dx is not None:      # J dx = r - r_prev along the last step
-                J = J + np.outer(r - r_prev - J @ dx, dx / (dx @ dx))
             err = float(np.max(np.abs(r)))
             if err < tol:
                 if _branch_jump(ang, self.st.nl_ang):
                     break
-                return q, (J if broyden and J is not None else self.jacobian(q, unk, mode, value, r))
+                if given and it <= keep:
+                    return q, J
+                return q, self.jacobian(q, unk, mode, value, r)
             if J is None or (it > 0 and err > 0.25 * err_prev and not fresh):
                 J, fresh = self.jacobian(q, unk, mode, value, r), True
                 if J is None:
                     break
+                given = False
+                F = lu_factor(J, check_finite=False)
             else:
                 fresh = False
             err_prev = err
-            try:
-                dx = np.linalg.solve(J, -r)
-            except np.linalg.LinAlgError:
+            if _lu_sign(F) == 0:
                 break
+            dx = lu_solve(F, -r, check_finite=False)
             if not np.all(np.isfinite(dx)) or (mode == "height" and abs(dx[np.searchsorted(unk, self.jyaw)]) > max_dyaw):
                 break
             q[unk] += dx
-            r_prev = r
             self.stats[0] += 1
         self.st.nl_ang[:] = ang
         return None, None
+
+
+def _lu_sign(F) -> int:
+    """The sign of det J from its LU factors (scipy.linalg.lu_factor); 0 if singular."""
+    lu, piv = F
+    d = np.diag(lu)
+    if not np.all(d != 0.0) or not np.all(np.isfinite(d)):
+        return 0
+    swaps = int(np.count_nonzero(piv != np.arange(len(piv))))
+    return (-1) ** (swaps + int(np.count_nonzero(d < 0.0)))
 
 
 def _branch_jump(before, after, limit=0.5) -> bool:
@@ -457,6 +469,12 @@ class SweepResult:
     crane: Crane
 
 
+# a continuation step whose chord Newton converged within this many iterations keeps its Jacobian for
+# the next predictor (the path's Jacobian changes little per step; a fresh one costs an assembly per
+# unknown)
+KEEP_ITERATIONS = 8
+
+
 class _Continuation:
     """Natural continuation of the statics in the fall length h."""
 
@@ -470,11 +488,12 @@ class _Continuation:
     def continue_to(self, h_target, dh_min, yaw_step):
         """From the current point to h_target; False at a fold (no equilibrium beyond self.h within
         dh_min, or the Jacobian's determinant changes sign: a jump onto the unstable branch)."""
-        sign0 = np.linalg.slogdet(self.J)[0]
+        F = lu_factor(self.J, check_finite=False)
+        sign0 = _lu_sign(F)
         e = np.zeros(len(self.unk))
         e[-1] = 1.0
         while abs(h_target - self.h) > 1e-12 * max(1.0, abs(h_target)):
-            v = np.linalg.solve(self.J, e)          # dx/dh: the height row is h(q) - h
+            v = lu_solve(F, e, check_finite=False)          # dx/dh: the height row is h(q) - h
             dh = h_target - self.h
             if abs(v[self.iyaw] * dh) > yaw_step:
                 dh = math.copysign(yaw_step / abs(v[self.iyaw]), dh)
@@ -483,13 +502,15 @@ class _Continuation:
                     return False
                 qp = self.q.copy()
                 qp[self.unk] += dh * v
-                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, broyden=True)
+                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS)
                 ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
-                if ok and np.linalg.slogdet(Jn)[0] not in (sign0, 0):     # Broyden's J: check a fresh one
+                Fn = lu_factor(Jn, check_finite=False) if ok else None
+                if ok and _lu_sign(Fn) not in (sign0, 0):     # a kept J: check a fresh one
                     Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
-                    ok = Jn is not None and np.linalg.slogdet(Jn)[0] in (sign0, 0)
+                    Fn = lu_factor(Jn, check_finite=False) if Jn is not None else None
+                    ok = Fn is not None and _lu_sign(Fn) in (sign0, 0)
                 if ok:
-                    self.q, self.h, self.J = qn, self.h + dh, Jn
+                    self.q, self.h, self.J, F = qn, self.h + dh, Jn, Fn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
                     break
@@ -512,26 +533,37 @@ def _columns(crane: Crane, n: int) -> dict:
     return cols
 
 
-def _record(crane: Crane, st, q, cols, i):
-    """Row i of the sweep's columns at the equilibrium q."""
-    m = crane.model
-    st = st.copy()
-    st.q[:] = q
-    y = dict(zip(m.output_names, crane.sim.outputs(st)))
-    bd = m.body_dofs[crane.spec.block]
-    Rm = _rotation_matrix(np.array([q[bd[a]] for a in ("rx", "ry", "rz")]))
-    cols["block.yaw"][i] = q[bd["rz"]]
-    cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
-    cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
-    cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = (q[bd[a]] for a in ("x", "y", "z"))
-    for k, nm in enumerate(crane.span_names):
-        a, b = crane.tension_outputs[k]
-        cols[f"{nm}.tension"][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
-    rope = crane.spec.rope
-    cols["rope.torque"][i] = float(np.mean([y[f"{rope}.span{k}.torque"] for k in crane.falls]))
-    tw = [y[f"{rope}.span{k}.twist"] for k in crane.falls]
-    cols["rope.twist"][i] = float(np.mean(tw)) if "twist" in m.q_kind else math.nan   # no twist state: NaN
-    cols["drum.s"][i] = q[m.sheave_dof[crane.drum]]
+class _Recorder:
+    """Rows of the sweep's columns at equilibria: the output indices looked up once, the outputs
+    evaluated on one scratch copy of the State."""
+
+    def __init__(self, crane: Crane, st):
+        m = crane.model
+        self.crane, self.st = crane, st.copy()
+        ix = {n: k for k, n in enumerate(m.output_names)}
+        self.tension = [(f"{nm}.tension", ix[a], ix[b]) for nm, (a, b) in zip(crane.span_names, crane.tension_outputs)]
+        rope = crane.spec.rope
+        self.torque = [ix[f"{rope}.span{k}.torque"] for k in crane.falls]
+        self.twist = [ix[f"{rope}.span{k}.twist"] for k in crane.falls] if "twist" in m.q_kind else None
+        self.bd = m.body_dofs[crane.spec.block]
+        self.jd = m.sheave_dof[crane.drum]
+
+    def record(self, q, cols, i):
+        """Row i of the sweep's columns at the equilibrium q."""
+        self.st.q[:] = q
+        y = self.crane.sim.outputs(self.st)
+        bd = self.bd
+        Rm = _rotation_matrix(np.array([q[bd["rx"]], q[bd["ry"]], q[bd["rz"]]]))
+        cols["block.yaw"][i] = q[bd["rz"]]
+        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
+        cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
+        cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = q[bd["x"]], q[bd["y"]], q[bd["z"]]
+        for nm, a, b in self.tension:
+            cols[nm][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
+        cols["rope.torque"][i] = sum(y[k] for k in self.torque) / len(self.torque)
+        # no twist state: NaN
+        cols["rope.twist"][i] = sum(y[k] for k in self.twist) / len(self.twist) if self.twist else math.nan
+        cols["drum.s"][i] = q[self.jd]
 
 
 def sweep(crane: Crane, heights=None) -> SweepResult:
@@ -554,6 +586,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
     t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
     cont = _Continuation(S, q, h0, J)
+    rec = _Recorder(crane, st)
     cols = _columns(crane, len(heights))
     cols["height"][:] = heights
     crit = crit_yaw = None
@@ -566,7 +599,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
             break
         if i == 0:
             cont.history = [(cont.h, cont.q[S.jyaw])]
-        _record(crane, st, cont.q, cols, i)
+        rec.record(cont.q, cols, i)
     return SweepResult(columns=cols, critical_height=crit, critical_yaw=crit_yaw,
                        seconds=time.perf_counter() - t0, first_solve_seconds=t_first,
                        path=np.array(cont.history + path), steps=cont.steps, rejected=cont.rejected,
