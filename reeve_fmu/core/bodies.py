@@ -39,8 +39,8 @@ NL_EPS = 5e-4    # step of the second difference along qdot (normalised by its l
 ROW_TANGENT, ROW_WRAP, ROW_SLOPE = 0, 1, 2
 # nl_rf columns of a W1 wrap row after (R, sense, s offset, centre, rhoA g, lumped rope): the leaving
 # span's far s = c[RF_ROW] (+ q[RF_J2] if RF_J2 >= 0), the rope's EA (> 0: the wrap holds its rope at
-# that span's strain, _strain_wrap) and its tension-only flag
-RF_J2, RF_ROW, RF_EA, RF_TONLY = 8, 9, 10, 11
+# that span's strain, _strain_wrap) and that span's first element (whose axial law the wrap's rope follows)
+RF_J2, RF_ROW, RF_EA, RF_EL = 8, 9, 10, 11
 RF_WIDTH = 12
 # SW columns (Work.nl_SW, per row): the far s's constant part, the leaving span's chord D, the wrap's
 # arc A, the material s2 - sigma shared by the wrap and that span
@@ -906,7 +906,8 @@ def _wrap_strain(K, W, Q, r, energy):
     D, A, dl = SW[r, SW_D], SW[r, SW_A], SW[r, SW_DL]
     S = D + A
     lam = S / dl
-    N, w, _ = axial_law(rf[r, RF_EA], 0.0, lam - 1.0, 0.0, rf[r, RF_TONLY] != 0.0)
+    el = int(rf[r, RF_EL])     # the element's law (a statics may swap tension-only for bilateral)
+    N, w, _ = axial_law(K.el_EA[el], 0.0, lam - 1.0, 0.0, K.el_tonly[el] != 0)
     if energy:
         return A * dl / S * w
     UA = dl * D * w / (S * S) + A * N / S

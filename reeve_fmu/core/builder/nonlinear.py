@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..bodies import (RF_EA, RF_J2, RF_ROW, RF_TONLY, RF_WIDTH, ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef,
+from ..bodies import (RF_EA, RF_J2, RF_ROW, RF_EL, RF_WIDTH, ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef,
                       geometry, rows_jacobian)
 
 
@@ -93,8 +93,8 @@ class NonlinearRows:
         axis, which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector),
         lw: the wrap's rope whose weight the builder lumped (wrap_weight adds the rest). A W0 wrap is
         the same row with offset = -R * (its angle at t = 0): no rope on it in the scene's pose, the
-        change of its arc since. strain = (the leaving span's far node, EA, tension-only): W1, the wrap
-        holds R x angle / (1 + eps) of rope, eps the leaving span's strain (core/bodies._strain_wrap)."""
+        change of its arc since. strain = (the leaving span's far node, EA, its first element): W1, the
+        wrap holds R x angle / (1 + eps) of rope, eps the leaving span's strain (core/bodies._strain_wrap)."""
         if self.moving[span_in] or self.moving[span_out]:
             centre = self.spans[span_in][1]
             self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, float(offset), centre,
@@ -103,17 +103,17 @@ class NonlinearRows:
     @staticmethod
     def _strain_cols(spec, row_of, B):
         """nl_rf[RF_J2:] of a row: a strain wrap's far node's s as its p row, whose B row is one
-        coordinate with coefficient 1 (RF_J2) or none (a rope end); EA, tension-only. Other rows: -1, -1,
-        0, 0."""
+        coordinate with coefficient 1 (RF_J2) or none (a rope end); EA, the span's first element. Other
+        rows: -1, -1, 0, 0."""
         if len(spec) < 12 or spec[11] is None:
             return [-1.0, -1.0, 0.0, 0.0]
-        node, EA, tonly = spec[11]
+        node, EA, el = spec[11]
         row = row_of(("s", node))
         nz = np.nonzero(B[row])[0]
         if len(nz) > 1 or (len(nz) == 1 and B[row, nz[0]] != 1.0) or EA <= 0.0:
             raise ValueError("a W1 wrap's leaving span must end at a node whose s is one coordinate or a "
                              "constant, with EA > 0")
-        return [float(nz[0]) if len(nz) else -1.0, float(row), float(EA), 1.0 if tonly else 0.0]
+        return [float(nz[0]) if len(nz) else -1.0, float(row), float(EA), float(el)]
 
     def _cols(self):
         """q indices of every registered body coordinate and the body tables of rows_eval."""

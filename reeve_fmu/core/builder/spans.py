@@ -145,7 +145,7 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
             # rope from the axle
             w1 = rb.rope.wrap_model == "W1"
             off = 0.0 if w1 else -rb.geo[k][1] * rb.wraps[k][3]
-            strain = (ends[1], rb.rope.EA * rb.rope.count, rb.rope.tension_only) if w1 else None
+            strain = (ends[1], rb.rope.EA * rb.rope.count, len(bs.elements)) if w1 else None   # span k's first element
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
                             rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0], offset=off, strain=strain)
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
