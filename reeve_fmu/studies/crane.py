@@ -23,7 +23,6 @@ import sys
 import time
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
 
 from ..core.builder.bodies import world
 from ..core.builder.routes import span_tangents, stop_geometry
@@ -32,6 +31,7 @@ from ..core.geometry import GeometryError
 from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
+from ..core.solver.lu import lu_factor, lu_solve
 from ..core._jit import njit
 from ..core.system import static_forces, workspace
 
@@ -264,17 +264,23 @@ def _height(q, hd, hw, hE, hc):
 
 @njit(cache=True)
 def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
-    """Statics.residual into r; False if a span vanishes (hgeo: _height's arrays, empty hw: no
-    height row)."""
+    """Statics.residual into r (hgeo: _height's arrays; r one longer than eqs: the height row).
+    Returns its largest magnitude (inf if not finite), -1 if a span vanishes."""
     if static_forces(K, W, c, q, zero, 0.0, u) < 0:
-        return False
+        return -1.0
     Q = W.Q
     for i in range(eqs.shape[0]):
         r[i] = Q[eqs[i]] / fscale
     if r.shape[0] > eqs.shape[0]:
         hd, hw, hE, hc = hgeo
         r[eqs.shape[0]] = _height(q, hd, hw, hE, hc) - value
-    return True
+    err = 0.0
+    for i in range(r.shape[0]):
+        a = abs(r[i])
+        if not a <= 1e300:
+            return math.inf
+        err = max(err, a)
+    return err
 
 
 @njit(cache=True)
@@ -286,7 +292,7 @@ def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
         qj = q[j]
         q[j] = qj + 1e-7 * (1.0 + abs(qj))
         dq = q[j] - qj
-        ok = _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, rp)
+        ok = _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, rp) >= 0.0
         q[j] = qj
         if not ok:
             return False
@@ -321,10 +327,14 @@ class Statics:
     def residual(self, q, mode, value):
         """Scaled forces of the statics equations, then the constraint (height row, m) for mode 'height';
         None if a span vanishes."""
+        return self._residual(q, mode, value)[0]
+
+    def _residual(self, q, mode, value):
+        """(residual or None, its largest magnitude: inf if not finite)."""
         r = np.empty(len(self.eqs) + (mode == "height"))
-        ok = _residual(self.crane.model.KJ, self.W, self.st.c, q, self.zero, self.u, self.eqs, self.fscale,
-                       self.hgeo, float(value), r)
-        return r if ok else None
+        err = _residual(self.crane.model.KJ, self.W, self.st.c, q, self.zero, self.u, self.eqs, self.fscale,
+                        self.hgeo, float(value), r)
+        return (r, err) if err >= 0.0 else (None, math.inf)
 
     def jacobian(self, q, unk, mode, value, r0=None):
         r0 = self.residual(q, mode, value) if r0 is None else r0
@@ -351,12 +361,13 @@ class Statics:
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
         given = J is not None
-        F = lu_factor(J, check_finite=False) if given else None
+        F = _factor(J) if given else None
+        if given and F is None:
+            J = None
         for it in range(maxit):
-            r = self.residual(q, mode, value)
-            if r is None or not np.all(np.isfinite(r)):
+            r, err = self._residual(q, mode, value)
+            if not err < math.inf:
                 break
-            err = float(np.max(np.abs(r)))
             if err < tol:
                 if _branch_jump(ang, self.st.nl_ang):
                     break
@@ -368,13 +379,13 @@ class Statics:
                 if J is None:
                     break
                 given = False
-                F = lu_factor(J, check_finite=False)
+                F = _factor(J)
+                if F is None:
+                    break
             else:
                 fresh = False
             err_prev = err
-            if _lu_sign(F) == 0:
-                break
-            dx = lu_solve(F, -r, check_finite=False)
+            dx = _lu_apply(F, -r)
             if not np.all(np.isfinite(dx)) or (mode == "height" and abs(dx[np.searchsorted(unk, self.jyaw)]) > max_dyaw):
                 break
             q[unk] += dx
@@ -383,12 +394,27 @@ class Statics:
         return None, None
 
 
+def _factor(J):
+    """LU factors (core/solver/lu.py) of J, or None if J is singular or not finite."""
+    LU, piv = J.copy(), np.empty(len(J), np.int64)
+    if not lu_factor(LU, piv) or not np.all(np.isfinite(np.diag(LU))):
+        return None
+    return LU, piv
+
+
+def _lu_apply(F, b):
+    """J^-1 b from J's factors."""
+    x = np.array(b, float)
+    lu_solve(F[0], F[1], x)
+    return x
+
+
 def _lu_sign(F) -> int:
-    """The sign of det J from its LU factors (scipy.linalg.lu_factor); 0 if singular."""
-    lu, piv = F
-    d = np.diag(lu)
-    if not np.all(d != 0.0) or not np.all(np.isfinite(d)):
+    """The sign of det J from its LU factors (_factor); 0 if singular."""
+    if F is None:
         return 0
+    LU, piv = F
+    d = np.diag(LU)
     swaps = int(np.count_nonzero(piv != np.arange(len(piv))))
     return (-1) ** (swaps + int(np.count_nonzero(d < 0.0)))
 
@@ -472,7 +498,7 @@ class SweepResult:
 # a continuation step whose chord Newton converged within this many iterations keeps its Jacobian for
 # the next predictor (the path's Jacobian changes little per step; a fresh one costs an assembly per
 # unknown)
-KEEP_ITERATIONS = 8
+KEEP_ITERATIONS = 4
 
 
 class _Continuation:
@@ -484,16 +510,17 @@ class _Continuation:
         self.iyaw = int(np.searchsorted(self.unk, S.jyaw))
         self.steps = self.rejected = 0
         self.history = [(h, q[S.jyaw])]
+        self.prev = None             # (h, q) of the previous accepted point: the secant predictor
 
     def continue_to(self, h_target, dh_min, yaw_step):
         """From the current point to h_target; False at a fold (no equilibrium beyond self.h within
         dh_min, or the Jacobian's determinant changes sign: a jump onto the unstable branch)."""
-        F = lu_factor(self.J, check_finite=False)
+        F = _factor(self.J)
         sign0 = _lu_sign(F)
         e = np.zeros(len(self.unk))
         e[-1] = 1.0
         while abs(h_target - self.h) > 1e-12 * max(1.0, abs(h_target)):
-            v = lu_solve(F, e, check_finite=False)          # dx/dh: the height row is h(q) - h
+            v = _lu_apply(F, e)          # dx/dh: the height row is h(q) - h
             dh = h_target - self.h
             if abs(v[self.iyaw] * dh) > yaw_step:
                 dh = math.copysign(yaw_step / abs(v[self.iyaw]), dh)
@@ -501,15 +528,19 @@ class _Continuation:
                 if abs(dh) < dh_min:
                     return False
                 qp = self.q.copy()
-                qp[self.unk] += dh * v
+                if self.prev is not None and abs(dh) <= 2.0 * abs(self.h - self.prev[0]):
+                    qp += (self.q - self.prev[1]) * (dh / (self.h - self.prev[0]))   # secant: second order
+                else:
+                    qp[self.unk] += dh * v
                 qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS)
                 ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
-                Fn = lu_factor(Jn, check_finite=False) if ok else None
-                if ok and _lu_sign(Fn) not in (sign0, 0):     # a kept J: check a fresh one
+                Fn = _factor(Jn) if ok else None
+                if ok and _lu_sign(Fn) != sign0:     # a kept J: check a fresh one
                     Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
-                    Fn = lu_factor(Jn, check_finite=False) if Jn is not None else None
-                    ok = Fn is not None and _lu_sign(Fn) in (sign0, 0)
+                    Fn = _factor(Jn) if Jn is not None else None
+                    ok = Fn is not None and _lu_sign(Fn) == sign0
                 if ok:
+                    self.prev = (self.h, self.q)
                     self.q, self.h, self.J, F = qn, self.h + dh, Jn, Fn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
