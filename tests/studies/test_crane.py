@@ -303,3 +303,28 @@ def test_three_falls_dead_end_on_the_block_and_crossed_sheave_axes(tmp_path):
         assert np.allclose(col[f"fall{i}.tension"], c.weight / 3, rtol=0.02)
     psi = col["block.yaw"]
     assert psi[0] > 0 and np.all(np.diff(psi) > 0)
+
+
+def test_compiled_statics_residual_is_the_assembly_at_rest():
+    """The sweep's compiled residual (core/system.static_forces, studies/crane._height) against the
+    model's full assembly at rest and Crane.height, at random block poses and rope coordinates of the
+    8-fall crane: the same forces to round-off (the same sums in the same order)."""
+    from reeve_fmu.core.system import assemble
+    from reeve_fmu.studies.crane import Statics
+    c = load_crane(EIGHT)
+    m = c.model
+    st = c.sim.initial_state()
+    S = Statics(c, st)
+    rng = np.random.default_rng(5)
+    bd = m.body_dofs["block"]
+    pose = [bd[a] for a in ("x", "y", "z", "rx", "ry", "rz")]
+    M, Q, z = np.empty((m.nq, m.nq)), np.empty(m.nq), np.zeros(m.nq)
+    for _ in range(3):
+        q = st.q.copy()
+        q[pose] += rng.normal(0.0, [0.05, 0.05, 0.05, 0.02, 0.02, 0.3])
+        q[S.eqs] += rng.normal(0.0, 1e-3, len(S.eqs)) * (np.array(m.q_kind)[S.eqs] != "body")
+        r = S.residual(q, "height", 0.0)
+        assemble(m.KJ, st.arrays(), st.c, q, z, 0.0, S.u, M, Q)
+        check("static_forces - assembly at rest, / largest force", r[:-1] - Q[S.eqs] / S.fscale, 1e-14,
+              reason="round-off")
+        check("compiled height - Crane.height [m]", r[-1] - c.height(q), 1e-13, reason="round-off")
