@@ -805,6 +805,8 @@ def nl_update(K, W, c, q, v):
          W.nl_P, W.nl_TW, W.nl_BR, W.nl_ang, W.nl_AX, W.nl_SW)
     strain_far_s(K.nl_rk, K.nl_rf, c, W.nl_SW)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
+    for i in range(q.shape[0]):     # q of this update (wrap_weight linearises the rows about it)
+        qs[i] = q[i]
     acc = W.nl_racc
     at_rest = True
     for j in range(v.shape[0]):
@@ -863,24 +865,40 @@ def wrap_weight(K, W, Q, q, energy):
             continue
         ip = int(rf[r, 3])
         gc = rf[r, 4] * P[ip, 0] + rf[r, 5] * P[ip, 1] + rf[r, 6] * P[ip, 2]
-        dl = f0[r] - q[rk[r, 3]] - rf[r, 7]
+        sig = q[rk[r, 3]]
+        f = f0[r]
         strain = rf[r, RF_EA] > 0.0
         gm = gc      # the weight's coefficient of d l_w
-        lx = 0.0     # l_w - A
+        dmat = 0.0   # s2 - sigma
+        D, A = SW[r, SW_D], SW[r, SW_A]
         if strain:
-            V += _wrap_strain(K, W, Q, r, energy)
+            # q as it is now: f0, D, A are those of the last update, which the Newton matrix's
+            # differences keep (W.frz); sigma, s2 and, to first order (rows_jacobian), D and A follow q
+            j2 = int(rf[r, RF_J2])
+            s2 = SW[r, SW_C] + (q[j2] if j2 >= 0 else 0.0)
+            dA = 0.0
+            dD = 0.0
+            for k in range(cols.shape[0]):
+                dx = q[cols[k]] - W.nl_qs[cols[k]]
+                dA += J[nr + r, k] * dx
+                dD += J[2 * nr + r, k] * dx
+            A += dA
+            D += dD
+            f = (sig * D + A * s2) / (D + A)
+            dmat = s2 - sig
+            V += _wrap_strain(K, W, Q, r, D, A, dmat, energy)
             ko = rk[r, 2]
             gm = 0.5 * (rf[r, 4] * (TW[ko, 0] + TW[ko, 3]) + rf[r, 5] * (TW[ko, 1] + TW[ko, 4])
                         + rf[r, 6] * (TW[ko, 2] + TW[ko, 5]))
-            lx = f0[r] - q[rk[r, 3]] - SW[r, SW_A]
+        dl = f - sig - rf[r, 7]
+        lx = f - sig - A if strain else 0.0     # l_w - A
         if energy:
             V -= dl * gc + lx * (gm - gc)
             continue
         if strain:     # l_w = s - sigma also moves with sigma and s2
-            S = SW[r, SW_D] + SW[r, SW_A]
-            Q[rk[r, 3]] += gm * (SW[r, SW_D] / S - 1.0)
+            Q[rk[r, 3]] += gm * (D / (D + A) - 1.0)
             if rf[r, RF_J2] >= 0.0:
-                Q[int(rf[r, RF_J2])] += gm * SW[r, SW_A] / S
+                Q[int(rf[r, RF_J2])] += gm * A / (D + A)
         for k in range(cols.shape[0]):
             Q[cols[k]] += gm * J[r, k]
             if strain:
@@ -895,15 +913,14 @@ def wrap_weight(K, W, Q, q, energy):
 
 
 @njit(cache=True)
-def _wrap_strain(K, W, Q, r, energy):
+def _wrap_strain(K, W, Q, r, D, A, dl, energy):
     """Strain energy of the rope on a wrap that holds it at its leaving span's strain (_strain_wrap):
     U = l_w w(lambda), l_w = A Delta / S, lambda = S / Delta (S = D + A, Delta = s2 - sigma: the wrap
     and the span are one stretch of rope; w the elements' axial law). Q -= dU/dq through A and D
-    (their q-derivatives kept by rows_jacobian below the rows' Jacobian), sigma and s2.
-    energy: return U (Q untouched), else 0."""
-    rk, rf, J, cols, SW = K.nl_rk, K.nl_rf, W.nl_J, K.nl_cols, W.nl_SW
+    (their q-derivatives kept by rows_jacobian below the rows' Jacobian), sigma and s2 (D, A, dl =
+    s2 - sigma: wrap_weight's, at q). energy: return U (Q untouched), else 0."""
+    rk, rf, J, cols = K.nl_rk, K.nl_rf, W.nl_J, K.nl_cols
     nr = rk.shape[0]
-    D, A, dl = SW[r, SW_D], SW[r, SW_A], SW[r, SW_DL]
     S = D + A
     lam = S / dl
     el = int(rf[r, RF_EL])     # the element's law (a statics may swap tension-only for bilateral)
