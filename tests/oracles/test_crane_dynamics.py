@@ -66,7 +66,7 @@ def test_lowering_follows_the_quasi_static_yaw():
     # the equilibrium against the closed form (the torsion moment is 2 k d S): measured 5.4e-5
     check('static yaw / closed form - 1', np.array(psi_qs) / np.array(psi_cf) - 1.0, 5e-4)
     tilt = np.max(np.abs(res["block.rotation.x"])) + np.max(np.abs(res["block.rotation.y"]))
-    check('block tilt while lowering [rad]', tilt, 1e-5)
+    check('block tilt while lowering [rad]', tilt, 9e-6)
 
 
 def test_torsion_forces_are_the_energy_gradient():
@@ -211,7 +211,7 @@ def test_two_fall_statics_by_yaw_continuation_against_the_closed_form():
     for psi in np.arange(0.2, 1.01, 0.1):
         q, _ = S.solve(q, "yaw", psi)
         h = crane.height(q)
-        check('sin(psi) at prescribed yaw / closed form - 1', math.sin(psi) / (K_D_AB * h) - 1.0, 6e-4)
+        check('sin(psi) at prescribed yaw / closed form - 1', math.sin(psi) / (K_D_AB * h) - 1.0, 4.3e-4)
 
 
 def test_slow_lowering_cables_where_the_sweep_finds_the_fold():
