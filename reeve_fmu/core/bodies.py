@@ -32,10 +32,20 @@ import math
 import numpy as np
 
 from ._jit import njit
+from .elements.linear import axial_law
 
 NL_H = 1e-4      # m or rad: Jacobian step; truncation ~ h^2/6 |f'''| ~ 2e-9 m, round-off ~ 1e-16 |f| / h
 NL_EPS = 5e-4    # step of the second difference along qdot (normalised by its largest component)
 ROW_TANGENT, ROW_WRAP, ROW_SLOPE = 0, 1, 2
+# nl_rf columns of a W1 wrap row after (R, sense, s offset, centre, rhoA g, lumped rope): the leaving
+# span's far s = c[RF_ROW] (+ q[RF_J2] if RF_J2 >= 0), the rope's EA (> 0: the wrap holds its rope at
+# that span's strain, _strain_wrap) and that span's first element (whose axial law the wrap's rope follows)
+RF_J2, RF_ROW, RF_EA, RF_EL = 8, 9, 10, 11
+RF_WIDTH = 12
+# SW columns (Work.nl_SW, per row): the far s's constant part, the leaving span's chord D, the wrap's
+# arc A, the material s2 - sigma shared by the wrap and that span
+SW_C, SW_D, SW_A, SW_DL = 0, 1, 2, 3
+SW_WIDTH = 4
 
 
 @njit(cache=True, inline="always")
@@ -239,12 +249,30 @@ def _span_dir(TW, k, comp):
 
 
 @njit(cache=True, inline="always")
-def extra_coef(rk, TW, r):
-    """The B entry of a row's own coordinate (-2 in nl_rw): 1 for a W1 wrap's sigma, the span
-    direction's component for a slope row's stretch."""
+def extra_coef(rk, rf, TW, SW, r, k):
+    """The B entry of a row's own coordinate (k = -2 in nl_rw): 1 for a W1 wrap's sigma (D / (D + A)
+    when the wrap holds its rope at the leaving span's strain, and A / (D + A) for that span's far s,
+    k = -3: _strain_wrap), the span direction's component for a slope row's stretch."""
     if rk[r, 0] == ROW_SLOPE:
         return _span_dir(TW, rk[r, 1], rk[r, 3])
+    if rf[r, RF_EA] > 0.0:
+        S = SW[r, SW_D] + SW[r, SW_A]
+        return SW[r, SW_D] / S if k == -2 else SW[r, SW_A] / S
     return 1.0
+
+
+@njit(cache=True, inline="always")
+def _strain_wrap(q, rf, TW, SW, r, k_out, sig, A):
+    """s of the node leaving a W1 wrap that holds its rope at the leaving span's strain: the wrap
+    (arc A = R x angle) and that span (chord D, from the node to the far node's s2) share the material
+    s2 - sigma in proportion to their lengths, s = (sigma D + A s2) / (D + A), i.e. R x angle / (1 + eps)
+    of rope on the wrap. Keeps D, A and s2 - sigma in SW[r]."""
+    j2 = int(rf[r, RF_J2])
+    s2 = SW[r, SW_C] + (q[j2] if j2 >= 0 else 0.0)
+    d0, d1, d2 = TW[k_out, 3] - TW[k_out, 0], TW[k_out, 4] - TW[k_out, 1], TW[k_out, 5] - TW[k_out, 2]
+    D = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    SW[r, SW_D], SW[r, SW_A], SW[r, SW_DL] = D, A, s2 - sig
+    return (sig * D + A * s2) / (D + A)
 
 
 @njit(cache=True, inline="always")
@@ -263,7 +291,7 @@ def _slope_rate(TW, k, comp, lam, dT):
 
 
 @njit(cache=True)
-def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, only, f):
+def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, SW, only, f):
     """The nonlinear rows f at q.
     Body b: bq[b] = q indices of (x, y, z, angle, rotation vector) (-1: fixed at b0[b]); bk[b] = 0: reference point
     (x, y, z) turned by the angle about the unit axis bax[b] (planar theta: -y; revolute joint: its
@@ -276,8 +304,10 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
     sa[k, 0:3], sa[k, 3:6] in their bodies' axes; row r: rk[r] = (ROW_TANGENT, span, end, world
     component) or (ROW_WRAP, span in, span out, sigma index) with rf[r] = (R, sense relative to the
     span-in end-B axis, s offset, centre point) or (ROW_SLOPE, span, end, world component) with
-    rf[r, 0] = the stretch coordinate's index (f = q[stretch] * span direction). P, TW, BR (body rotations), ANG (contact angles), AX
-    (two axes) are scratch. only >= 0: recompute only the points and spans on body `only` (the others
+    rf[r, 0] = the stretch coordinate's index (f = q[stretch] * span direction); a W1 wrap at its leaving
+    span's strain (rf[r, RF_EA] > 0) reads that span's far s = SW[r, SW_C] (+ q[rf[r, RF_J2]]).
+    P, TW, BR (body rotations), ANG (contact angles), AX (two axes), SW (the strain wraps' D, A, s2 -
+    sigma) are scratch. only >= 0: recompute only the points and spans on body `only` (the others
     keep their values in P and TW: a Jacobian column of that body's coordinate)."""
     for b in range(bq.shape[0]):
         if bk[b] == 2:   # rotation vector phi: axis phi / |phi|, angle |phi|
@@ -335,7 +365,10 @@ def rows_eval(q, bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX
             v0, v1, v2 = _axis_w(bq, bk, BR, pb[ip], sa[k_in, 3], sa[k_in, 4], sa[k_in, 5])
             aB[0], aB[1], aB[2] = v0, v1, v2
             ang = _wrap_angle(P[ip], aB, rf[r, 1], TW[k_in, 3:6], TW[k_out, 0:3])
-            f[r] = q[rk[r, 3]] + rf[r, 2] + rf[r, 0] * ang
+            if rf[r, RF_EA] > 0.0:
+                f[r] = _strain_wrap(q, rf, TW, SW, r, k_out, q[rk[r, 3]], rf[r, 0] * ang)
+            else:
+                f[r] = q[rk[r, 3]] + rf[r, 2] + rf[r, 0] * ang
 
 
 @njit(cache=True)
@@ -475,8 +508,9 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
     rigidly (_twist); tangent points follow by implicit differentiation of the tangency conditions
     (_tangent_rate); a W1 wrap's s by R d(wrap angle), with d(angle of x about n) = (n x x) . dx / |x|^2.
     (rows_jacobian_fd: the same by central differences.)"""
-    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, SW = G
     rows_eval(q, *G, -1, f0)
+    nr = rk.shape[0]
     nsp = sp.shape[0]
     dTW = np.zeros((nsp, 6))
     tw = np.empty(9)
@@ -515,6 +549,18 @@ def rows_jacobian(q, G, cols, colbody, f0, fp, fm, qs, J):
             g -= ((n1 * x2 - n2 * x1) * (dTW[k_in, 3] - c0) + (n2 * x0 - n0 * x2) * (dTW[k_in, 4] - c1)
                   + (n0 * x1 - n1 * x0) * (dTW[k_in, 5] - c2)) / (x0 * x0 + x1 * x1 + x2 * x2)
             J[r, k] = rf[r, 0] * g
+            if rf[r, RF_EA] > 0.0:      # s = (sigma D + A s2) / (D + A): _strain_wrap
+                D, A, dl = SW[r, SW_D], SW[r, SW_A], SW[r, SW_DL]
+                dD = 0.0
+                for m in range(3):
+                    dD += (TW[k_out, 3 + m] - TW[k_out, m]) / D * (dTW[k_out, 3 + m] - dTW[k_out, m])
+                if J.shape[0] >= 4 * nr:    # dA/dq, dD/dq, rhoA g.dm/dq (span middle m): wrap_weight
+                    J[nr + r, k] = J[r, k]
+                    J[2 * nr + r, k] = dD
+                    J[3 * nr + r, k] = 0.5 * (rf[r, 4] * (dTW[k_out, 0] + dTW[k_out, 3])
+                                              + rf[r, 5] * (dTW[k_out, 1] + dTW[k_out, 4])
+                                              + rf[r, 6] * (dTW[k_out, 2] + dTW[k_out, 5]))
+                J[r, k] = dl * (D * J[r, k] - A * dD) / ((D + A) * (D + A))
 
 
 @njit(cache=True, inline="always")
@@ -707,7 +753,7 @@ def rows_accel(q, v, G, acc):
     differentiating the tangency conditions twice (_tangent_accel), a W1 wrap's s by R times the
     second derivative of the wrap angle in the sheave's frame.
     (rows_accel_fd: the same by a second difference along v.)"""
-    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX = G
+    bq, b0, bk, bax, pb, po, sp, sg, sa, rk, rf, P, TW, BR, ANG, AX, SW = G
     nb = bq.shape[0]
     mo = np.empty((nb, 15))
     for b in range(nb):
@@ -740,6 +786,7 @@ def rows_accel(q, v, G, acc):
         n0, n1, n2 = sgn * n0, sgn * n1, sgn * n2
         uc0, uc1, uc2, ac0, ac1, ac2 = _point_motion(P, ip, m)
         tot = 0.0
+        rate = 0.0
         for e in range(2):
             k, o = (k_out, 0) if e == 0 else (k_in, 3)
             x0, x1, x2 = TW[k, o] - P[ip, 0], TW[k, o + 1] - P[ip, 1], TW[k, o + 2] - P[ip, 2]
@@ -758,7 +805,38 @@ def rows_accel(q, v, G, acc):
             th = ((nx0 * z0 + nx1 * z1 + nx2 * z2) / xx
                   - 2.0 * (nx0 * y0 + nx1 * y1 + nx2 * y2) * (x0 * y0 + x1 * y1 + x2 * y2) / (xx * xx))
             tot += th if e == 0 else -th
+            rt = (nx0 * y0 + nx1 * y1 + nx2 * y2) / xx
+            rate += rt if e == 0 else -rt
         acc[r] = rf[r, 0] * tot
+        if rf[r, RF_EA] > 0.0:
+            acc[r] = _strain_wrap_accel(v, rf, SW, r, TW[k_out], VT[k_out], AT[k_out], rk[r, 3],
+                                        rf[r, 0] * rate, rf[r, 0] * tot)
+
+
+@njit(cache=True)
+def _strain_wrap_accel(v, rf, SW, r, T, VT, AT, jsig, Ad, Add):
+    """Convective acceleration of s = s2 - (s2 - sigma) phi, phi = D / (D + A) (_strain_wrap):
+    -2 (s2 - sigma)' phi' - (s2 - sigma) phi'' at zero coordinate accelerations, with
+    phi' = (D' A - D A') / (D + A)^2, phi'' = (D'' A - D A'') / (D + A)^2 - 2 (D' A - D A') (D' + A') / (D + A)^3;
+    A' = Ad, A'' = Add (the wrap arc's rate and convective acceleration), D'' = e . (the touching
+    points' convective accelerations) + (|D'|^2 - (e . D')^2) / D."""
+    D, A, dl = SW[r, SW_D], SW[r, SW_A], SW[r, SW_DL]
+    Dd = 0.0
+    dd2 = 0.0
+    ea = 0.0
+    for m in range(3):
+        e = (T[3 + m] - T[m]) / D
+        dv = VT[3 + m] - VT[m]
+        Dd += e * dv
+        dd2 += dv * dv
+        ea += e * (AT[3 + m] - AT[m])
+    Ddd = ea + (dd2 - Dd * Dd) / D
+    S = D + A
+    j2 = int(rf[r, RF_J2])
+    dld = (v[j2] if j2 >= 0 else 0.0) - v[jsig]
+    ph1 = (Dd * A - D * Ad) / (S * S)
+    ph2 = (Ddd * A - D * Add) / (S * S) - 2.0 * (Dd * A - D * Ad) * (Dd + Ad) / (S * S * S)
+    return -2.0 * dld * ph1 - dl * ph2
 
 
 @njit(cache=True)
@@ -772,6 +850,10 @@ def rows_accel_fd(q, v, G, cols, f0, fp, fm, qs, acc):
     for r in range(rk.shape[0]):
         if rk[r, 0] == ROW_SLOPE:
             sel[int(rf[r, 0])] = True
+        elif rk[r, 0] == ROW_WRAP and rf[r, RF_EA] > 0.0:    # sigma and s2 of a strain wrap
+            sel[rk[r, 3]] = True
+            if rf[r, RF_J2] >= 0.0:
+                sel[int(rf[r, RF_J2])] = True
     nrm = 0.0
     for j in range(q.shape[0]):
         if sel[j] and abs(v[j]) > nrm:
@@ -799,10 +881,21 @@ def nl_update(K, W, c, q, v):
     f0, fp, fm, J = W.nl_f0, W.nl_fp, W.nl_fm, W.nl_J
     qs = W.nl_qs
     G = (K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, K.nl_pb, K.nl_po, K.nl_sp, K.nl_sg, K.nl_sa, K.nl_rk, K.nl_rf,
-         W.nl_P, W.nl_TW, W.nl_BR, W.nl_ang, W.nl_AX)
+         W.nl_P, W.nl_TW, W.nl_BR, W.nl_ang, W.nl_AX, W.nl_SW)
+    strain_far_s(K.nl_rk, K.nl_rf, c, W.nl_SW)
     rows_jacobian(q, G, K.nl_cols, K.nl_colbody, f0, fp, fm, qs, J)
+    for i in range(q.shape[0]):     # q of this update (wrap_weight linearises the rows about it)
+        qs[i] = q[i]
     acc = W.nl_racc
-    rows_accel(q, v, G, acc)
+    at_rest = True
+    for j in range(v.shape[0]):
+        if v[j] != 0.0:
+            at_rest = False
+            break
+    if at_rest:           # statics: no convective accelerations
+        acc[:] = 0.0
+    else:
+        rows_accel(q, v, G, acc)
     el_idx, el_map, el_coef, ent, rw = K.el_idx, K.el_map, W.el_coef, K.nl_ent, K.nl_rw
     for ie in range(ent.shape[0]):
         for a in range(ent.shape[1]):
@@ -812,11 +905,21 @@ def nl_update(K, W, c, q, v):
             x = f0[r]
             for w in range(el_map.shape[2]):
                 k = rw[r, w]
-                b = 0.0 if k == -1 else (extra_coef(K.nl_rk, W.nl_TW, r) if k == -2 else J[r, k])
+                b = 0.0 if k == -1 else (extra_coef(K.nl_rk, K.nl_rf, W.nl_TW, W.nl_SW, r, k) if k < -1
+                                         else J[r, k])
                 el_coef[ie, a, w] = b
                 x -= b * q[el_map[ie, a, w]]
             c[el_idx[ie, a]] = x
             W.nl_acc[ie, a] = acc[r]
+
+
+@njit(cache=True)
+def strain_far_s(rk, rf, c, SW):
+    """SW[r, SW_C] <- the constant part of a strain wrap's far s (c of its node's row: the rope's length
+    at a rope end)."""
+    for r in range(rk.shape[0]):
+        if rf[r, RF_EA] > 0.0:
+            SW[r, SW_C] = c[int(rf[r, RF_ROW])]
 
 
 @njit(cache=True)
@@ -825,28 +928,93 @@ def wrap_weight(K, W, Q, q, energy):
     per wrap (l_w = s_out - sigma, c the sheave centre, lw the lumped part). Without it the span
     elements' gravity potential, which counts material leaving a span at the span's mid-height, makes a
     spurious force rhoA g.(span mid - c) R d(wrap angle)/dq. Q -= dV/dq = rhoA g.c d l_w/dq (the rope
-    moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope). energy: return V
-    instead (after nl_update on W)."""
-    rk, rf, P, J, cols, f0, pb = K.nl_rk, K.nl_rf, W.nl_P, W.nl_J, K.nl_cols, W.nl_f0, K.nl_pb
+    moved) + rhoA (l_w - lw) g.dc/dq (the centre moving under the unlumped rope).
+    A wrap at its leaving span's strain (l_w = A / lambda, A = R x angle) adds its rope's strain energy
+    (_wrap_strain) and counts its stretch deficit l_w - A at the leaving span's middle m instead of at
+    c, V = -rhoA g.((l_w - lw) c + (l_w - A)(m - c)): the material that moves between the wrap and the
+    span as the span's chord D changes then weighs where the span's element counts it, so a payload
+    hanging from a one-element span carries M g at its end (at c: a force rhoA g.(m - c) A/(D + A)
+    per unit chord, 1.2e-4 of M g on the slewing crane). energy: return V instead (after nl_update
+    on W)."""
+    rk, rf, P, J, cols, f0, pb, TW, SW = K.nl_rk, K.nl_rf, W.nl_P, W.nl_J, K.nl_cols, W.nl_f0, K.nl_pb, W.nl_TW, W.nl_SW
+    nr = rk.shape[0]
     V = 0.0
-    for r in range(rk.shape[0]):
+    for r in range(nr):
         if rk[r, 0] != ROW_WRAP:
             continue
         ip = int(rf[r, 3])
         gc = rf[r, 4] * P[ip, 0] + rf[r, 5] * P[ip, 1] + rf[r, 6] * P[ip, 2]
-        dl = f0[r] - q[rk[r, 3]] - rf[r, 7]
+        sig = q[rk[r, 3]]
+        f = f0[r]
+        strain = rf[r, RF_EA] > 0.0
+        gm = gc      # the weight's coefficient of d l_w
+        dmat = 0.0   # s2 - sigma
+        D, A = SW[r, SW_D], SW[r, SW_A]
+        if strain:
+            # q as it is now: f0, D, A are those of the last update, which the Newton matrix's
+            # differences keep (W.frz); sigma, s2 and, to first order (rows_jacobian), D and A follow q
+            j2 = int(rf[r, RF_J2])
+            s2 = SW[r, SW_C] + (q[j2] if j2 >= 0 else 0.0)
+            dA = 0.0
+            dD = 0.0
+            for k in range(cols.shape[0]):
+                dx = q[cols[k]] - W.nl_qs[cols[k]]
+                dA += J[nr + r, k] * dx
+                dD += J[2 * nr + r, k] * dx
+            A += dA
+            D += dD
+            f = (sig * D + A * s2) / (D + A)
+            dmat = s2 - sig
+            V += _wrap_strain(K, W, Q, r, D, A, dmat, energy)
+            ko = rk[r, 2]
+            gm = 0.5 * (rf[r, 4] * (TW[ko, 0] + TW[ko, 3]) + rf[r, 5] * (TW[ko, 1] + TW[ko, 4])
+                        + rf[r, 6] * (TW[ko, 2] + TW[ko, 5]))
+        dl = f - sig - rf[r, 7]
+        lx = f - sig - A if strain else 0.0     # l_w - A
         if energy:
-            V -= dl * gc
+            V -= dl * gc + lx * (gm - gc)
             continue
+        if strain:     # l_w = s - sigma also moves with sigma and s2
+            Q[rk[r, 3]] += gm * (D / (D + A) - 1.0)
+            if rf[r, RF_J2] >= 0.0:
+                Q[int(rf[r, RF_J2])] += gm * A / (D + A)
         for k in range(cols.shape[0]):
-            Q[cols[k]] += gc * J[r, k]
+            Q[cols[k]] += gm * J[r, k]
+            if strain:
+                Q[cols[k]] += lx * J[3 * nr + r, k] - (gm - gc) * J[nr + r, k]
             b = K.nl_colbody[k]
             if _on(K.nl_bq, K.nl_bk, pb[ip], b):
                 v0, v1, v2, w0, w1, w2, O0, O1, O2 = _twist(q, K.nl_bq, K.nl_b0, K.nl_bk, K.nl_bax, W.nl_BR, b,
                                                             cols[k])
                 c0, c1, c2 = _moved(P, ip, True, v0, v1, v2, w0, w1, w2, O0, O1, O2)
-                Q[cols[k]] += dl * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
+                Q[cols[k]] += (dl - lx) * (rf[r, 4] * c0 + rf[r, 5] * c1 + rf[r, 6] * c2)
     return V
+
+
+@njit(cache=True)
+def _wrap_strain(K, W, Q, r, D, A, dl, energy):
+    """Strain energy of the rope on a wrap that holds it at its leaving span's strain (_strain_wrap):
+    U = l_w w(lambda), l_w = A Delta / S, lambda = S / Delta (S = D + A, Delta = s2 - sigma: the wrap
+    and the span are one stretch of rope; w the elements' axial law). Q -= dU/dq through A and D
+    (their q-derivatives kept by rows_jacobian below the rows' Jacobian), sigma and s2 (D, A, dl =
+    s2 - sigma: wrap_weight's, at q). energy: return U (Q untouched), else 0."""
+    rk, rf, J, cols = K.nl_rk, K.nl_rf, W.nl_J, K.nl_cols
+    nr = rk.shape[0]
+    S = D + A
+    lam = S / dl
+    el = int(rf[r, RF_EL])     # the element's law (a statics may swap tension-only for bilateral)
+    N, w, _ = axial_law(K.el_EA[el], 0.0, lam - 1.0, 0.0, K.el_tonly[el] != 0)
+    if energy:
+        return A * dl / S * w
+    UA = dl * D * w / (S * S) + A * N / S
+    UD = -A * dl * w / (S * S) + A * N / S
+    Ud = A * (w - N * lam) / S
+    for k in range(cols.shape[0]):
+        Q[cols[k]] -= UA * J[nr + r, k] + UD * J[2 * nr + r, k]
+    Q[rk[r, 3]] += Ud
+    if rf[r, RF_J2] >= 0.0:
+        Q[int(rf[r, RF_J2])] -= Ud
+    return 0.0
 
 
 @njit(cache=True, inline="always")
@@ -862,16 +1030,21 @@ def nl_convect(W, MEs, QEs, ie):
         QEs[ie, a] -= s
 
 
-# The kernel fields of the geometry rows_eval reads (the first 11 of its tuple G); the last five are
-# scratch and warm start: points, span tangents, body rotations, contact angles, axes (geometry()).
+# The kernel fields of the geometry rows_eval reads (the first 11 of its tuple G); the last six are
+# scratch and warm start: points, span tangents, body rotations, contact angles, axes, strain wraps
+# (geometry()).
 GEOMETRY_FIELDS = ("nl_bq", "nl_b0", "nl_bk", "nl_bax", "nl_pb", "nl_po", "nl_sp", "nl_sg", "nl_sa", "nl_rk",
                    "nl_rf")
 
 
-def geometry(K, ang=None):
+def geometry(K, ang=None, c=None):
     """rows_eval's tuple G for kernel fields K (a Kernel or any object with them) with fresh scratch;
-    ang: the contact angles' warm start (default: K.nl_ang0's copy; NaN: from the coplanar formula)."""
+    ang: the contact angles' warm start (default: K.nl_ang0's copy; NaN: from the coplanar formula);
+    c: the model's c (the strain wraps' far s at rope ends; default: zero)."""
     nsp = K.nl_sp.shape[0]
+    SW = np.zeros((K.nl_rk.shape[0], SW_WIDTH))
+    if c is not None:
+        strain_far_s(K.nl_rk, K.nl_rf, np.asarray(c, float), SW)
     return tuple(getattr(K, f) for f in GEOMETRY_FIELDS) + (
         np.zeros((K.nl_pb.shape[0], 3)), np.zeros((nsp, 6)), np.zeros((K.nl_bq.shape[0], 5)),
-        K.nl_ang0.copy() if ang is None else ang, np.zeros((2, 3)))
+        K.nl_ang0.copy() if ang is None else ang, np.zeros((2, 3)), SW)

@@ -137,7 +137,10 @@ WORK_FIELDS = (("M", "float[,]"), ("Q", "float[]"), ("QE", "float[,]"), ("VE", "
                ("nl_J", "float[,]"), ("nl_racc", "float[]"), ("nl_acc", "float[,]"), ("nl_P", "float[,]"),
                ("nl_TW", "float[,]"), ("nl_BR", "float[,]"), ("nl_AX", "float[,]"), ("frz", "int[]"),
                # the torsion spans' (M, kappa) at the last assembly (outputs)
-               ("tq_out", "float[,]"))
+               ("tq_out", "float[,]"),
+               # the W1 wraps at their leaving span's strain (bodies.SW_*; after the torsion outputs so
+               # that the fields above keep their places)
+               ("nl_SW", "float[,]"))
 Work = namedtuple("Work", [name for name, _ in WORK_FIELDS])
 
 # A State's arrays (model.State) in one object, the same buffers: the step call then passes 8

@@ -14,7 +14,7 @@ import numpy as np
 from ._jit import gated, njit
 from .elements.cubic import cubic_element_at, cubic_elastic, cubic_gravity
 from .elements.linear import end_tension, linear_element_1d_at, linear_element_at, reported_tension
-from .bodies import nl_convect, nl_update, wrap_weight
+from .bodies import SW_WIDTH, nl_convect, nl_update, wrap_weight
 from .contact import (brake_torque, buffer_force, creep_angle, creep_input_set, creep_terms_at, creep_wound,
                       sheave_terms, traction_force, traction_kappa, traction_slip, wound_kappa)
 from .elements.torsion import torsion_energy, torsion_terms
@@ -135,10 +135,10 @@ def _work(K, S, M, Q):
     nr = K.nl_rk.shape[0]
     return new_work(M, Q, np.empty((n_el, ne)), np.empty((n_el, ne)), np.empty((n_el, ne, ne)), np.empty((n_el, ne)),
                     np.empty(K.nq), S.el_coef, S.nl_ang, S.tq_dref, S.jp_prof, S.jt_tab, np.zeros(nr), np.zeros(nr),
-                    np.zeros(nr), np.zeros(K.nq), np.zeros((nr, K.nl_cols.shape[0])), np.zeros(nr),
+                    np.zeros(nr), np.zeros(K.nq), np.zeros((4 * nr, K.nl_cols.shape[0])), np.zeros(nr),
                     np.zeros(K.nl_ent.shape), np.zeros((K.nl_pb.shape[0], 3)), np.zeros((K.nl_sp.shape[0], 6)),
                     np.zeros((K.nl_bq.shape[0], 5)), np.zeros((2, 3)), np.zeros(1, np.int64),
-                    np.zeros((K.tq_el.shape[0], 2)))
+                    np.zeros((K.tq_el.shape[0], 2)), np.zeros((nr, SW_WIDTH)))
 
 
 @njit(cache=True)
@@ -343,6 +343,47 @@ def assemble_ws(K, W, c, q, v, t, u):
     Md = W.Md
     for j in range(nq):
         M[j, j] += Md[j]
+    return status
+
+
+@njit(cache=True)
+def static_forces(K, W, c, q, zero, t, u):
+    """W.Q = the generalized forces at rest (v = zero) without assembling the mass matrix:
+    assemble_ws's Q at v = 0 (the same sums in the same order, less the nonlinear rows' convective
+    terms, which vanish at rest), for a statics that needs no M (studies/crane.py). Returns
+    assemble_ws's status."""
+    nq = K.nq
+    Q = W.Q
+    MEs = W.MEs
+    QEs = W.QEs
+    el_map = K.el_map
+    el_coef = W.el_coef
+    nw = el_map.shape[2]
+    ne = K.el_idx.shape[1]
+    for i in range(nq):
+        Q[i] = K.F0[i]
+    status = 0
+    nl = (K.nl_on & 1) != 0
+    if nl and W.frz[0] == 0:
+        _nl_update(K, K, W, c, q, zero)
+    for ie in range(el_map.shape[0]):
+        st, ok = element_eval(K, el_coef, c, q, zero, ie, W.QE, W.VE, MEs, QEs)
+        if st < 0:
+            status = st
+        if not ok:
+            continue
+        for a in range(ne):
+            for wa in range(nw):
+                ba = el_coef[ie, a, wa]
+                if ba != 0.0:
+                    Q[el_map[ie, a, wa]] += ba * QEs[ie, a]
+    if nl:
+        _wrap_weight(K, K, W, Q, q, False)
+    q_terms(K, W, q, zero, t, u)
+    if K.nl_on & 2:     # rigid bodies' rotational terms (their M part is all it writes at rest)
+        _rigid_terms(K, K, q, zero, W.M, Q)
+    if K.nl_on & 4:
+        _torsion_terms(K, K, W, W.QE, q, Q)
     return status
 
 

@@ -31,7 +31,9 @@ from ..core.geometry import GeometryError
 from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
-from ..core.system import assemble
+from ..core.solver.lu import lu_factor, lu_solve
+from ..core._jit import njit
+from ..core.system import static_forces, workspace
 
 
 class CraneError(ValueError):
@@ -137,6 +139,23 @@ class Crane:
         return float(np.mean([z(top) - z(bot) for top, bot in self.ends]))
 
 
+def _height_arrays(crane: Crane):
+    """_height's arrays for Crane.height: the block's (x, y, z, rx, ry, rz) indices, the weights +-1/n
+    and offsets of the fall ends on the block, and the ground ends' constant part."""
+    bd = crane.model.body_dofs[crane.spec.block]
+    n = len(crane.ends)
+    hw, hE, hc = [], [], 0.0
+    for top, bot in crane.ends:
+        for e, w in ((top, 1.0 / n), (bot, -1.0 / n)):
+            if e[0] is None:
+                hc += w * float(e[1][2])
+            else:
+                hw.append(w)
+                hE.append(np.asarray(e[1], float))
+    return (np.array([bd[a] for a in ("x", "y", "z", "rx", "ry", "rz")], np.int64), np.array(hw, float),
+            np.array(hE, float).reshape(-1, 3), hc)
+
+
 def _rotation_matrix(v):
     th = float(np.linalg.norm(v))
     if th < 1e-300:
@@ -224,10 +243,69 @@ def load_crane(path, sets: dict | None = None) -> Crane:
 
 
 # ------------------------------------------------------------------------------------- statics
+@njit(cache=True)
+def _height(q, hd, hw, hE, hc):
+    """Crane.height in compiled form: hc + sum_i hw[i] z(block point i), z = the block's z + the z row
+    of its rotation (rotation vector q[hd[3:6]], Rodrigues) applied to the offset hE[i]."""
+    p0, p1, p2 = q[hd[3]], q[hd[4]], q[hd[5]]
+    th = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    k0 = k1 = k2 = 0.0
+    sn, cm = 0.0, 0.0
+    if th >= 1e-300:
+        k0, k1, k2 = p0 / th, p1 / th, p2 / th
+        sn, cm = math.sin(th), 1.0 - math.cos(th)
+    h = hc
+    for i in range(hw.shape[0]):
+        e0, e1, e2 = hE[i, 0], hE[i, 1], hE[i, 2]
+        ke = k0 * e0 + k1 * e1 + k2 * e2
+        h += hw[i] * (q[hd[2]] + e2 + sn * (k0 * e1 - k1 * e0) + cm * (k2 * ke - e2))
+    return h
+
+
+@njit(cache=True)
+def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
+    """Statics.residual into r (hgeo: _height's arrays; r one longer than eqs: the height row).
+    Returns its largest magnitude (inf if not finite), -1 if a span vanishes."""
+    if static_forces(K, W, c, q, zero, 0.0, u) < 0:
+        return -1.0
+    Q = W.Q
+    for i in range(eqs.shape[0]):
+        r[i] = Q[eqs[i]] / fscale
+    if r.shape[0] > eqs.shape[0]:
+        hd, hw, hE, hc = hgeo
+        r[eqs.shape[0]] = _height(q, hd, hw, hE, hc) - value
+    err = 0.0
+    for i in range(r.shape[0]):
+        a = abs(r[i])
+        if not a <= 1e300:
+            return math.inf
+        err = max(err, a)
+    return err
+
+
+@njit(cache=True)
+def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
+    """Forward differences of _residual over the unknowns into J (the reference of the closed-form
+    one's test); False if a span vanishes."""
+    for k in range(unk.shape[0]):
+        j = unk[k]
+        qj = q[j]
+        q[j] = qj + 1e-7 * (1.0 + abs(qj))
+        dq = q[j] - qj
+        ok = _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, rp) >= 0.0
+        q[j] = qj
+        if not ok:
+            return False
+        for i in range(r0.shape[0]):
+            J[i, k] = (rp[i] - r0[i]) / dq
+    return True
+
+
 class Statics:
     """Static equilibria of the crane's dynamic model with the drum's rope coordinate free and one
     constraint in its place: a prescribed fall length h, or a prescribed block yaw (its rotation
-    vector's z component). Newton with a forward-difference Jacobian of the assembled forces."""
+    vector's z component). Newton with a forward-difference Jacobian of the assembled forces
+    (compiled: _residual, _fd_jacobian)."""
 
     def __init__(self, crane: Crane, st):
         m = crane.model
@@ -235,41 +313,46 @@ class Statics:
         self.u = crane.sim.kernel_inputs(st)
         self.jd = m.sheave_dof[crane.drum]
         self.jyaw = m.body_dofs[crane.spec.block]["rz"]
-        self.eqs = np.array(m.statics_equations)
+        self.eqs = np.array(m.statics_equations, np.int64)
         self.fscale = max(1.0, float(np.max(np.abs(m.K.F0))))
-        self.M, self.Q = np.empty((m.nq, m.nq)), np.empty(m.nq)
+        self.W = workspace(m.KJ, st.arrays())
         self.zero = np.zeros(m.nq)
+        self.hgeo = _height_arrays(crane)
         self.stats = [0, 0]          # Newton iterations, Jacobians
 
     def unknowns(self, mode):
         free = set(self.eqs) | {self.jd}
-        return np.array(sorted(free - {self.jyaw} if mode == "yaw" else free))
+        return np.array(sorted(free - {self.jyaw} if mode == "yaw" else free), np.int64)
 
     def residual(self, q, mode, value):
         """Scaled forces of the statics equations, then the constraint (height row, m) for mode 'height';
         None if a span vanishes."""
-        if assemble(self.crane.model.KJ, self.st.arrays(), self.st.c, q, self.zero, 0.0, self.u, self.M, self.Q) < 0:
-            return None
-        r = self.Q[self.eqs] / self.fscale
-        return np.append(r, self.crane.height(q) - value) if mode == "height" else r
+        return self._residual(q, mode, value)[0]
+
+    def _residual(self, q, mode, value):
+        """(residual or None, its largest magnitude: inf if not finite)."""
+        r = np.empty(len(self.eqs) + (mode == "height"))
+        err = _residual(self.crane.model.KJ, self.W, self.st.c, q, self.zero, self.u, self.eqs, self.fscale,
+                        self.hgeo, float(value), r)
+        return (r, err) if err >= 0.0 else (None, math.inf)
 
     def jacobian(self, q, unk, mode, value, r0=None):
         r0 = self.residual(q, mode, value) if r0 is None else r0
+        if r0 is None:
+            return None
         J = np.empty((len(r0), len(unk)))
-        for k, j in enumerate(unk):
-            qp = q.copy()
-            qp[j] += 1e-7 * (1.0 + abs(q[j]))
-            rp = self.residual(qp, mode, value)
-            if rp is None:
-                return None
-            J[:, k] = (rp - r0) / (qp[j] - q[j])
+        if not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                            self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
+            return None
         self.stats[1] += 1
         return J
 
-    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5):
+    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
-        the tangent solver's warm start is restored on failure or when it jumped (_branch_jump)."""
+        the tangent solver's warm start is restored on failure or when it jumped (_branch_jump).
+        keep: a given J that converged within `keep` iterations is returned as the Jacobian at q (the
+        continuation's next predictor); else a fresh one is differenced there."""
         ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
@@ -277,32 +360,63 @@ class Statics:
             q[self.jyaw] = value
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
+        given = J is not None
+        F = _factor(J) if given else None
+        if given and F is None:
+            J = None
         for it in range(maxit):
-            r = self.residual(q, mode, value)
-            if r is None or not np.all(np.isfinite(r)):
+            r, err = self._residual(q, mode, value)
+            if not err < math.inf:
                 break
-            err = float(np.max(np.abs(r)))
             if err < tol:
                 if _branch_jump(ang, self.st.nl_ang):
                     break
+                if given and it <= keep:
+                    return q, J
                 return q, self.jacobian(q, unk, mode, value, r)
             if J is None or (it > 0 and err > 0.25 * err_prev and not fresh):
                 J, fresh = self.jacobian(q, unk, mode, value, r), True
                 if J is None:
                     break
+                given = False
+                F = _factor(J)
+                if F is None:
+                    break
             else:
                 fresh = False
             err_prev = err
-            try:
-                dx = np.linalg.solve(J, -r)
-            except np.linalg.LinAlgError:
-                break
+            dx = _lu_apply(F, -r)
             if not np.all(np.isfinite(dx)) or (mode == "height" and abs(dx[np.searchsorted(unk, self.jyaw)]) > max_dyaw):
                 break
             q[unk] += dx
             self.stats[0] += 1
         self.st.nl_ang[:] = ang
         return None, None
+
+
+def _factor(J):
+    """LU factors (core/solver/lu.py) of J, or None if J is singular or not finite."""
+    LU, piv = J.copy(), np.empty(len(J), np.int64)
+    if not lu_factor(LU, piv) or not np.all(np.isfinite(np.diag(LU))):
+        return None
+    return LU, piv
+
+
+def _lu_apply(F, b):
+    """J^-1 b from J's factors."""
+    x = np.array(b, float)
+    lu_solve(F[0], F[1], x)
+    return x
+
+
+def _lu_sign(F) -> int:
+    """The sign of det J from its LU factors (_factor); 0 if singular."""
+    if F is None:
+        return 0
+    LU, piv = F
+    d = np.diag(LU)
+    swaps = int(np.count_nonzero(piv != np.arange(len(piv))))
+    return (-1) ** (swaps + int(np.count_nonzero(d < 0.0)))
 
 
 def _branch_jump(before, after, limit=0.5) -> bool:
@@ -381,6 +495,12 @@ class SweepResult:
     crane: Crane
 
 
+# a continuation step whose chord Newton converged within this many iterations keeps its Jacobian for
+# the next predictor (the path's Jacobian changes little per step; a fresh one costs an assembly per
+# unknown)
+KEEP_ITERATIONS = 4
+
+
 class _Continuation:
     """Natural continuation of the statics in the fall length h."""
 
@@ -390,15 +510,17 @@ class _Continuation:
         self.iyaw = int(np.searchsorted(self.unk, S.jyaw))
         self.steps = self.rejected = 0
         self.history = [(h, q[S.jyaw])]
+        self.prev = None             # (h, q) of the previous accepted point: the secant predictor
 
     def continue_to(self, h_target, dh_min, yaw_step):
         """From the current point to h_target; False at a fold (no equilibrium beyond self.h within
         dh_min, or the Jacobian's determinant changes sign: a jump onto the unstable branch)."""
-        sign0 = np.linalg.slogdet(self.J)[0]
+        F = _factor(self.J)
+        sign0 = _lu_sign(F)
         e = np.zeros(len(self.unk))
         e[-1] = 1.0
         while abs(h_target - self.h) > 1e-12 * max(1.0, abs(h_target)):
-            v = np.linalg.solve(self.J, e)          # dx/dh: the height row is h(q) - h
+            v = _lu_apply(F, e)          # dx/dh: the height row is h(q) - h
             dh = h_target - self.h
             if abs(v[self.iyaw] * dh) > yaw_step:
                 dh = math.copysign(yaw_step / abs(v[self.iyaw]), dh)
@@ -406,11 +528,20 @@ class _Continuation:
                 if abs(dh) < dh_min:
                     return False
                 qp = self.q.copy()
-                qp[self.unk] += dh * v
-                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12)
-                if qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step \
-                        and np.linalg.slogdet(Jn)[0] in (sign0, 0):
-                    self.q, self.h, self.J = qn, self.h + dh, Jn
+                if self.prev is not None and abs(dh) <= 2.0 * abs(self.h - self.prev[0]):
+                    qp += (self.q - self.prev[1]) * (dh / (self.h - self.prev[0]))   # secant: second order
+                else:
+                    qp[self.unk] += dh * v
+                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS)
+                ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
+                Fn = _factor(Jn) if ok else None
+                if ok and _lu_sign(Fn) != sign0:     # a kept J: check a fresh one
+                    Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
+                    Fn = _factor(Jn) if Jn is not None else None
+                    ok = Fn is not None and _lu_sign(Fn) == sign0
+                if ok:
+                    self.prev = (self.h, self.q)
+                    self.q, self.h, self.J, F = qn, self.h + dh, Jn, Fn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
                     break
@@ -433,26 +564,37 @@ def _columns(crane: Crane, n: int) -> dict:
     return cols
 
 
-def _record(crane: Crane, st, q, cols, i):
-    """Row i of the sweep's columns at the equilibrium q."""
-    m = crane.model
-    st = st.copy()
-    st.q[:] = q
-    y = dict(zip(m.output_names, crane.sim.outputs(st)))
-    bd = m.body_dofs[crane.spec.block]
-    Rm = _rotation_matrix(np.array([q[bd[a]] for a in ("rx", "ry", "rz")]))
-    cols["block.yaw"][i] = q[bd["rz"]]
-    cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
-    cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
-    cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = (q[bd[a]] for a in ("x", "y", "z"))
-    for k, nm in enumerate(crane.span_names):
-        a, b = crane.tension_outputs[k]
-        cols[f"{nm}.tension"][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
-    rope = crane.spec.rope
-    cols["rope.torque"][i] = float(np.mean([y[f"{rope}.span{k}.torque"] for k in crane.falls]))
-    tw = [y[f"{rope}.span{k}.twist"] for k in crane.falls]
-    cols["rope.twist"][i] = float(np.mean(tw)) if "twist" in m.q_kind else math.nan   # no twist state: NaN
-    cols["drum.s"][i] = q[m.sheave_dof[crane.drum]]
+class _Recorder:
+    """Rows of the sweep's columns at equilibria: the output indices looked up once, the outputs
+    evaluated on one scratch copy of the State."""
+
+    def __init__(self, crane: Crane, st):
+        m = crane.model
+        self.crane, self.st = crane, st.copy()
+        ix = {n: k for k, n in enumerate(m.output_names)}
+        self.tension = [(f"{nm}.tension", ix[a], ix[b]) for nm, (a, b) in zip(crane.span_names, crane.tension_outputs)]
+        rope = crane.spec.rope
+        self.torque = [ix[f"{rope}.span{k}.torque"] for k in crane.falls]
+        self.twist = [ix[f"{rope}.span{k}.twist"] for k in crane.falls] if "twist" in m.q_kind else None
+        self.bd = m.body_dofs[crane.spec.block]
+        self.jd = m.sheave_dof[crane.drum]
+
+    def record(self, q, cols, i):
+        """Row i of the sweep's columns at the equilibrium q."""
+        self.st.q[:] = q
+        y = self.crane.sim.outputs(self.st)
+        bd = self.bd
+        Rm = _rotation_matrix(np.array([q[bd["rx"]], q[bd["ry"]], q[bd["rz"]]]))
+        cols["block.yaw"][i] = q[bd["rz"]]
+        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
+        cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
+        cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = q[bd["x"]], q[bd["y"]], q[bd["z"]]
+        for nm, a, b in self.tension:
+            cols[nm][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
+        cols["rope.torque"][i] = sum(y[k] for k in self.torque) / len(self.torque)
+        # no twist state: NaN
+        cols["rope.twist"][i] = sum(y[k] for k in self.twist) / len(self.twist) if self.twist else math.nan
+        cols["drum.s"][i] = q[self.jd]
 
 
 def sweep(crane: Crane, heights=None) -> SweepResult:
@@ -475,6 +617,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
     t0 = time.perf_counter()
     dh_min = spec.fold_tol * float(np.ptp(heights) or 1.0)
     cont = _Continuation(S, q, h0, J)
+    rec = _Recorder(crane, st)
     cols = _columns(crane, len(heights))
     cols["height"][:] = heights
     crit = crit_yaw = None
@@ -487,7 +630,7 @@ def sweep(crane: Crane, heights=None) -> SweepResult:
             break
         if i == 0:
             cont.history = [(cont.h, cont.q[S.jyaw])]
-        _record(crane, st, cont.q, cols, i)
+        rec.record(cont.q, cols, i)
     return SweepResult(columns=cols, critical_height=crit, critical_yaw=crit_yaw,
                        seconds=time.perf_counter() - t0, first_solve_seconds=t_first,
                        path=np.array(cont.history + path), steps=cont.steps, rejected=cont.rejected,

@@ -99,7 +99,9 @@ def _check_geometry(m, sim, st):
     X = _nodes(m, st)
     for k, (TA, TB) in enumerate(T):
         check('node coordinates - tangent points', X[k, :4] - np.r_[TA[[0, 2]], TB[[0, 2]]], 1e-14, reason=ROUNDOFF)
-    return sum(X[k, 5] - X[k, 4] for k in range(3)) + sum(wraps)
+    # a W1 wrap holds R x angle of rope at its leaving span's strain: R angle (s2 - s1) / |r2 - r1|
+    held = [w * (X[k, 5] - X[k, 4]) / np.linalg.norm(X[k, 2:4] - X[k, :2]) for w, k in zip(wraps, (1, 2))]
+    return sum(X[k, 5] - X[k, 4] for k in range(3)) + sum(held)
 
 
 def test_rope_over_sheaves_on_a_rotating_and_a_translating_body():

@@ -1,6 +1,7 @@
 """Exact tangents over skewed sheaves (the 8-fall crane reeving): the generalized forces of the spans
-and W1 wraps are minus the gradient of the rope's elastic energy, with the rope path (tangent points
-and wrap angles) computed independently here from the scene data and the block pose."""
+and W1 wraps (their rope at the leaving span's strain) are minus the gradient of the rope's elastic
+energy, with the rope path (tangent points and wrap angles) computed independently here from the scene
+data and the block pose."""
 from dataclasses import replace
 
 import numpy as np
@@ -49,8 +50,8 @@ def test_wrap_and_tangent_forces_are_the_elastic_energy_gradient():
     m = build_model(sc)
     st = Simulator(m).initial_state()
     nq, EA = m.nq, sc.ropes[0].EA
-    # material constants of the span ends: s = sigma (+ R * wrap angle leaving a W1 wrap) + const,
-    # read once at the start pose from the model's element data
+    # material constants of the span ends: s = sigma + const (the drum, the span ends), read once at
+    # the start pose from the model's element data; a W1 wrap's leaving s follows from U's law below
     ne = m.K.el_idx.shape[1]
     nel = m.K.el_idx.shape[0]
     QE, VE = np.empty((nel, ne)), np.empty((nel, ne))
@@ -72,10 +73,16 @@ def test_wrap_and_tangent_forces_are_the_elastic_energy_gradient():
         u = 0.0
         for k, (TA, TB) in enumerate(spans):
             jA, jB = stops[k][4], stops[k + 1][4]
-            sA = const[k][0] + (q[jA] + stops[k][1] * wraps[k] if jA is not None else 0.0)
             sB = const[k][1] + (q[jB] if jB is not None else 0.0)
-            L = sB - sA
-            u += 0.5 * EA * (np.linalg.norm(TB - TA) - L) ** 2 / L
+            D = np.linalg.norm(TB - TA)
+            if k > 0 and jA is not None:
+                # a W1 wrap and its leaving span: one stretch of rope, material sB - sigma over the
+                # length R * wrap angle + chord
+                L = sB - q[jA]
+                u += 0.5 * EA * (stops[k][1] * wraps[k] + D - L) ** 2 / L
+                continue
+            L = sB - (const[k][0] + (q[jA] if jA is not None else 0.0))
+            u += 0.5 * EA * (D - L) ** 2 / L
         return u
 
     rng = np.random.default_rng(3)

@@ -47,8 +47,10 @@ def test_payload_hangs_under_the_tangent_point_of_a_turned_jib(wrap_model):
     q[bd["payload"]["x"]], q[bd["payload"]["y"]] = R_TIP * math.cos(ang), R_TIP * math.sin(ang)
     st = sim.statics.solve(new_state(m, q=q), "rope-length")
     x, y = st.q[bd["payload"]["x"]], st.q[bd["payload"]["y"]]
-    # measured 1.45e-7 m (W0 and W1): eps R / 2 at this rope's strain 8.2e-7
-    check(f"{wrap_model}: payload radius - tangent point radius [m]", math.hypot(x, y) - R_TIP, 1.2e-6)
+    # measured 1.45e-7 m with W0: eps R / 2 at this rope's strain 8.2e-7 (its wrap counts its rope
+    # unstretched); 9.8e-10 m with W1, which holds its rope at the span's strain
+    check(f"{wrap_model}: payload radius - tangent point radius [m]", math.hypot(x, y) - R_TIP,
+          1.2e-6 if wrap_model == "W0" else 9e-9)
     check(f"{wrap_model}: payload azimuth - jib angle [rad]", math.atan2(y, x) - ang, 1e-14,
           reason="round-off, which differs by platform")
 

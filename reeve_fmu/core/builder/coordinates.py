@@ -50,7 +50,8 @@ def node_arrays(bs: BuildState) -> Arrays:
             if key[0] == "slope":
                 return n_nodes * nd + key[1] * nd + comps.index(key[2])
             return _sidx(nd, n_nodes, n_slope, key[1])
-        el_map, el_coef, nl = bs.nlr.finalize(nd, row_of, bs.q0, B, c0, el_idx, el_map, el_coef)
+        el_map, el_coef, nl = bs.nlr.finalize(nd, row_of, bs.q0, B, c0, el_idx, el_map, el_coef,
+                                              c_full=c0 + Bpar @ bs.par0)
     ptr, idx, val = [0], [], []
     for row in range(B.shape[0]):
         nz = np.nonzero(B[row])[0]

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..bodies import ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef, geometry, rows_jacobian
+from ..bodies import (RF_EA, RF_J2, RF_ROW, RF_EL, RF_WIDTH, ROW_SLOPE, ROW_TANGENT, ROW_WRAP, extra_coef,
+                      geometry, rows_jacobian)
 
 
 def body_frame(b):
@@ -34,7 +35,7 @@ def empty_fields() -> dict:
     return dict(nl_on=0, nl_bq=np.zeros((0, 7), np.int64), nl_b0=f2, nl_bk=np.zeros(0, np.int64), nl_bax=np.zeros((0, 3)),
                 nl_ang0=np.zeros((0, 2)), nl_pb=np.zeros(0, np.int64), nl_po=np.zeros((0, 3)),
                 nl_sp=np.zeros((0, 2), np.int64), nl_sg=f2.copy(), nl_sa=np.zeros((0, 6)), nl_rk=i2.copy(),
-                nl_rf=np.zeros((0, 8)), nl_cols=np.zeros(0, np.int64), nl_colbody=np.zeros(0, np.int64),
+                nl_rf=np.zeros((0, RF_WIDTH)), nl_cols=np.zeros(0, np.int64), nl_colbody=np.zeros(0, np.int64),
                 nl_rw=np.zeros((0, 1), np.int64), nl_ent=np.zeros((0, 0), np.int64), nl_grp=np.zeros(1, np.int64))
 
 
@@ -95,16 +96,32 @@ class NonlinearRows:
                                                     j_stretch)
 
     def wrap_row(self, node, span_in, span_out, j_sigma, R, sense, axis, rhoA_g=(0.0, 0.0, 0.0), lw=0.0,
-                 offset=0.0):
-        """s of the node leaving a W1 wrap: sigma + offset + R * current wrap angle (about the sheave's
+                 offset=0.0, strain=None):
+        """s of the node leaving a wrap: sigma + offset + R * current wrap angle (about the sheave's
         axis, which is the incoming span's end-B axis). rhoA_g: the rope's weight per length (vector),
         lw: the wrap's rope whose weight the builder lumped (wrap_weight adds the rest). A W0 wrap is
         the same row with offset = -R * (its angle at t = 0): no rope on it in the scene's pose, the
-        change of its arc since."""
+        change of its arc since. strain = (the leaving span's far node, EA, its first element): W1, the
+        wrap holds R x angle / (1 + eps) of rope, eps the leaving span's strain (core/bodies._strain_wrap)."""
         if self.moving[span_in] or self.moving[span_out]:
             centre = self.spans[span_in][1]
             self.rows[("s", node)] = (ROW_WRAP, span_in, span_out, j_sigma, R, sense, float(offset), centre,
-                                      j_sigma, tuple(rhoA_g), lw)
+                                      j_sigma, tuple(rhoA_g), lw, strain)
+
+    @staticmethod
+    def _strain_cols(spec, row_of, B):
+        """nl_rf[RF_J2:] of a row: a strain wrap's far node's s as its p row, whose B row is one
+        coordinate with coefficient 1 (RF_J2) or none (a rope end); EA, the span's first element. Other
+        rows: -1, -1, 0, 0."""
+        if len(spec) < 12 or spec[11] is None:
+            return [-1.0, -1.0, 0.0, 0.0]
+        node, EA, el = spec[11]
+        row = row_of(("s", node))
+        nz = np.nonzero(B[row])[0]
+        if len(nz) > 1 or (len(nz) == 1 and B[row, nz[0]] != 1.0) or EA <= 0.0:
+            raise ValueError("a W1 wrap's leaving span must end at a node whose s is one coordinate or a "
+                             "constant, with EA > 0")
+        return [float(nz[0]) if len(nz) else -1.0, float(row), float(EA), float(el)]
 
     def _cols(self):
         """q indices of every registered body coordinate and the body tables of rows_eval."""
@@ -122,16 +139,17 @@ class NonlinearRows:
         cols = sorted({int(j) for j in bq[:, :7].ravel() if j >= 0})
         return bq, b0, bk, bax, cols
 
-    def finalize(self, nd, row_of, q0, B, c0, el_idx, el_map, el_coef):
+    def finalize(self, nd, row_of, q0, B, c0, el_idx, el_map, el_coef, c_full=None):
         """Kernel fields; B and c0 rows of the nonlinear rows set from the Jacobian at q0; el_map and
-        el_coef widened so that every nonlinear entry lists its columns. row_of(key) -> p row."""
+        el_coef widened so that every nonlinear entry lists its columns. row_of(key) -> p row; c_full:
+        c at the scene's parameters (default c0)."""
         bq, b0, bk, bax, cols = self._cols()
         keys = list(self.rows)
         specs = [self.rows[k] for k in keys]
         nr = len(keys)
         rk = np.array([[s[0], s[1], s[2], s[3]] for s in specs], np.int64).reshape(nr, 4)
         rf = np.array([[s[4], s[5], s[6], s[7]] + (list(s[9]) + [s[10]] if len(s) > 9 else [0.0] * 4)
-                       for s in specs], float).reshape(nr, 8)
+                       + self._strain_cols(s, row_of, B) for s in specs], float).reshape(nr, RF_WIDTH)
         col_k = {j: k for k, j in enumerate(cols)}
         colbody = np.array([next(ib for ib in range(len(bq)) if j in bq[ib, :7]) for j in cols], np.int64)
         body_cols = {ib: [col_k[int(j)] for j in bq[ib, :7] if j >= 0] for ib in range(len(self.bodies))}
@@ -146,10 +164,10 @@ class NonlinearRows:
             return out
 
         deps = []
-        for s in specs:
+        for r, s in enumerate(specs):
             d = span_cols(s[1]) + (span_cols(s[2]) if s[0] == ROW_WRAP else [])
             d = sorted(set(d))
-            deps.append(d + ([-2] if s[0] in (ROW_WRAP, ROW_SLOPE) else []))
+            deps.append(d + ([-2] if s[0] in (ROW_WRAP, ROW_SLOPE) else []) + ([-3] if rf[r, RF_J2] >= 0 else []))
         W = max([el_map.shape[2]] + [len(d) for d in deps])
         rw = -np.ones((nr, W), np.int64)
         for r, d in enumerate(deps):
@@ -168,7 +186,8 @@ class NonlinearRows:
                 ent[ie, a] = r
                 for w in range(W):
                     k = rw[r, w]
-                    new_map[ie, a, w] = cols[k] if k >= 0 else (specs[r][8] if k == -2 else 0)
+                    new_map[ie, a, w] = (cols[k] if k >= 0 else specs[r][8] if k == -2
+                                         else int(rf[r, RF_J2]) if k == -3 else 0)
                     new_coef[ie, a, w] = 0.0
         pb = np.array([p[0] for p in self.points], np.int64)
         po = np.array([p[1] for p in self.points], float).reshape(-1, 3)
@@ -181,7 +200,8 @@ class NonlinearRows:
         if nr:
             q0 = np.asarray(q0, float)
             K = SimpleNamespace(**f)
-            G = geometry(K, f["nl_ang0"])      # the contact angles at q0 stay in nl_ang0: a State's warm start
+            # the contact angles at q0 stay in nl_ang0: a State's warm start
+            G = geometry(K, f["nl_ang0"], c0 if c_full is None else c_full)
             J = np.zeros((nr, len(cols)))
             f0 = np.zeros(nr)
             rows_jacobian(q0, G, f["nl_cols"], colbody, f0, np.zeros(nr), np.zeros(nr), np.zeros(len(q0)), J)
@@ -190,7 +210,9 @@ class NonlinearRows:
                 B[row, :] = 0.0
                 for k, j in enumerate(cols):
                     B[row, j] = J[r, k]
-                if specs[r][0] in (ROW_WRAP, ROW_SLOPE):
-                    B[row, specs[r][8]] = extra_coef(rk, G[-4], r)   # G[-4]: the span tangents
+                if specs[r][0] in (ROW_WRAP, ROW_SLOPE):   # G[-5], G[-1]: span tangents, strain wraps
+                    B[row, specs[r][8]] = extra_coef(rk, rf, G[-5], G[-1], r, -2)
+                if rf[r, RF_J2] >= 0:
+                    B[row, int(rf[r, RF_J2])] = extra_coef(rk, rf, G[-5], G[-1], r, -3)
                 c0[row] = f0[r] - B[row] @ q0
         return new_map, new_coef, f

@@ -140,11 +140,16 @@ def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
         if k == 0 and stops[0].sheave is not None:
             _drum_row(bs, rb, ends[0])
         if 0 < k and stops[k].sheave is not None:
-            # W1: the wrap holds R x its current angle of rope; W0 the change of R x angle since t = 0
-            # (zero rope in the scene's pose): without it a W0 pulley hangs its rope from the axle
-            off = -rb.geo[k][1] * rb.wraps[k][3] if rb.rope.wrap_model == "W0" else 0.0
+            # W1: the wrap holds R x its current angle of rope at the leaving span's strain (linear
+            # elements; cubic: unstretched); W0 the change of R x angle since t = 0 (zero rope in the
+            # scene's pose): without it a W0 pulley hangs its rope from the axle
+            w1 = rb.rope.wrap_model == "W1"
+            off = 0.0 if w1 else -rb.geo[k][1] * rb.wraps[k][3]
+            strain = None
+            if w1 and not bs.cubic:
+                strain = (ends[1], rb.rope.EA * rb.rope.count, len(bs.elements))   # span k's first element
             bs.nlr.wrap_row(ends[0], rb.nl_spans[k - 1], rb.nl_spans[k], rb.sig[k], rb.geo[k][1], rb.geo[k][3],
-                            rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0], offset=off)
+                            rb.geo[k][2], _wrap_weight(bs, rb), rb.wraps[k][0], offset=off, strain=strain)
     if rb.rope.wrap_model == "W2" and k > 0 and stops[k].sheave is not None and rb.wraps[k][0] > 0:
         rope_wraps.append((k, _add_wrap_elements(bs, span_nodes[k - 1][1], ends[0], rb.geo[k], rb.wraps[k],
                                                  bs.sheaves[stops[k].sheave], rb.sig[k],

@@ -17,14 +17,32 @@ from .result import SolverError
 RCOND = 1e-12   # singular values below RCOND x the largest are zero (round-off of a ~1e16 condition)
 
 
-def _newton_direction(J, r):
+def _line_search(resid, x, step, rn, fscale, cap, rot, ang, ang0):
+    """The step length (halved from 1) that reduces the largest force imbalance rn, or None. A Newton
+    step longer than the scene (cap) is not trusted: it is cut to the scene's size first, and to half a
+    radian of body rotation (indices rot; an unloaded start has a near-singular yaw). Every trial
+    starts from the contact angles ang0 at x (ang: the State's, which a residual updates): a rejected
+    far trial must not leave the exact tangents' warm start on another tangent of the sheaves."""
+    lam = min(1.0, cap / max(float(np.max(np.abs(step), initial=0.0)), 1e-300),
+              0.5 / max(float(np.max(np.abs(step[rot]), initial=0.0)), 1e-300))
+    while lam > 1e-6:
+        ang[:] = ang0
+        rt = resid(x + lam * step)[0]
+        if rt is not None and np.max(np.abs(rt)) < max(rn, 1e-300) * (1 - 1e-4 * lam) or rn < 1e-9 * fscale:
+            return lam
+        lam *= 0.5
+    ang[:] = ang0
+    return None
+
+
+def _newton_direction(J, r, rcond=None):
     """Newton step -J^+ r and the part of the residual outside J's range. Singular values below
     RCOND x the largest are dropped: interior nodes of a straight, unstretched span have no
     transverse stiffness until the rope carries tension, so J is singular to round-off there and a
     plain solve returns a step of ~1e7 m. Dropping those directions leaves them alone (their residual
-    is zero) and loads the rope; the next Jacobian is regular."""
+    is zero) and loads the rope; the next Jacobian is regular. rcond: another threshold."""
     U, sv, Vt = np.linalg.svd(J)
-    keep = sv > RCOND * (sv[0] if sv.size else 0.0)
+    keep = sv > (RCOND if rcond is None else rcond) * (sv[0] if sv.size else 0.0)
     step = -(Vt[keep].T @ ((U[:, keep].T @ r) / sv[keep]))
     outside = float(np.max(np.abs(J @ step + r))) if r.size else 0.0
     return step, outside
@@ -145,28 +163,30 @@ class Statics:
                 raise SolverError(f"{m.scene.source}: initial statics: a span is shorter than "
                                   f"solver.min_span = {m.scene.solver.min_span:g} m")
             rn = np.max(np.abs(r)) if len(r) else 0.0
+            ang = st.nl_ang.copy()      # the contact angles' warm start at x (exact tangents)
             J = self._jacobian(resid, x, r, unknowns, eqs, KS, S, u, st.t)
             try:
                 step = _solve(J, -r)
             except np.linalg.LinAlgError:
                 step = None
             outside = 0.0
+            rconds = ()
             if step is None or np.max(np.abs(step), initial=0.0) > cap:
                 # singular, or so near it that the step is longer than the scene (interior nodes of
                 # an unloaded span: no transverse stiffness yet): truncated-SVD direction. A residual
                 # outside J's range is left for the next iteration (the rope weight across an unloaded
                 # span: the loaded rope holds it); if it stays, nothing holds that body
                 step, outside = _newton_direction(J.toarray() if hasattr(J, "toarray") else J, r)
-            # a Newton step longer than the scene is not trusted: it is cut to the scene's size first,
-            # and to half a radian of body rotation (an unloaded start has a near-singular yaw)
-            lam = min(1.0, cap / max(float(np.max(np.abs(step), initial=0.0)), 1e-300),
-                      0.5 / max(float(np.max(np.abs(step[rot]), initial=0.0)), 1e-300))
-            while lam > 1e-6:
-                rt = resid(x + lam * step)[0]
-                if rt is not None and np.max(np.abs(rt)) < max(rn, 1e-300) * (1 - 1e-4 * lam) or rn < 1e-9 * fscale:
+                # if no part of it reduces the imbalance, more directions are dropped (the sideways
+                # and yaw stiffness of a block on an unloaded, nearly weightless rope: ~1e-11 of EA)
+                rconds = (1e-9, 1e-6)
+            lam = _line_search(resid, x, step, rn, fscale, cap, rot, st.nl_ang, ang)
+            for rc in rconds:
+                if lam is not None:
                     break
-                lam *= 0.5
-            else:
+                step, outside = _newton_direction(J.toarray() if hasattr(J, "toarray") else J, r, rc)
+                lam = _line_search(resid, x, step, rn, fscale, cap, rot, st.nl_ang, ang)
+            if lam is None:
                 break   # no step reduces the force imbalance: reported below
             x = x + lam * step
             if np.max(np.abs(lam * step)) < 1e-12 * (1 + np.max(np.abs(x))):
