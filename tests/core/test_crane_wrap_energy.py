@@ -46,7 +46,7 @@ def _path(sc, m, q):
 def test_wrap_and_tangent_forces_are_the_elastic_energy_gradient():
     sc = load_scene("scenes/crane_8fall_hoist.toml")
     sc = replace(sc, gravity=(0.0, 0.0, 0.0), statics="none", sheave_contact="rigid",   # creep: stored-rope strain on the drum s
-                 ropes=(replace(sc.ropes[0], torsion=None, damping=0.0),))
+                 ropes=(replace(sc.ropes[0], torsion=None, damping=0.0, tension_only=False),))   # U: bilateral
     m = build_model(sc)
     st = Simulator(m).initial_state()
     nq, EA = m.nq, sc.ropes[0].EA

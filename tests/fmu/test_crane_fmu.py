@@ -9,6 +9,7 @@ solver failures logged and discarded. Every FMU-loading check runs in its own in
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import replace
 
@@ -62,7 +63,9 @@ def test_speed_input_is_integrated_exactly_and_torque_input_equals_the_torque_ta
         ya = a.step(0.01, 0.0, 0.0, [tau])
         yb = b.step(0.01, 0.0, 0.0)
     assert np.array_equal(ya, yb)
-    check('a.output("jib.joint_torque") - tau', a.output("jib.joint_torque") - tau, 1e-11 * np.max(np.abs(tau)))
+    # measured 3.6e-12 N m of 3e4 (round-off of the joint's force sum)
+    check('a.output("jib.joint_torque") - tau', a.output("jib.joint_torque") - tau, 1e-15 * np.max(np.abs(tau)),
+          reason="round-off, which differs by platform")
     assert a.output("jib.angular_velocity") > 0.0
     with pytest.raises(ValueError, match="jib.torque must be finite"):
         a.step(0.01, 0.0, 0.0, [math.nan])
@@ -151,10 +154,12 @@ def test_crane_fmus_build_validate_and_declare_units(fmus):
 def test_crane_fmu_static_tension_and_honest_state(fmus):
     r = job("static_and_state", fmus["plant"])
     assert r["errors"] == []
-    # payload-end rope force at rest = M g, at t = 0 and after 2 s: measured 1.1e-6 N, the statics'
-    # round-off (4.5e-11 of M g)
+    # payload-end rope force at rest = M g, at t = 0 and after 2 s: measured 2.4e-3 N (8.3e-8 of M g).
+    # The W1 wraps hold their rope at the span's strain, so the stretch takes rope from them and the
+    # one-element fall's end force is M g less half the weight of that rope (tests/studies/test_crane.py
+    # checks that prediction to 9e-13)
     for row in (r["t0"], r["t2"]):
-        check('row[0] - (M * G)', row[0] - (M * G), 1e-5)
+        check('row[0] - (M * G)', row[0] - (M * G), 3e-3, reason="the wraps' stretch deficit, see above")
     check('r["t2"][1] - r["t0"][1]', r["t2"][1] - r["t0"][1], 1.8e-11)  # the holding torque holds
     assert r["a"] == r["b"] == r["c"]                    # rewind and deserialize: bit-identical
 
@@ -188,7 +193,8 @@ def test_crane_fmu_solver_failure_is_logged_and_discarded(fmus):
     assert r["statuses"][-1] == 2 and all(s == 0 for s in r["statuses"][:-1])
     assert r["after"] >= 2
     text = "\n".join(m for _, m in r["log"])
-    assert "(tip -> payload anchor) is shorter than solver.min_span" in text, text[-2000:]
+    # which span vanishes first depends on the rope law and the wraps; the reason must name it
+    assert re.search(r"rope 'hoist' span \d+ \([\w ]+ -> [\w ]+\) is shorter than solver.min_span", text), text[-2000:]
     assert "motor.torque = nan is not finite" in text
 
 

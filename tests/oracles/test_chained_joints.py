@@ -103,8 +103,9 @@ def test_free_trolley_slides_out_as_cosh_on_the_slewing_jib(motion, force, trave
     # measured 7.8e-6 m (free, 17 m of travel) and 5.0e-6 m (force, 3.5 m): the generalized-alpha step's
     # O(h^2) error on the exponential growth
     check("trolley radius - r'' = w^2 r + F / m [m]", r - rr, 5e-5)
-    # measured 5.7e-14 N (free) and 2.8e-14 N (force) (round-off)
-    check("joint force - the force table [N]", res["trolley.joint_force"] - force, 2.5e-13)
+    # measured 5.7e-14 N (free) and 1.4e-14 N (force) (round-off)
+    check("joint force - the force table [N]", res["trolley.joint_force"] - force, 2.5e-13,
+          reason="round-off, which differs by platform and case")
 
 
 def _rot(axis, ang):
@@ -170,9 +171,9 @@ def test_tower_crane_slew_loads_rail_and_slewing_drive_with_the_rope():
     check_min("box swing across the jib [m]", np.max(np.abs(res["payload.position.y"] - 20.35 * np.sin(res["jib.angle"]))), 1.0)
     check_min("rope's pull along the rail [N]", np.max(np.abs(res["trolley.joint_force"])), 2.5e4)
     check_min("slewing torque [N m]", np.max(np.abs(res["jib.joint_torque"])), 1e5)
-    # measured 2.3e-3 N of the 32 kN pull and 4.7e-3 N m of the 2.5e5 N m slewing torque
-    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 2e-2)
-    check("slewing torque: tau - (I_jib + m r^2) alpha - S dP/dtheta [N m]", np.array(slew), 4e-2)
+    # measured 6.0e-4 N of the 32 kN pull and 1.7e-3 N m of the 2.5e5 N m slewing torque
+    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 6e-3)
+    check("slewing torque: tau - (I_jib + m r^2) alpha - S dP/dtheta [N m]", np.array(slew), 1.6e-2)
 
 
 CHAIN = """

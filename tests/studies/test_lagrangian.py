@@ -76,8 +76,10 @@ def test_modal_series_reference_meets_its_initial_condition():
 
 
 def test_lagrangian_release_follows_the_modal_series():
+    # the modal series is that of a linear (bilateral) rope: released from its unstretched length, a
+    # tension-only rope's strain starts inside the slack law's smoothing band
     sc = _hanging("none").with_overrides(ropes=tuple(
-        r.__class__(**{**r.__dict__, "damping": 0.0}) for r in _hanging().ropes))
+        r.__class__(**{**r.__dict__, "damping": 0.0, "tension_only": False}) for r in _hanging().ropes))
     m = lag.build_lagrangian(sc, element_length=6.25, coarse_length=6.25)
     sim = lag.LagrangianSimulator(m, step=2.5e-4, rho_inf=1.0, newton_tol=1e-8)
     res = sim.run(0.6, 1e-3)
@@ -103,7 +105,7 @@ def test_bench_records_schema(tmp_path):
     ale, lag_ = sorted(recs, key=lambda r: r["method"])
     # the two methods' errors agree
     check('ale["err_position_m"] - lag_["err_position_m"]', ale["err_position_m"] - lag_["err_position_m"], 5e-10 * np.max(np.abs(lag_["err_position_m"])), reason=ROUNDOFF)
-    check('ale["err_tension_rel"] - lag_["err_tension_rel"]', ale["err_tension_rel"] - lag_["err_tension_rel"], 5e-10 * np.max(np.abs(lag_["err_tension_rel"])))
+    check('ale["err_tension_rel"] - lag_["err_tension_rel"]', ale["err_tension_rel"] - lag_["err_tension_rel"], 5e-10 * np.max(np.abs(lag_["err_tension_rel"])), reason=ROUNDOFF)
     h = bench.headline(recs, "hanging_release")
     assert h["case"] == "hanging_release"
     figs = bench.plot(recs, tmp_path)
