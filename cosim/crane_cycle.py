@@ -151,6 +151,17 @@ def _swing_figure(res):
     return fig, ax, t
 
 
+def _save(fig, ax, effort_label, title, png):
+    """The effort panel's labels, the title, and the PNG."""
+    ax[2].set_ylabel(effort_label)
+    ax[2].set_xlabel("time [s]")
+    ax[2].legend(loc="best")
+    fig.suptitle(title)
+    fig.tight_layout()
+    Path(png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=90)
+
+
 def plot_all_axes(res, axes, png, scene):
     fig, ax, t = _swing_figure(res)
     for a in axes:
@@ -163,13 +174,7 @@ def plot_all_axes(res, axes, png, scene):
         n = f"{a['body']}.{'joint_torque' if a['joint'] == 'revolute' else 'joint_force'}"
         sc = 1e3
         ax[2].plot(t, res[n] / sc, label=f"{n} / {sc:g}")
-    ax[2].set_ylabel("drive effort [kN m, kN]")
-    ax[2].set_xlabel("time [s]")
-    ax[2].legend(loc="best")
-    fig.suptitle(f"{scene}: crane plant FMU driven by its speed inputs (slew, travel, hoist)")
-    fig.tight_layout()
-    Path(png).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=90)
+    _save(fig, ax, "drive effort [kN m, kN]", f"{scene}: crane plant FMU driven by its speed inputs (slew, travel, hoist)", png)
 
 
 def plot(res, png, slew_input, scene):
@@ -183,13 +188,7 @@ def plot(res, png, slew_input, scene):
     ax[1].legend(loc="best")
     ax[2].plot(t, res["motor.torque"] / 1e3, label="hoist motor torque")
     ax[2].plot(t, res["axis.effort"] / 1e5, label="axis torque (N m) or force (N) / 1e5")
-    ax[2].set_ylabel("torque [kN m]")
-    ax[2].set_xlabel("time [s]")
-    ax[2].legend(loc="best")
-    fig.suptitle(f"{scene}: crane plant FMU + CraneDrive.fmu (fmpy)")
-    fig.tight_layout()
-    Path(png).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=90)
+    _save(fig, ax, "torque [kN m]", f"{scene}: crane plant FMU + CraneDrive.fmu (fmpy)", png)
 
 
 if __name__ == "__main__":
