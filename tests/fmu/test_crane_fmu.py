@@ -160,7 +160,8 @@ def test_crane_fmu_static_tension_and_honest_state(fmus):
     # checks that prediction to 9e-13)
     for row in (r["t0"], r["t2"]):
         check('row[0] - (M * G)', row[0] - (M * G), 3e-3, reason="the wraps' stretch deficit, see above")
-    check('r["t2"][1] - r["t0"][1]', r["t2"][1] - r["t0"][1], 1.8e-11)  # the holding torque holds
+    # the holding torque holds: measured 5.6e-13 N m (round-off)
+    check('r["t2"][1] - r["t0"][1]', r["t2"][1] - r["t0"][1], 1.8e-11, reason="round-off, which differs by platform")
     assert r["a"] == r["b"] == r["c"]                    # rewind and deserialize: bit-identical
 
 
