@@ -479,6 +479,20 @@ def _early_plan(plan, gs: bool) -> list:
     return back
 
 
+def _end_of_step(k, j, stop, probe, recs, record_every, progress, every, step):
+    """After communication step k: the probe's verdict, the record row j, the progress report; returns
+    (the next row, stop)."""
+    if probe is not None:
+        stop = probe.after(k)
+    if (k + 1) % record_every == 0 or stop:
+        for u, R in recs:
+            R[j] = u.row()
+        j += 1
+    if (k + 1) % every == 0:
+        progress((k + 1) * step)
+    return j, stop
+
+
 def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, every) -> None:
     """The communication steps: the master's whole per-step cost (docs/cosim.md, Performance); what the
     loop touches is bound to local names first."""
@@ -509,14 +523,7 @@ def _loop(run_: MasterRun, plan, units, tk, ns_diff, gs, probe, recs, progress, 
                     s = u.get()
                     if s > 1:
                         _check(s, f"{u.name} getReal", units, t)
-            if probe is not None:
-                stop = probe.after(k)
-            if (k + 1) % record_every == 0 or stop:
-                for u, R in recs:
-                    R[j] = u.row()
-                j += 1
-            if (k + 1) % every == 0:
-                progress((k + 1) * step)
+            j, stop = _end_of_step(k, j, stop, probe, recs, record_every, progress, every, step)
             if k == 0:                      # the first step loads/compiles the units' kernels (JIT)
                 t_first = time.perf_counter() - t_loop0
             if stop:
@@ -546,14 +553,7 @@ def _loop_events(run_: MasterRun, plan, back, units, tk, gs, probe, recs, progre
             while t < t_end:
                 t = _piece(groups, back, units, t, t_end, h, events)
                 h = t_end - t
-            if probe is not None:
-                stop = probe.after(k)
-            if (k + 1) % record_every == 0 or stop:
-                for u, R in recs:
-                    R[j] = u.row()
-                j += 1
-            if (k + 1) % every == 0:
-                progress((k + 1) * step)
+            j, stop = _end_of_step(k, j, stop, probe, recs, record_every, progress, every, step)
             if k == 0:
                 t_first = time.perf_counter() - t_loop0
             if stop:
