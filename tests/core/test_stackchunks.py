@@ -67,7 +67,8 @@ def _run(env_extra=None):
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
-NO_JIT = "REEVE_FMU_NO_JIT=1 or numba not installed: the kernels run as plain Python and there is no compiled-kernel cache to test"
+NO_JIT = ("REEVE_FMU_NO_JIT=1 or numba not installed: nothing is compiled, so the chunk keeper, which "
+          "runs only during numba compiles, is never installed")
 
 
 @pytest.mark.skipif(not JIT, reason=NO_JIT)

@@ -23,7 +23,7 @@ from tests.support import ROOT
 from tests.support.fmu_host import chost
 
 # the FMI 3.0 adapter is part of the native loader (SKIP_POLICY in tests/conftest.py allows this reason)
-pytestmark = pytest.mark.skipif(not loader_supported(), reason="the native loader is built on Linux x86-64 only")
+pytestmark = pytest.mark.skipif(not loader_supported(), reason="the native loader is built on Linux x86-64 only: elsewhere the FMI 3.0 build has no loader to wrap, so there is no FMI 3.0 FMU to test")
 
 JOBS = str(ROOT / "tests" / "support" / "fmi3_jobs.py")
 OK, DISCARD, ERROR = 0, 2, 3

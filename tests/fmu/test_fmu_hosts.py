@@ -24,7 +24,7 @@ from tests.support import ROOT
 from tests.support.checks import check
 from tests.support.fmu_host import chost
 
-pytestmark = pytest.mark.skipif(not loader_supported(), reason="the native loader is built on Linux x86-64 only")
+pytestmark = pytest.mark.skipif(not loader_supported(), reason="the native loader is built on Linux x86-64 only: elsewhere no C host can load the FMU (the fmpy tests of the same FMUs still run)")
 
 JOBS = str(ROOT / "tests" / "support" / "cosim_jobs.py")
 R1_DRIVE = {"pretorque[1]": 522.5, "pretorque[2]": 331.5}
