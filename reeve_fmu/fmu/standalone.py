@@ -109,26 +109,55 @@ def _copy_distribution(dist, site: Path) -> int:
     return n
 
 
-def stage_runtime(dest: Path, requirements) -> dict:
-    """Lay out the runtime under dest (see the module doc); returns the manifest."""
+def _tops(dist) -> set:
+    """The top-level names a distribution installs into site-packages (package, .libs, .dist-info)."""
+    return {Path(f).parts[0] for f in dist.files or [] if Path(f).parts[0] != ".."}
+
+
+def _link_tree(src: Path, dst: Path) -> None:
+    if src.is_dir():
+        shutil.copytree(src, dst, copy_function=os.link)
+    else:
+        os.link(src, dst)
+
+
+def stage_runtime(dest: Path, requirements, reuse: Path = None) -> dict:
+    """Lay out the runtime under dest (see the module doc); returns the manifest. `reuse`: a runtime
+    this process staged before; its interpreter, byte-compiled standard library and the distributions
+    both need are hard-linked, so only the new distributions are copied and compiled."""
     version = f"{sys.version_info.major}.{sys.version_info.minor}"
     lib = libpython_path()
     if not lib:
         raise RuntimeError(f"this Python ({sys.executable}) has no shared libpython: a standalone FMU "
                            f"needs a Python built with --enable-shared (python.org, pyenv with "
                            f"PYTHON_CONFIGURE_OPTS=--enable-shared, or a distribution's libpython{version})")
-    (dest / "lib").mkdir(parents=True)
-    shutil.copy2(os.path.realpath(lib), dest / "lib" / f"libpython{version}.so.1.0")
     stdlib = dest / "lib" / f"python{version}"
-    _copy_stdlib(stdlib)
     site = stdlib / "site-packages"
+    if reuse is None:
+        (dest / "lib").mkdir(parents=True)
+        shutil.copy2(os.path.realpath(lib), dest / "lib" / f"libpython{version}.so.1.0")
+        _copy_stdlib(stdlib)
+        compile_dirs = [stdlib]
+    else:
+        old_site = reuse / "lib" / f"python{version}" / "site-packages"
+        shutil.copytree(reuse / "lib", dest / "lib", copy_function=os.link,
+                        ignore=lambda d, names: ["site-packages"] if Path(d) == old_site.parent else [])
+        compile_dirs = []
     site.mkdir()
     packages = {}
     for dist in _distribution_names(requirements):
-        _copy_distribution(dist, site)
+        tops = _tops(dist)
+        if reuse is not None and tops and all((old_site / t).exists() for t in tops):
+            for t in tops:
+                _link_tree(old_site / t, site / t)
+        else:
+            _copy_distribution(dist, site)
+            if reuse is not None:    # a first staging compiles the whole stdlib, site-packages included
+                compile_dirs += [site / t for t in tops if (site / t).is_dir()]
         packages[dist.metadata["Name"]] = dist.version
-    compileall.compile_dir(str(stdlib), quiet=2, workers=0 if os.cpu_count() else 1,
-                           invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
+    for d in compile_dirs:
+        compileall.compile_dir(str(d), quiet=2, workers=0 if os.cpu_count() else 1,
+                               invalidation_mode=py_compile.PycInvalidationMode.UNCHECKED_HASH)
     libs = {p.relative_to(dest).as_posix(): p.stat().st_size for p in sorted(dest.rglob("*.so*")) if p.is_file()}
     manifest = {"format": "reeve_fmu.runtime/1", "python_version": version,
                 "python_full_version": sys.version.split()[0], "packages": packages,
@@ -141,6 +170,11 @@ def stage_runtime(dest: Path, requirements) -> dict:
 _STAGED: dict = {}   # distributions -> (TemporaryDirectory, manifest): the plant and drive FMUs share one
 
 
+#: deflate level of the runtime's entries: level 1 compresses the ~360 MB runtime 3.2x faster than
+#: zlib's default 6 (6.7 s against 21.7 s) for an 11 % larger archive (134 against 120 MB)
+RUNTIME_COMPRESSLEVEL = 1
+
+
 def _zip_runtime(stage: Path, zip_path: Path, prefix: str) -> None:
     """The staged runtime as zip entries under `prefix`, compressed once: every FMU of the process starts
     from a copy of this file (compressing the ~360 MB runtime is most of a standalone build)."""
@@ -151,14 +185,16 @@ def _zip_runtime(stage: Path, zip_path: Path, prefix: str) -> None:
                 zi.compress_type = zipfile.ZIP_DEFLATED
                 zi.external_attr = (0o755 if p.suffix == ".so" or ".so." in p.name else 0o644) << 16
                 with open(p, "rb") as fh:
-                    zout.writestr(zi, fh.read())
+                    zout.writestr(zi, fh.read(), compresslevel=RUNTIME_COMPRESSLEVEL)
 
 
 def _staged(requirements, prefix: str):
     key = tuple(d.metadata["Name"].lower() for d in _distribution_names(requirements))
     if key not in _STAGED:
         tmp = tempfile.TemporaryDirectory(prefix="reeve_runtime_")
-        manifest = stage_runtime(Path(tmp.name) / RUNTIME_DIR, requirements)
+        earlier = next(iter(_STAGED.values()), None)
+        manifest = stage_runtime(Path(tmp.name) / RUNTIME_DIR, requirements,
+                                 reuse=Path(earlier[0].name) / RUNTIME_DIR if earlier else None)
         _zip_runtime(Path(tmp.name) / RUNTIME_DIR, Path(tmp.name) / "runtime.zip", prefix)
         _STAGED[key] = (tmp, manifest)
     tmp, manifest = _STAGED[key]
