@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from ..core.bodies import rot_coefs
 from ..core.builder.bodies import world
 from ..core.builder.routes import span_tangents, stop_geometry
 from ..core.builder.state import start
@@ -32,6 +33,7 @@ from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
 from ..core.solver.lu import lu_factor, lu_solve
+from ..core.solver.statics_jac import static_jacobian, supported
 from ..core._jit import njit
 from ..core.system import static_forces, workspace
 
@@ -284,6 +286,58 @@ def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
 
 
 @njit(cache=True)
+def _height_grad(q, hd, hw, hE, g):
+    """g[k] = d _height / d q[hd[2 + k]] (k = 0: the block's z, 1-3: its rotation vector): the z row of
+    omega_c x (R e_i), omega_c = T(phi) e_c the rotation per unit phi_c."""
+    p0, p1, p2 = q[hd[3]], q[hd[4]], q[hd[5]]
+    a, b, s1, _, _ = rot_coefs(p0, p1, p2)
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    g[0] = 0.0
+    for i in range(hw.shape[0]):
+        g[0] += hw[i]
+    for c in range(3):
+        e = np.zeros(3)
+        e[c] = 1.0
+        x0, x1, x2 = p1 * e[2] - p2 * e[1], p2 * e[0] - p0 * e[2], p0 * e[1] - p1 * e[0]     # phi x e_c
+        y0, y1 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2                                          # phi x (phi x e_c)
+        w0, w1 = e[0] + a * x0 + b * y0, e[1] + a * x1 + b * y1
+        s = 0.0
+        for i in range(hw.shape[0]):
+            e0, e1, e2 = hE[i, 0], hE[i, 1], hE[i, 2]
+            pe = p0 * e0 + p1 * e1 + p2 * e2
+            # R e = e + s1 phi x e + a phi x (phi x e), phi x (phi x e) = phi (phi.e) - th2 e
+            r0 = e0 + s1 * (p1 * e2 - p2 * e1) + a * (p0 * pe - th2 * e0)
+            r1 = e1 + s1 * (p2 * e0 - p0 * e2) + a * (p1 * pe - th2 * e1)
+            s += hw[i] * (w0 * r1 - w1 * r0)
+        g[1 + c] = s
+
+
+@njit(cache=True)
+def _closed_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, unk, Jq, J):
+    """Statics.residual's Jacobian over the unknowns into J from the closed-form static Jacobian
+    (core/solver/statics_jac.py) and _height_grad; False if a span vanishes."""
+    if static_jacobian(K, W, c, q, zero, u, Jq) < 0:
+        return False
+    pos = np.full(q.shape[0], -1, np.int64)
+    for k in range(unk.shape[0]):
+        pos[unk[k]] = k
+    for i in range(eqs.shape[0]):
+        for k in range(unk.shape[0]):
+            J[i, k] = Jq[eqs[i], unk[k]] / fscale
+    if J.shape[0] > eqs.shape[0]:
+        hd, hw, hE, hc = hgeo
+        g = np.empty(4)
+        _height_grad(q, hd, hw, hE, g)
+        n = eqs.shape[0]
+        for k in range(unk.shape[0]):
+            J[n, k] = 0.0
+        for k in range(4):
+            if pos[hd[2 + k]] >= 0:
+                J[n, pos[hd[2 + k]]] = g[k]
+    return True
+
+
+@njit(cache=True)
 def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
     """Forward differences of _residual over the unknowns into J (the reference of the closed-form
     one's test); False if a span vanishes."""
@@ -319,6 +373,8 @@ class Statics:
         self.zero = np.zeros(m.nq)
         self.hgeo = _height_arrays(crane)
         self.stats = [0, 0]          # Newton iterations, Jacobians
+        # the closed-form Jacobian where it covers the model's static forces, else differences
+        self.Jq = np.empty((m.nq, m.nq)) if supported(m.K) else None
 
     def unknowns(self, mode):
         free = set(self.eqs) | {self.jd}
@@ -341,8 +397,12 @@ class Statics:
         if r0 is None:
             return None
         J = np.empty((len(r0), len(unk)))
-        if not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
-                            self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
+        if self.Jq is not None:
+            if not _closed_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                                    self.fscale, self.hgeo, unk, self.Jq, J):
+                return None
+        elif not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                              self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
             return None
         self.stats[1] += 1
         return J
