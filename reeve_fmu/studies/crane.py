@@ -6,8 +6,8 @@ crane-specific, on the statics of that model:
 
 * `sweep`: equilibria over a range of fall lengths h (the [crane] section). At each h the drum's rope
   coordinate is free and h(q) = h replaces its equation; continuation from the previous solution
-  (tangent predictor dq/dh, Newton corrector with a forward-difference Jacobian of the model's
-  assembled forces, step control on the predicted yaw). Cabling is the fold of the path: the height
+  (secant predictor, chord Newton corrector with the closed-form Jacobian of the model's forces at
+  rest, core/solver/statics_jac.py, step control on the predicted yaw). Cabling is the fold of the path: the height
   continuation creeps up to it with shrinking steps and hands over to
 * `cabling_of_model`: continuation in the block yaw (prescribed; the drum free), which passes the fold;
   the critical height is the vertex of the parabola h(yaw) through the highest point and its neighbours.
@@ -35,7 +35,8 @@ from ..core.solver import Simulator, SolverError
 from ..core.solver.lu import lu_factor, lu_solve
 from ..core.solver.statics_jac import static_jacobian, supported
 from ..core._jit import njit
-from ..core.system import static_forces, workspace
+from ..core.solver.inputs import kernel_inputs_at
+from ..core.system import outputs, static_forces, workspace
 
 
 class CraneError(ValueError):
@@ -165,6 +166,16 @@ def _rotation_matrix(v):
     k = v / th
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+
+
+def _rotation_row_z(v0, v1, v2):
+    """The last row of _rotation_matrix((v0, v1, v2)) (Rodrigues: I + sin K + (1 - cos) K^2)."""
+    th = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if th < 1e-300:
+        return 0.0, 0.0, 1.0
+    k0, k1, k2 = v0 / th, v1 / th, v2 / th
+    sn, cm = math.sin(th), 1.0 - math.cos(th)
+    return -sn * k1 + cm * k2 * k0, sn * k0 + cm * k2 * k1, 1.0 - cm * (k0 * k0 + k1 * k1)
 
 
 def _route_parts(scene, spec, r):
@@ -339,8 +350,8 @@ def _closed_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, unk, Jq, J):
 
 @njit(cache=True)
 def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
-    """Forward differences of _residual over the unknowns into J (the reference of the closed-form
-    one's test); False if a span vanishes."""
+    """Forward differences of _residual over the unknowns into J (models whose static forces
+    statics_jac does not cover); False if a span vanishes."""
     for k in range(unk.shape[0]):
         j = unk[k]
         qj = q[j]
@@ -358,8 +369,9 @@ def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
 class Statics:
     """Static equilibria of the crane's dynamic model with the drum's rope coordinate free and one
     constraint in its place: a prescribed fall length h, or a prescribed block yaw (its rotation
-    vector's z component). Newton with a forward-difference Jacobian of the assembled forces
-    (compiled: _residual, _fd_jacobian)."""
+    vector's z component). Newton with the closed-form Jacobian of the forces at rest where
+    statics_jac covers the model, else forward differences (compiled: _residual, _closed_jacobian,
+    _fd_jacobian)."""
 
     def __init__(self, crane: Crane, st):
         m = crane.model
@@ -407,12 +419,12 @@ class Statics:
         self.stats[1] += 1
         return J
 
-    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0):
+    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0, F=None):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
         the tangent solver's warm start is restored on failure or when it jumped (_branch_jump).
         keep: a given J that converged within `keep` iterations is returned as the Jacobian at q (the
-        continuation's next predictor); else a fresh one is differenced there."""
+        continuation's next predictor); else a fresh one is computed there. F: J's factors if known."""
         ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
@@ -421,7 +433,7 @@ class Statics:
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
         given = J is not None
-        F = _factor(J) if given else None
+        F = (_factor(J) if F is None else F) if given else None
         if given and F is None:
             J = None
         for it in range(maxit):
@@ -566,6 +578,7 @@ class _Continuation:
 
     def __init__(self, S: Statics, q, h, J):
         self.S, self.q, self.h, self.J = S, q, h, J
+        self.F = _factor(J)          # J's LU factors (kept with it)
         self.unk = S.unknowns("height")
         self.iyaw = int(np.searchsorted(self.unk, S.jyaw))
         self.steps = self.rejected = 0
@@ -575,7 +588,7 @@ class _Continuation:
     def continue_to(self, h_target, dh_min, yaw_step):
         """From the current point to h_target; False at a fold (no equilibrium beyond self.h within
         dh_min, or the Jacobian's determinant changes sign: a jump onto the unstable branch)."""
-        F = _factor(self.J)
+        F = self.F
         sign0 = _lu_sign(F)
         e = np.zeros(len(self.unk))
         e[-1] = 1.0
@@ -592,16 +605,17 @@ class _Continuation:
                     qp += (self.q - self.prev[1]) * (dh / (self.h - self.prev[0]))   # secant: second order
                 else:
                     qp[self.unk] += dh * v
-                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS)
+                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS, F=F)
                 ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
-                Fn = _factor(Jn) if ok else None
+                Fn = (F if Jn is self.J else _factor(Jn)) if ok else None
                 if ok and _lu_sign(Fn) != sign0:     # a kept J: check a fresh one
                     Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
                     Fn = _factor(Jn) if Jn is not None else None
                     ok = Fn is not None and _lu_sign(Fn) == sign0
                 if ok:
                     self.prev = (self.h, self.q)
-                    self.q, self.h, self.J, F = qn, self.h + dh, Jn, Fn
+                    self.q, self.h, self.J, self.F = qn, self.h + dh, Jn, Fn
+                    F = Fn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
                     break
@@ -638,16 +652,23 @@ class _Recorder:
         self.twist = [ix[f"{rope}.span{k}.twist"] for k in crane.falls] if "twist" in m.q_kind else None
         self.bd = m.body_dofs[crane.spec.block]
         self.jd = m.sheave_dof[crane.drum]
+        # the kernel inputs at the sweep's state (the recorded outputs are element forces and torsion
+        # torques: they do not read them), the scratch State's arrays, the outputs
+        self.u = kernel_inputs_at(m, self.st)
+        self.arrays = self.st.arrays()
+        self.y = np.empty(len(m.output_names))
 
     def record(self, q, cols, i):
         """Row i of the sweep's columns at the equilibrium q."""
-        self.st.q[:] = q
-        y = self.crane.sim.outputs(self.st)
+        st = self.st
+        st.q[:] = q
+        y = self.y
+        outputs(self.crane.model.KJ, self.arrays, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self.u, y)
         bd = self.bd
-        Rm = _rotation_matrix(np.array([q[bd["rx"]], q[bd["ry"]], q[bd["rz"]]]))
+        r20, r21, r22 = _rotation_row_z(q[bd["rx"]], q[bd["ry"]], q[bd["rz"]])
         cols["block.yaw"][i] = q[bd["rz"]]
-        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
-        cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
+        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -r20)))
+        cols["block.roll"][i] = math.atan2(r21, r22)
         cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = q[bd["x"]], q[bd["y"]], q[bd["z"]]
         for nm, a, b in self.tension:
             cols[nm][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
