@@ -255,9 +255,10 @@ def fmu_hosts(d):
 
 
 def crane_sweep(d):
-    return table(["case", "sweep", "heights", "steps (+ rejected)", "Newton iterations", "Jacobians",
-                  "unknowns", "cabling height"],
-                 [[r["case"], f"**{r['sweep_seconds']:.2f} s**", r["heights"],
+    return table(["case", "sweep", "with differenced Jacobians", "heights", "steps (+ rejected)", "Newton iterations",
+                  "Jacobians", "unknowns", "cabling height"],
+                 [[r["case"], f"**{r['sweep_seconds']:.3f} s**",
+                   f"{r['differences_seconds']:.3f} s" if "differences_seconds" in r else "—", r["heights"],
                    f"{r['steps']} (+ {r['rejected_steps']})", r["newton_iterations"], r["jacobians"], r["unknowns"],
                    "—" if r.get("critical_height") is None else f"{r['critical_height']:.2f} m"] for r in d])
 
