@@ -334,7 +334,7 @@ TABLES = {
     "bench_window": ("bench.json", "reeve-fmu bench --out docs/img", lambda d: bench_case(d, "trip_2to1_window")),
     "bench_trip": ("bench.json", "reeve-fmu bench --out docs/img", lambda d: bench_case(d, "trip_2to1")),
     "headline": ("headline.json", "reeve-fmu bench --out docs/img", headline),
-    "crane_sweep": ("crane_sweep.json", "python benchmarks/crane_sweep.py --json docs/img/crane_sweep.json",
+    "crane_sweep": ("crane_sweep.json", "python benchmarks/crane_sweep.py --repeat 3 --differences --json docs/img/crane_sweep.json",
                     crane_sweep),
     "hil": ("hil_lockstep.json", "python benchmarks/hil_lockstep.py --out docs/img/hil_lockstep.json", hil),
     "cosim": ("cosim_trip.json", "python benchmarks/cosim_trip.py --json docs/img/cosim_trip.json", cosim),

@@ -191,7 +191,7 @@ def _frame_rate(K, W, q, b, j, v):
 
 
 @njit(cache=True)
-def _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, idx):
+def _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, HJ, idx):
     """Torsion span k: Jq -= Jx^T Hl Jx + the frames' second derivatives g_v . v''; lam gets its forces
     on the element coordinates (their second derivatives are the rows')."""
     ie = K.tq_el[k]
@@ -207,18 +207,6 @@ def _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, idx):
     dref = W.tq_dref[k]
     torsion_extra(law, p[1], p[2], p[3], p[4], p[5], x[0:3], x[3:6], x[6], x[7], x[8], x[9], x[10:13], x[13:16],
                   dref, g, wk)
-    for b in range(16):
-        h = TORSION_STEP * (1.0 + abs(x[b]))
-        xb = x[b]
-        x[b] = xb + h
-        torsion_extra(law, p[1], p[2], p[3], p[4], p[5], x[0:3], x[3:6], x[6], x[7], x[8], x[9], x[10:13],
-                      x[13:16], dref, gp, wk)
-        x[b] = xb - h
-        torsion_extra(law, p[1], p[2], p[3], p[4], p[5], x[0:3], x[3:6], x[6], x[7], x[8], x[9], x[10:13],
-                      x[13:16], dref, gm, wk)
-        x[b] = xb
-        for a in range(16):
-            Hl[a, b] = (gp[a] - gm[a]) / (2.0 * h)
     # Jx: d(local inputs)/dq on the columns idx[:n]
     n = 0
     nq = q.shape[0]
@@ -259,16 +247,37 @@ def _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, idx):
             Jx[10 + 3 * e, slot[j]] += d0
             Jx[11 + 3 * e, slot[j]] += d1
             Jx[12 + 3 * e, slot[j]] += d2
+    for b in range(16):     # Hl[:, b] by central differences, for the inputs that move with q
+        active = False
+        for i in range(n):
+            if Jx[b, i] != 0.0:
+                active = True
+        if not active:
+            for a in range(16):
+                Hl[a, b] = 0.0
+            continue
+        h = TORSION_STEP * (1.0 + abs(x[b]))
+        xb = x[b]
+        x[b] = xb + h
+        torsion_extra(law, p[1], p[2], p[3], p[4], p[5], x[0:3], x[3:6], x[6], x[7], x[8], x[9], x[10:13],
+                      x[13:16], dref, gp, wk)
+        x[b] = xb - h
+        torsion_extra(law, p[1], p[2], p[3], p[4], p[5], x[0:3], x[3:6], x[6], x[7], x[8], x[9], x[10:13],
+                      x[13:16], dref, gm, wk)
+        x[b] = xb
+        for a in range(16):
+            Hl[a, b] = (gp[a] - gm[a]) / (2.0 * h)
+    for a in range(16):     # HJ = Hl Jx, then Jx^T HJ
+        for jj in range(n):
+            t = 0.0
+            for b in range(16):
+                t += Hl[a, b] * Jx[b, jj]
+            HJ[a, jj] = t
     for i in range(n):
         for jj in range(n):
             s = 0.0
             for a in range(16):
-                if Jx[a, i] == 0.0:
-                    continue
-                t = 0.0
-                for b in range(16):
-                    t += Hl[a, b] * Jx[b, jj]
-                s += Jx[a, i] * t
+                s += Jx[a, i] * HJ[a, jj]
             Jq[idx[i], idx[jj]] -= s
     nr = K.nl_rk.shape[0]
     for e in range(2):       # g_v . v'' on the frame body's coordinates
@@ -291,9 +300,10 @@ def _torsion(K, W, q, Jq, lam, H):
     Hl = np.empty((16, 16))
     nmax = 8 * K.el_map.shape[2] + 2 + K.nl_cols.shape[0]
     Jx = np.empty((16, nmax))
+    HJ = np.empty((16, nmax))
     idx = np.empty(nmax, np.int64)
     for k in range(K.tq_el.shape[0]):
-        _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, idx)
+        _torsion_span(K, W, q, k, Jq, lam, H, x, g, gp, gm, wk, Hl, Jx, HJ, idx)
 
 
 @njit(cache=True, inline="always")
