@@ -655,16 +655,18 @@ def _point_motion(P, i, mo):
 
 
 @njit(cache=True)
-def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
+def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT, S):
     """Velocities VT and convective accelerations AT (zero coordinate accelerations) of the touching
     points T of a span whose stops move with mA, mB (_body_motion): the tangency conditions
-    (TB - TA) . n = 0 differentiated once and twice (same 2 x 2 matrix as _tangent_rate)."""
+    (TB - TA) . n = 0 differentiated once and twice (same 2 x 2 matrix as _tangent_rate). S: scratch
+    (5, 2, 3), the caller's (no allocation per span)."""
     uA0, uA1, uA2, gA0, gA1, gA2 = _point_motion(P, iA, mA)
     uB0, uB1, uB2, gB0, gB1, gB2 = _point_motion(P, iB, mB)
     d0, d1, d2 = T[3] - T[0], T[4] - T[1], T[5] - T[2]
-    n = np.zeros((2, 3))
-    t = np.zeros((2, 3))
-    wn = np.zeros((2, 3))      # omega x n
+    S[:, :, :] = 0.0
+    n = S[0]
+    t = S[1]
+    wn = S[2]      # omega x n
     for e in range(2):
         R = RA if e == 0 else RB
         if R > 0.0:
@@ -686,7 +688,7 @@ def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
     gA = -(e0 * n[0, 0] + e1 * n[0, 1] + e2 * n[0, 2] + d0 * wn[0, 0] + d1 * wn[0, 1] + d2 * wn[0, 2])
     gB = -(e0 * n[1, 0] + e1 * n[1, 1] + e2 * n[1, 2] + d0 * wn[1, 0] + d1 * wn[1, 1] + d2 * wn[1, 2])
     xA, xB = _solve2(RA, RB, jAA, jAB, jBA, jBB, gA, gB)
-    nd = np.empty((2, 3))
+    nd = S[3]
     for m in range(3):
         nd[0, m] = wn[0, m] + t[0, m] * xA
         nd[1, m] = wn[1, m] + t[1, m] * xB
@@ -694,7 +696,7 @@ def _tangent_accel(P, iA, iB, RA, RB, aA, aB, mA, mB, T, VT, AT):
     VT[3], VT[4], VT[5] = uB0 + RB * nd[1, 0], uB1 + RB * nd[1, 1], uB2 + RB * nd[1, 2]
     # second order at zero alpha_ddot: n_ddot0 = domega x n + omega x n_dot + t_dot alpha_dot,
     # t_dot = (omega x a) x n + a x n_dot
-    nn = np.zeros((2, 3))
+    nn = S[4]
     for e in range(2):
         R = RA if e == 0 else RB
         if R == 0.0:
@@ -764,12 +766,13 @@ def rows_accel(q, v, G, acc):
     AT = np.empty((nsp, 6))
     aA = np.empty(3)
     aB = np.empty(3)
+    S = np.empty((5, 2, 3))
     for s in range(nsp):
         iA, iB = sp[s, 0], sp[s, 1]
         aA[0], aA[1], aA[2] = _world_axis(sa, s, 0, bq, bk, BR, pb[iA])
         aB[0], aB[1], aB[2] = _world_axis(sa, s, 1, bq, bk, BR, pb[iB])
         _tangent_accel(P, iA, iB, sg[s, 0], sg[s, 2], aA, aB, mo[pb[iA]] if pb[iA] >= 0 else zero,
-                       mo[pb[iB]] if pb[iB] >= 0 else zero, TW[s], VT[s], AT[s])
+                       mo[pb[iB]] if pb[iB] >= 0 else zero, TW[s], VT[s], AT[s], S)
     for r in range(rk.shape[0]):
         if rk[r, 0] == ROW_TANGENT:
             acc[r] = AT[rk[r, 1], 3 * rk[r, 2] + rk[r, 3]]

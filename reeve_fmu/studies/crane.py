@@ -6,8 +6,8 @@ crane-specific, on the statics of that model:
 
 * `sweep`: equilibria over a range of fall lengths h (the [crane] section). At each h the drum's rope
   coordinate is free and h(q) = h replaces its equation; continuation from the previous solution
-  (tangent predictor dq/dh, Newton corrector with a forward-difference Jacobian of the model's
-  assembled forces, step control on the predicted yaw). Cabling is the fold of the path: the height
+  (secant predictor, chord Newton corrector with the closed-form Jacobian of the model's forces at
+  rest, core/solver/statics_jac.py, step control on the predicted yaw). Cabling is the fold of the path: the height
   continuation creeps up to it with shrinking steps and hands over to
 * `cabling_of_model`: continuation in the block yaw (prescribed; the drum free), which passes the fold;
   the critical height is the vertex of the parabola h(yaw) through the highest point and its neighbours.
@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from ..core.bodies import rot_coefs
 from ..core.builder.bodies import world
 from ..core.builder.routes import span_tangents, stop_geometry
 from ..core.builder.state import start
@@ -32,8 +33,10 @@ from ..core.model import build_model
 from ..core.scene import Scene, SceneError, _Reader, load_scene
 from ..core.solver import Simulator, SolverError
 from ..core.solver.lu import lu_factor, lu_solve
+from ..core.solver.statics_jac import static_jacobian, supported
 from ..core._jit import njit
-from ..core.system import static_forces, workspace
+from ..core.solver.inputs import kernel_inputs_at
+from ..core.system import outputs, static_forces, workspace
 
 
 class CraneError(ValueError):
@@ -165,6 +168,16 @@ def _rotation_matrix(v):
     return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
 
 
+def _rotation_row_z(v0, v1, v2):
+    """The last row of _rotation_matrix((v0, v1, v2)) (Rodrigues: I + sin K + (1 - cos) K^2)."""
+    th = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if th < 1e-300:
+        return 0.0, 0.0, 1.0
+    k0, k1, k2 = v0 / th, v1 / th, v2 / th
+    sn, cm = math.sin(th), 1.0 - math.cos(th)
+    return -sn * k1 + cm * k2 * k0, sn * k0 + cm * k2 * k1, 1.0 - cm * (k0 * k0 + k1 * k1)
+
+
 def _route_parts(scene, spec, r):
     """Route geometry of the hoist rope in the scene's configuration: falls, span names, fall ends
     (block points as offsets from the block's position) and the falls' (top, bottom) tangent points."""
@@ -284,9 +297,61 @@ def _residual(K, W, c, q, zero, u, eqs, fscale, hgeo, value, r):
 
 
 @njit(cache=True)
+def _height_grad(q, hd, hw, hE, g):
+    """g[k] = d _height / d q[hd[2 + k]] (k = 0: the block's z, 1-3: its rotation vector): the z row of
+    omega_c x (R e_i), omega_c = T(phi) e_c the rotation per unit phi_c."""
+    p0, p1, p2 = q[hd[3]], q[hd[4]], q[hd[5]]
+    a, b, s1, _, _ = rot_coefs(p0, p1, p2)
+    th2 = p0 * p0 + p1 * p1 + p2 * p2
+    g[0] = 0.0
+    for i in range(hw.shape[0]):
+        g[0] += hw[i]
+    for c in range(3):
+        e = np.zeros(3)
+        e[c] = 1.0
+        x0, x1, x2 = p1 * e[2] - p2 * e[1], p2 * e[0] - p0 * e[2], p0 * e[1] - p1 * e[0]     # phi x e_c
+        y0, y1 = p1 * x2 - p2 * x1, p2 * x0 - p0 * x2                                          # phi x (phi x e_c)
+        w0, w1 = e[0] + a * x0 + b * y0, e[1] + a * x1 + b * y1
+        s = 0.0
+        for i in range(hw.shape[0]):
+            e0, e1, e2 = hE[i, 0], hE[i, 1], hE[i, 2]
+            pe = p0 * e0 + p1 * e1 + p2 * e2
+            # R e = e + s1 phi x e + a phi x (phi x e), phi x (phi x e) = phi (phi.e) - th2 e
+            r0 = e0 + s1 * (p1 * e2 - p2 * e1) + a * (p0 * pe - th2 * e0)
+            r1 = e1 + s1 * (p2 * e0 - p0 * e2) + a * (p1 * pe - th2 * e1)
+            s += hw[i] * (w0 * r1 - w1 * r0)
+        g[1 + c] = s
+
+
+@njit(cache=True)
+def _closed_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, unk, Jq, J):
+    """Statics.residual's Jacobian over the unknowns into J from the closed-form static Jacobian
+    (core/solver/statics_jac.py) and _height_grad; False if a span vanishes."""
+    if static_jacobian(K, W, c, q, zero, u, Jq) < 0:
+        return False
+    pos = np.full(q.shape[0], -1, np.int64)
+    for k in range(unk.shape[0]):
+        pos[unk[k]] = k
+    for i in range(eqs.shape[0]):
+        for k in range(unk.shape[0]):
+            J[i, k] = Jq[eqs[i], unk[k]] / fscale
+    if J.shape[0] > eqs.shape[0]:
+        hd, hw, hE, hc = hgeo
+        g = np.empty(4)
+        _height_grad(q, hd, hw, hE, g)
+        n = eqs.shape[0]
+        for k in range(unk.shape[0]):
+            J[n, k] = 0.0
+        for k in range(4):
+            if pos[hd[2 + k]] >= 0:
+                J[n, pos[hd[2 + k]]] = g[k]
+    return True
+
+
+@njit(cache=True)
 def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
-    """Forward differences of _residual over the unknowns into J (the reference of the closed-form
-    one's test); False if a span vanishes."""
+    """Forward differences of _residual over the unknowns into J (models whose static forces
+    statics_jac does not cover); False if a span vanishes."""
     for k in range(unk.shape[0]):
         j = unk[k]
         qj = q[j]
@@ -304,8 +369,9 @@ def _fd_jacobian(K, W, c, q, zero, u, eqs, fscale, hgeo, value, unk, r0, rp, J):
 class Statics:
     """Static equilibria of the crane's dynamic model with the drum's rope coordinate free and one
     constraint in its place: a prescribed fall length h, or a prescribed block yaw (its rotation
-    vector's z component). Newton with a forward-difference Jacobian of the assembled forces
-    (compiled: _residual, _fd_jacobian)."""
+    vector's z component). Newton with the closed-form Jacobian of the forces at rest where
+    statics_jac covers the model, else forward differences (compiled: _residual, _closed_jacobian,
+    _fd_jacobian)."""
 
     def __init__(self, crane: Crane, st):
         m = crane.model
@@ -319,6 +385,8 @@ class Statics:
         self.zero = np.zeros(m.nq)
         self.hgeo = _height_arrays(crane)
         self.stats = [0, 0]          # Newton iterations, Jacobians
+        # the closed-form Jacobian where it covers the model's static forces, else differences
+        self.Jq = np.empty((m.nq, m.nq)) if supported(m.K) else None
 
     def unknowns(self, mode):
         free = set(self.eqs) | {self.jd}
@@ -341,18 +409,22 @@ class Statics:
         if r0 is None:
             return None
         J = np.empty((len(r0), len(unk)))
-        if not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
-                            self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
+        if self.Jq is not None:
+            if not _closed_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                                    self.fscale, self.hgeo, unk, self.Jq, J):
+                return None
+        elif not _fd_jacobian(self.crane.model.KJ, self.W, self.st.c, q.copy(), self.zero, self.u, self.eqs,
+                              self.fscale, self.hgeo, float(value), unk, r0, np.empty(len(r0)), J):
             return None
         self.stats[1] += 1
         return J
 
-    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0):
+    def solve(self, q, mode, value, J=None, maxit=25, max_dyaw=0.5, keep=0, F=None):
         """Newton from q (q[jyaw] = value first in mode 'yaw'); J: a Jacobian to start from (chord
         Newton, refreshed when the residual falls by less than 4x). Returns (q, J at q) or (None, None);
         the tangent solver's warm start is restored on failure or when it jumped (_branch_jump).
         keep: a given J that converged within `keep` iterations is returned as the Jacobian at q (the
-        continuation's next predictor); else a fresh one is differenced there."""
+        continuation's next predictor); else a fresh one is computed there. F: J's factors if known."""
         ang = self.st.nl_ang.copy()
         unk = self.unknowns(mode)
         q = q.copy()
@@ -361,7 +433,7 @@ class Statics:
         tol = self.crane.spec.tolerance
         err_prev, fresh = np.inf, False
         given = J is not None
-        F = _factor(J) if given else None
+        F = (_factor(J) if F is None else F) if given else None
         if given and F is None:
             J = None
         for it in range(maxit):
@@ -506,6 +578,7 @@ class _Continuation:
 
     def __init__(self, S: Statics, q, h, J):
         self.S, self.q, self.h, self.J = S, q, h, J
+        self.F = _factor(J)          # J's LU factors (kept with it)
         self.unk = S.unknowns("height")
         self.iyaw = int(np.searchsorted(self.unk, S.jyaw))
         self.steps = self.rejected = 0
@@ -515,7 +588,7 @@ class _Continuation:
     def continue_to(self, h_target, dh_min, yaw_step):
         """From the current point to h_target; False at a fold (no equilibrium beyond self.h within
         dh_min, or the Jacobian's determinant changes sign: a jump onto the unstable branch)."""
-        F = _factor(self.J)
+        F = self.F
         sign0 = _lu_sign(F)
         e = np.zeros(len(self.unk))
         e[-1] = 1.0
@@ -532,16 +605,17 @@ class _Continuation:
                     qp += (self.q - self.prev[1]) * (dh / (self.h - self.prev[0]))   # secant: second order
                 else:
                     qp[self.unk] += dh * v
-                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS)
+                qn, Jn = self.S.solve(qp, "height", self.h + dh, J=self.J, maxit=12, keep=KEEP_ITERATIONS, F=F)
                 ok = qn is not None and abs(qn[self.S.jyaw] - self.q[self.S.jyaw]) <= 4.0 * yaw_step
-                Fn = _factor(Jn) if ok else None
+                Fn = (F if Jn is self.J else _factor(Jn)) if ok else None
                 if ok and _lu_sign(Fn) != sign0:     # a kept J: check a fresh one
                     Jn = self.S.jacobian(qn, self.unk, "height", self.h + dh)
                     Fn = _factor(Jn) if Jn is not None else None
                     ok = Fn is not None and _lu_sign(Fn) == sign0
                 if ok:
                     self.prev = (self.h, self.q)
-                    self.q, self.h, self.J, F = qn, self.h + dh, Jn, Fn
+                    self.q, self.h, self.J, self.F = qn, self.h + dh, Jn, Fn
+                    F = Fn
                     self.steps += 1
                     self.history.append((self.h, qn[self.S.jyaw]))
                     break
@@ -578,16 +652,23 @@ class _Recorder:
         self.twist = [ix[f"{rope}.span{k}.twist"] for k in crane.falls] if "twist" in m.q_kind else None
         self.bd = m.body_dofs[crane.spec.block]
         self.jd = m.sheave_dof[crane.drum]
+        # the kernel inputs at the sweep's state (the recorded outputs are element forces and torsion
+        # torques: they do not read them), the scratch State's arrays, the outputs
+        self.u = kernel_inputs_at(m, self.st)
+        self.arrays = self.st.arrays()
+        self.y = np.empty(len(m.output_names))
 
     def record(self, q, cols, i):
         """Row i of the sweep's columns at the equilibrium q."""
-        self.st.q[:] = q
-        y = self.crane.sim.outputs(self.st)
+        st = self.st
+        st.q[:] = q
+        y = self.y
+        outputs(self.crane.model.KJ, self.arrays, st.c, st.q, st.v, st.qdd, st.q_ref, st.t, self.u, y)
         bd = self.bd
-        Rm = _rotation_matrix(np.array([q[bd["rx"]], q[bd["ry"]], q[bd["rz"]]]))
+        r20, r21, r22 = _rotation_row_z(q[bd["rx"]], q[bd["ry"]], q[bd["rz"]])
         cols["block.yaw"][i] = q[bd["rz"]]
-        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -Rm[2, 0])))
-        cols["block.roll"][i] = math.atan2(Rm[2, 1], Rm[2, 2])
+        cols["block.pitch"][i] = math.asin(max(-1.0, min(1.0, -r20)))
+        cols["block.roll"][i] = math.atan2(r21, r22)
         cols["block.x"][i], cols["block.y"][i], cols["block.z"][i] = q[bd["x"]], q[bd["y"]], q[bd["z"]]
         for nm, a, b in self.tension:
             cols[nm][i] = 0.5 * (y[a] + y[b])     # mid-span: the element's EA eps
