@@ -157,11 +157,11 @@ def test_elastic_and_gravity_forces_are_minus_dV(nd, name, fn):
 
 @pytest.mark.parametrize("nd,name,fn", KERNELS, ids=IDS)
 def test_tension_only_has_no_force_in_compression(nd, name, fn):
-    """tension_only and lambda < 1 - SLACK_STRAIN: no axial force (elastic or damping) at all, and the
-    slack energy density -EA d^2/10 (linear.axial_law_d), whose only trace is the configurational force
-    EA d^2/10 on the material coordinates (rhoA = 0: no inertia, no gravity)."""
-    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d
+    """tension_only and lambda < 1 - d (d = linear.slack_band(EA)): no axial force (elastic or damping)
+    at all, and the slack energy density -EA d^2/10 (linear.axial_law_d), whose only trace is the
+    configurational force EA d^2/10 on the material coordinates (rhoA = 0: no inertia, no gravity)."""
     EA = 1e5
+    d = lin.slack_band(EA)
     rng = np.random.default_rng(500 + nd)
     for _ in range(N_STATES):
         qe, ve = random_state(rng, nd, lam_range=(0.8, 0.99))
@@ -175,7 +175,7 @@ def test_tension_only_has_no_force_in_compression(nd, name, fn):
 
 @pytest.mark.parametrize("nd,name,fn", KERNELS, ids=IDS)
 def test_tension_only_taut_is_the_bilateral_law_bit_for_bit(nd, name, fn):
-    """A stretched span (eps >= SLACK_STRAIN) whose total force is not clipped: the tension-only element
+    """A stretched span (eps >= d = linear.slack_band(EA)) whose total force is not clipped: the tension-only element
     returns the bilateral element's M, Q and results to the bit (a rope that stays taut runs as a
     bilateral one); with damping and without."""
     rng = np.random.default_rng(700 + nd)
@@ -186,7 +186,7 @@ def test_tension_only_taut_is_the_bilateral_law_bit_for_bit(nd, name, fn):
         g = rng.normal(size=nd)
         a = element(fn, nd, qe, ve, rhoA=0.7, EA=3e6, nu=nu, g=g, tonly=True)
         b = element(fn, nd, qe, ve, rhoA=0.7, EA=3e6, nu=nu, g=g, tonly=False)
-        if b[2][0] + b[2][1] < 3e6 * lin.SLACK_STRAIN:
+        if b[2][0] + b[2][1] < 3e6 * lin.slack_band(3e6):
             continue    # damping clipped (a fast-retracting span): not the linear law
         taken += 1
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and a[2] == b[2], (a, b)
@@ -198,8 +198,9 @@ def test_tension_only_law_is_conservative_and_smooth():
     central differences, N and dN/deps continuous at +-d (N = EA eps, slope EA above; 0, 0 below),
     the total force never negative and without damping exactly N (the clip never acts on N alone),
     and bit for bit the bilateral law wherever taut."""
-    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d, axial_law_d
+    from reeve_fmu.core.elements.linear import axial_law_d, slack_band
     EA, nu = 2.9e6, 1e-2
+    d = slack_band(EA)
     h, hd = 1e-3 * d, 1e-5 * d
     for eps in np.linspace(-1.5 * d, 1.5 * d, 60):     # not on +-d, where the second derivative jumps
         N, w, _, dN, _, _ = axial_law_d(EA, 0.0, eps, 0.0, True)
