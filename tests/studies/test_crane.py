@@ -167,7 +167,7 @@ def test_two_falls_against_the_exact_equilibrium_and_the_closed_form():
     check("fall tension / exact - 1", S / S_ref - 1, 1e-9)
     check("fall 2 / fall 1 tension - 1 (frictionless hook sheave)", res.columns["fall2.tension"][idx] / S - 1, 7e-11)
     H_exact, yaw_exact = ref.critical()
-    check("critical height / exact - 1", res.critical_height / H_exact - 1, 4e-10)        # measured 3.7e-11
+    check("critical height / exact - 1", res.critical_height / H_exact - 1, 3.5e-10)        # measured 3.7e-11
     check("critical yaw - exact [rad]", res.critical_yaw - yaw_exact, 5e-7,
           reason="h is flat in the yaw at the fold: the exact fold's yaw itself scatters by 5e-8 with the search")
     alpha = 2 * k * d / a
@@ -179,7 +179,7 @@ def test_two_falls_against_the_exact_equilibrium_and_the_closed_form():
           reason="the lean's share ranges over 0.75 to 0.94 alpha^2 with the yaw: a band, not an error")
     check('math.degrees(res.critical_yaw) - 90.0', math.degrees(res.critical_yaw) - 90.0, 0.01)
     # the torque is k d S
-    check("rope torque / (k d S) - 1", res.columns["rope.torque"][ok] / (k * d * res.columns["fall1.tension"][ok]) - 1, 1e-10)
+    check("rope torque / (k d S) - 1", res.columns["rope.torque"][ok] / (k * d * res.columns["fall1.tension"][ok]) - 1, 9e-11)
 
 
 def test_eight_falls_large_crane():
@@ -226,10 +226,11 @@ def test_eight_falls_cabling_height_against_the_exact_equilibrium():
     ref = HookBlock(c.scene)
     S = Statics(c, c.sim.initial_state())
     q = S.st.q
+    err = []
     for psi in (0.2, 0.6, 1.0):
         q, _ = S.solve(q, "yaw", psi)
-        # measured 8.4e-11
-        check("h at prescribed yaw / exact - 1", c.height(q) / ref.equilibrium(psi)[0] - 1, 2e-10)
+        err.append(c.height(q) / ref.equilibrium(psi)[0] - 1)
+    check("h at prescribed yaw / exact - 1", err, 5e-10)                                   # measured 8.4e-11
     res = sweep(c)
     H, yaw = ref.critical()
     check("cabling height / exact - 1", res.critical_height / H - 1, 2e-8)                # measured 2.1e-9
