@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from ._jit import gated, njit
-from .elements.linear import SLACK_STRAIN, chord, smooth_positive
+from .elements.linear import chord, smooth_positive
 from .kernel import (CR_ANGLE, CR_KAPPA_MID, CR_RATE, CR_SIGMA, CR_WOUND, CT_EA, CT_IN, CT_IR, CT_OUT, CT_S,
                      CT_TIN, CT_TOUT, CT_WIN, CT_WOUT, CUBIC, INFO_CREEP, MULTI_D, UE_BRAKE_E, UE_BRAKE_Z,
                      UE_CREEP, UE_MOTOR_Q, UE_SLIP, UE_STRIDE, UE_TRAC_S, UE_TRAC_TH, UE_TRAC_Z)
@@ -36,10 +36,11 @@ def _elastoplastic(z, zmax):
 @njit(cache=True, inline="always")
 def _carried_strain(tonly, e, ed):
     """A rope element's strain e (rate ed) as its tension carries it: e itself, or for a
-    tension-only rope (tonly != 0) its positive part N/EA of axial_law (e itself where taut)."""
-    if tonly == 0:
+    tension-only rope (tonly: its blend band linear.slack_band(EA) > 0; 0 bilateral) its positive
+    part N/EA of axial_law (e itself where taut)."""
+    if tonly == 0.0:
         return e, ed
-    p, s = smooth_positive(e, SLACK_STRAIN)
+    p, s = smooth_positive(e, tonly)
     return p, s * ed
 
 

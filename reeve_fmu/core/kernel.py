@@ -95,8 +95,9 @@ def compiled_features(K) -> int:
 
 # Columns of Kernel.crp_tab, one row per creep sheave: its sigma coordinate, arriving (in) and leaving
 # (out) element (-1: none), kind, rim inertia J / R^2, the EA of its creep force, the two elements'
-# tension-only flags, 1 / R, and for linear elements the weight grading of the groove strain (x, y, z)
-# at the in element's end and at the out element's start (contact.groove_strains).
+# tension-only blend bands (linear.slack_band; 0: bilateral), 1 / R, and for linear elements the weight
+# grading of the groove strain (x, y, z) at the in element's end and at the out element's start
+# (contact.groove_strains).
 CT_S, CT_IN, CT_OUT, CT_KIND, CT_JR2, CT_EA, CT_TIN, CT_TOUT, CT_IR, CT_WIN, CT_WOUT = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12
 CT_SIZE = 15
 

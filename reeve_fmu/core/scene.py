@@ -368,6 +368,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
     used_sheaves: dict[str, str] = {}
     ropes = _parse_ropes(r, data, names, model, statics, {b.name for b in bodies}, {s.name: s for s in sheaves},
                          used_sheaves)
+    _check_exact_tangents(r, ropes, tangents)
     drive = _parse_drive(r, data, sheaves, ropes, used_sheaves)
     brake = _parse_brake(r, data, drive)
     buffers = _parse_buffers(r, data, names, bodies)
@@ -578,6 +579,21 @@ def _parse_tangents(r: _Reader, sc, model, bodies) -> str:
     if tangents == "frozen" and rotating:
         r.fail("scene.tangents", f"the rotating bodies {', '.join(rotating)} need tangents = 'exact'")
     return tangents
+
+
+def _check_exact_tangents(r: _Reader, ropes, tangents) -> None:
+    """Exact tangent points move every span's end nodes with the bodies' poses: a W2 wrap's cubic
+    elements and a hitch spring's deflection coordinate have no such form."""
+    if tangents != "exact":
+        return
+    why = "with exact tangent points (scene.tangents = 'exact', the default with a rotating body or a joint)"
+    for i, rope in enumerate(ropes):
+        if rope.wrap_model == "W2":
+            r.fail(f"ropes[{i}].wrap_model", f"'W2' cannot hold its cubic wrap elements {why}: use 'W1' or 'W0'")
+        for k, st in enumerate(rope.route):
+            for key in ("hitch_stiffness", "hitch_damping"):
+                if getattr(st, key) > 0:
+                    r.fail(f"ropes[{i}].route[{k}].{key}", f"a hitch spring is not available {why}")
 
 
 def _parse_sheaves(r: _Reader, data, names, model, bodies) -> list:

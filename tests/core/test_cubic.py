@@ -344,13 +344,14 @@ def test_taut_span_transverse_frequency(nd):
 
 @pytest.mark.parametrize("nd", [2, 3])
 def test_tension_only_band_stiffness_and_damping_jacobian(nd):
-    """A straight cubic element strained within the tension-only law's band (|eps| < SLACK_STRAIN) and
+    """A straight cubic element strained within the tension-only law's band (|eps| < linear.slack_band) and
     moving so that the damping is clipped at some Gauss points: cubic_jac.cubic_stiffness (elastic,
     bending, Kelvin-Voigt: -dQ/dq, -dQ/dv) against central differences of the element's force with rhoA
     = 0, and the element is the bilateral one bit for bit once stretched beyond the band."""
     from reeve_fmu.core.elements.cubic_jac import cubic_stiffness
-    from reeve_fmu.core.elements.linear import SLACK_STRAIN as d
+    from reeve_fmu.core.elements.linear import slack_band
     EA, EI, nu, l = 3.0e6, 2.5, 1e-2, 1.3
+    d = slack_band(EA)
     ne = 4 * nd + 2
     rng = np.random.default_rng(40 + nd)
     t = rng.normal(size=nd)

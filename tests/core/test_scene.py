@@ -74,3 +74,23 @@ def test_unknown_sheave_and_reuse():
     text = BASE.replace('{ anchor = "mass", at = [0, 0, 0] }', '{ sheave = "nope" }, { anchor = "mass", at = [0, 0, 0] }')
     with pytest.raises(SceneError, match=r"route\[1\].sheave\] unknown sheave 'nope'"):
         loads_scene(text, "s.toml")
+
+
+TWO_FALL = (ROOT / "scenes" / "crane_two_fall.toml").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("old,new,key,problem", [
+    ("rhoA = 2.4 ", 'rhoA = 2.4\nelement = "cubic"\nEI = 10.0\nwrap_model = "W2"\n', "ropes[0].wrap_model",
+     "'W2' cannot hold its cubic wrap elements with exact tangent points"),
+    ('at = [0.25, 0.0, 0.0] }', 'at = [0.25, 0.0, 0.0], hitch_stiffness = 1e6 }', "ropes[0].route[3].hitch_stiffness",
+     "a hitch spring is not available with exact tangent points"),
+    ('at = [0.25, 0.0, 0.0] }', 'at = [0.25, 0.0, 0.0], hitch_damping = 1e3 }', "ropes[0].route[3].hitch_damping",
+     "a hitch spring is not available with exact tangent points"),
+])
+def test_exact_tangents_refuse_what_they_cannot_hold(old, new, key, problem):
+    """The hook block turns (exact tangent points): a W2 wrap or a hitch spring is refused at the key."""
+    assert old in TWO_FALL
+    with pytest.raises(SceneError) as exc:
+        loads_scene(TWO_FALL.replace(old, new, 1), "bad.toml")
+    msg = str(exc.value)
+    assert msg.startswith(f"bad.toml: [{key}] ") and problem in msg, msg

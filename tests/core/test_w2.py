@@ -29,8 +29,8 @@ G = 9.81
 def atwood(wrap="W2", n=4, EA=1e9, rhoA=2.0, R=0.5, mA=10.0, mB=6.0, side=2.0, J=0.0, EI=0.0,
            model="planar", step=1e-3, rho_inf=1.0):
     """Rope from mass A up over a fixed idler (radius R, inertia J, 180 deg wrap) down to mass B;
-    `side` m of rope hanging on each side. Bilateral: EA 1e9 N (the rigid limit) strains it by 1e-7,
-    inside the tension-only law's 1e-6 blend band."""
+    `side` m of rope hanging on each side. Bilateral: EA 1e9 N (the rigid limit) strains it by 1e-7
+    from an unstretched start, through the tension-only law's blend band at zero strain."""
     wrap_keys = f'wrap_model = "{wrap}"' + (f"\nwrap_elements = {n}" if wrap == "W2" else "")
     return build_model(loads_scene(f"""
 [scene]

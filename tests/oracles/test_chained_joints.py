@@ -171,9 +171,12 @@ def test_tower_crane_slew_loads_rail_and_slewing_drive_with_the_rope():
     check_min("box swing across the jib [m]", np.max(np.abs(res["payload.position.y"] - 20.35 * np.sin(res["jib.angle"]))), 1.0)
     check_min("rope's pull along the rail [N]", np.max(np.abs(res["trolley.joint_force"])), 2.5e4)
     check_min("slewing torque [N m]", np.max(np.abs(res["jib.joint_torque"])), 1e5)
-    # measured 6.0e-4 N of the 32 kN pull and 1.7e-3 N m of the 2.5e5 N m slewing torque
-    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 6e-3)
-    check("slewing torque: tau - (I_jib + m r^2) alpha - S dP/dtheta [N m]", np.array(slew), 1.6e-2)
+    # measured 2.1e-3 N of the 32 kN pull and 5.3e-4 N m of the 2.5e5 N m slewing torque (round-off: the
+    # run's last bits move with any change of the float operations, 6.0e-4 N and 1.7e-3 N m before the
+    # tension-only law's band narrowed to 1 N, which put this 1000 x stiff rope on its bilateral branch)
+    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 1.2e-2)
+    check("slewing torque: tau - (I_jib + m r^2) alpha - S dP/dtheta [N m]", np.array(slew), 1.6e-2,
+          reason="round-off of a 14 s spatial run: 5.3e-4 to 1.7e-3 N m as the float operations change")
 
 
 CHAIN = """

@@ -260,3 +260,25 @@ def test_bad_winch_mountings_name_the_key(frame, key, words):
     with pytest.raises(SceneError) as exc:
         parse_scene(tomllib.loads(WINCH.format(frame=frame)), "winch.toml")
     assert f"[{key}]" in str(exc.value) and words in str(exc.value), str(exc.value)
+
+
+def test_trolley_pushed_off_its_rail_stops_the_run_naming_the_key():
+    """The trolley of tower_crane_trolley.toml under a constant travel force instead of its profile
+    (statics off: the force does not balance the rope's pull): it runs along its rail to the rail's
+    inner end (range -15 m) and past it. The run stops at the first sample outside, naming the body and
+    [bodies[0].joint.range], and keeps the samples up to it (no profile to check when the scene loads)."""
+    from reeve_fmu.core.scene import loads_scene
+    from reeve_fmu.core.solver import SolverError
+    text = open("scenes/tower_crane_trolley.toml", encoding="utf-8").read()
+    old = 'motion = { kind = "profile", distance = 10.0, v_max = 0.8, a_max = 0.3, jerk = 0.5, t_start = 1.0 }'
+    assert old in text
+    text = text.replace('statics = "rope-length"', 'statics = "none"').replace(
+        old, 'motion = { kind = "torque", torque = [[0.0, 6000.0], [30.0, 6000.0]] }')
+    sim = Simulator(build_model(loads_scene(text, "trolley.toml")))
+    with pytest.raises(SolverError) as exc:
+        sim.run(12.0, 0.05)
+    msg = str(exc.value)
+    assert ("body 'trolley' ran off its rail: travel" in msg and "outside [bodies[0].joint.range] = [-15, 20] m" in msg
+            and "its motion 'torque'" in msg), msg
+    x = exc.value.result["trolley.travel"]
+    assert x[-1] < -15.0 <= x[-2] and exc.value.time == exc.value.result.time[-1] > 0.0

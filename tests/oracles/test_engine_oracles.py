@@ -177,8 +177,8 @@ def atwood_dict(side: float, wrap_model: str, EA: float | None = None) -> dict:
     for b in d["bodies"]:
         b["position"][2] = -side          # hanging material length on each side = side
     d["ropes"][0]["wrap_model"] = wrap_model
-    # bilateral: the exact laws here are of an elastic (or, EA 1e9 N, rigid: strain 1e-7, inside the
-    # tension-only law's 1e-6 blend band) rope, started unstretched, whose strain comes back to 0
+    # bilateral: the exact laws here are of an elastic (or, EA 1e9 N, rigid: strain 1e-7) rope, started
+    # unstretched, whose strain comes back to 0 (inside the tension-only law's blend band)
     d["ropes"][0]["tension_only"] = False
     if EA is not None:
         d["ropes"][0]["EA"] = EA

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..kernel import (CT_EA, CT_IN, CT_IR, CT_JR2, CT_KIND, CT_OUT, CT_S, CT_SIZE, CT_TIN, CT_TOUT,
                       CT_WIN, CT_WOUT, Kernel)
+from ..elements.linear import slack_band
 from ..sparse import dense_groups
 from ..traction import equivalent_friction
 from .bodies import chain_fields, rigid_fields
@@ -92,7 +93,7 @@ def creep_table(K: Kernel) -> np.ndarray:
         tab[k, CT_EA] = K.el_EA[eo if ei < 0 else ei]
         for e, col, tcol, end in ((ei, CT_WIN, CT_TIN, 1), (eo, CT_WOUT, CT_TOUT, 0)):
             if e >= 0:
-                tab[k, tcol] = K.el_tonly[e]
+                tab[k, tcol] = slack_band(K.el_EA[e]) if K.el_tonly[e] else 0.0
                 if linear:
                     w = 0.5 * K.el_rhoA[e] / K.el_EA[e] * (1.0 if end == 0 else -1.0)
                     tab[k, col:col + K.nd] = w * K.el_g[e, :K.nd]

@@ -199,21 +199,14 @@ def register_spans(nlr, scene, rope, stops, geo):
     The nonlinear rows are the span end nodes (positions; cubic: slopes; W1: s of the leaving node);
     interior nodes are free coordinates with s interpolated linearly between the end nodes' s at their
     t = 0 offsets (a valid ALE mesh: the material between the nodes follows from their s). W2 wraps
-    and hitch springs are not available."""
-    from ..scene import SceneError
+    and hitch springs are not available (scene._check_exact_tangents refuses them)."""
     sheaves = {s.name: s for s in scene.sheaves}
-    where = f"{scene.source}: [ropes.{rope.name}]"
-    if rope.wrap_model == "W2":
-        raise SceneError(f"{where} wrap_model = 'W2' is not available with exact tangent points (rotating "
-                         f"bodies, joints, scene.tangents = 'exact'): use 'W0' or 'W1'")
     desc = []
     for st, (c, R, a, sgn) in zip(stops, geo):     # c: the stop's world position at t = 0
         if st.sheave is not None:
             sh = sheaves[st.sheave]
             desc.append((sh.body, c, R, sgn, np.asarray(sh.axis, float)))
         else:
-            if st.hitch_stiffness > 0 or st.hitch_damping > 0:
-                raise SceneError(f"{where} route: hitch springs are not available with exact tangent points")
             desc.append((None if st.anchor == "ground" else st.anchor, c, 0.0, 1.0, None))
     return [nlr.span(desc[k], desc[k + 1]) for k in range(len(stops) - 1)]
 

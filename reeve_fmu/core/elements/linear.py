@@ -22,7 +22,18 @@ from .._jit import njit
 
 
 
-SLACK_STRAIN = 1e-6   # half-width d of the tension-only law's blend band (strain)
+SLACK_STRAIN = 1e-6   # widest half-width d of the tension-only law's blend band (strain)
+SLACK_FORCE = 1.0     # N: the band's widest force EA d, so a stiff rope under light load is on the linear law
+
+
+@njit(cache=True, inline="always")
+def slack_band(EA):
+    """Half-width d of the tension-only law's blend band of a rope of axial stiffness EA: SLACK_STRAIN,
+    narrowed to SLACK_FORCE / EA for a stiff rope (without it a rope of EA 1e9 N would sit inside the
+    band, softer than EA, under loads up to 1 kN)."""
+    if EA * SLACK_STRAIN > SLACK_FORCE:
+        return SLACK_FORCE / EA
+    return SLACK_STRAIN
 
 
 @njit(cache=True, inline="always")
@@ -55,7 +66,7 @@ def axial_law_d(EA, nu, eps, epsdot, tonly):
     part, dN/deps, dN_d/deps, dN_d/depsdot).
 
     Bilateral (tonly false): N = EA eps, w = EA eps^2/2, N_d = EA nu deps/dt.
-    Tension-only: N = EA p(eps), p = smooth_positive over d = SLACK_STRAIN (a bare max(., 0) makes
+    Tension-only: N = EA p(eps), p = smooth_positive over d = slack_band(EA) (a bare max(., 0) makes
     Newton cycle between the slack and the taut branch), with its energy w = EA int p deps:
     EA eps^2/2 for eps >= d, EA d^2 (y^4 - 2 y^5/5 - 1/10) in the band, -EA d^2/10 below (C2 in eps).
     The damper acts in proportion to the spring's slope p', and the total force
@@ -66,7 +77,7 @@ def axial_law_d(EA, nu, eps, epsdot, tonly):
     bilateral one."""
     if not tonly:
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu
-    d = SLACK_STRAIN
+    d = slack_band(EA)
     dF = EA * d
     if eps >= d and EA * eps + EA * nu * epsdot >= dF:
         return EA * eps, 0.5 * EA * eps * eps, EA * nu * epsdot, EA, 0.0, EA * nu

@@ -252,12 +252,36 @@ class Simulator:
                 raise
             times.append(res.time)
             vals.append(res.values)
+            self._check_joint_ranges(res, times, vals, st)
             if progress is not None:
                 progress(st.t)
         self.final_state = st
         res = Result(np.concatenate(times), np.vstack(vals), self.model.output_names)
         self._check_creep_arcs(res)
         return res
+
+    def _check_joint_ranges(self, res: Result, times, vals, st):
+        """A body on a joint with a range (a trolley's rail) that leaves it under a torque, a free
+        motion or an input: stop with the body, the key and the samples up to the first one outside."""
+        for i, b in enumerate(self.model.scene.bodies):
+            if b.joint_range is None:
+                continue
+            coord, unit = ("travel", "m") if b.joint == "prismatic" else ("angle", "rad")
+            x = res[f"{b.name}.{coord}"]
+            lo, hi = b.joint_range
+            out = np.flatnonzero((x < lo - 1e-9) | (x > hi + 1e-9))
+            if not len(out):
+                continue
+            k = int(out[0])
+            what = "ran off its rail" if b.joint == "prismatic" else "turned beyond its joint's range"
+            err = SolverError(f"t = {res.time[k]:.6f} s: body {b.name!r} {what}: {coord} {x[k]:.6g} {unit} outside "
+                              f"[bodies[{i}].joint.range] = [{lo:g}, {hi:g}] {unit} (0 is the scene's pose; "
+                              f"its motion {b.motion.kind!r} does not keep it there)")
+            err.time = float(res.time[k])
+            err.result = Result(np.concatenate(times[:-1] + [res.time[:k + 1]]),
+                                np.vstack(vals[:-1] + [res.values[:k + 1]]), self.model.output_names)
+            self.final_state = st
+            raise err
 
     def _check_creep_arcs(self, res: Result):
         """Creep on a no-slip traction sheave needs an arc ln(T_t/T_s)/f of the wrap (Euler-Eytelwein):

@@ -129,7 +129,7 @@ class Statics:
         if np.any(m.K.el_tonly):
             # tension-only ropes (the default) bend at zero strain, where the geometric guess starts: solve
             # the statics with the bilateral law, which the tension-only law is exactly on a span stretched
-            # beyond SLACK_STRAIN, and check below that every span ends up in tension
+            # beyond its blend band (linear.slack_band), and check below that every span ends up in tension
             KB = KB._replace(el_tonly=np.zeros_like(m.K.el_tonly))
             KS = compiled_kernel(KB._replace(crp_tab=creep_table(KB)))
         q = st.q.copy()
