@@ -20,6 +20,7 @@ from tests.support.checks import check, check_min
 
 SCENE = "scenes/tower_crane_trolley_hoist.toml"
 G = 9.81
+AT = np.array([0.0, 0.0, 0.5])      # the rope's anchor on the box, from its centre of mass
 
 
 def _rot(axis, ang):
@@ -31,12 +32,18 @@ def _rot(axis, ang):
 
 def _scene(EA_factor=1000.0, jib=None, trolley=None, **rope):
     """The shipped scene with a weightless rope (forces at the drum; EA_factor x stiffer), the drum
-    held (its hoist not started), the jib's and trolley's motions replaced if given."""
+    held (its hoist not started), the box a point mass (its rope anchor AT above its centre), the
+    jib's and trolley's motions replaced if given."""
     sc = load_scene(SCENE)
     r = replace(sc.ropes[0], rhoA=1e-6, damping=0.0, EA=EA_factor * sc.ropes[0].EA, **rope)
     motions = {"jib": jib, "trolley": trolley}
-    bodies = tuple(b if motions.get(b.name) is None else replace(b, motion=motions[b.name]) for b in sc.bodies)
+    bodies = tuple(replace(b, free=("x", "y", "z"), inertia=0.0) if b.name == "payload" else
+                   b if motions.get(b.name) is None else replace(b, motion=motions[b.name]) for b in sc.bodies)
     return replace(sc, ropes=(r,), bodies=bodies, drive=replace(sc.drive, t_start=1e3))
+
+
+def _anchor(y):
+    return np.array([y["payload.position.x"], y["payload.position.y"], y["payload.position.z"]]) + AT
 
 
 def _held(b):
@@ -59,9 +66,10 @@ def test_holding_torque_is_the_rope_tension_times_the_radius():
     check("drum tension / load weight - 1", S / W - 1.0, 1e-7)
     # measured 3.5e-7 = eps / 2: the drum counts its rope coordinate as unstretched material
     check("drive torque / (R x tension) - 1", -y["motor.torque"] / (R * S) - 1.0, 3.5e-6)
-    check_min("holding torque [N m]", -y["motor.torque"], 8.8e3)
+    check_min("holding torque [N m]", -y["motor.torque"], 1.0e4)
     # measured 1.5e-12 N
-    check("trolley.joint_force [N]", y["trolley.joint_force"], 1.5e-11)
+    check("trolley.joint_force [N]", y["trolley.joint_force"], 1.5e-11,
+          reason="round-off: 7.4e-13 to 1.7e-12 N as the scene's numbers change")
 
 
 def _path(sc, th, u, anc):
@@ -94,20 +102,21 @@ def test_slew_loads_rail_and_slewing_drive_with_trolley_drum_and_rope():
     for k in range(len(res.time)):
         y = {n: res[n][k] for n in res.names}
         th = y["jib.angle"]
-        anc = np.array([y["payload.position.x"], y["payload.position.y"], y["payload.position.z"]])
+        anc = _anchor(y)
         S = y["drum.tension_out"]
         dPu = (_path(sc, th, h, anc) - _path(sc, th, -h, anc)) / (2 * h)
         dPth = (_path(sc, th + h, 0.0, anc) - _path(sc, th - h, 0.0, anc)) / (2 * h)
         rail.append(y["trolley.joint_force"] + m * y["jib.angular_velocity"] ** 2 * r - S * dPu)
         slew.append(y["jib.joint_torque"] - (I_jib + m * r ** 2 + Jzz) * y["jib.angular_acceleration"] - S * dPth)
     check_min("slew [rad]", res["jib.angle"][-1], 0.59)
-    swing = res["payload.position.y"] - 20.3 * np.sin(res["jib.angle"])
+    swing = res["payload.position.y"] - 20.35 * np.sin(res["jib.angle"])
     check_min("load swing across the jib [m]", np.max(np.abs(swing)), 1.0)
     check_min("rail force [N]", np.max(np.abs(res["trolley.joint_force"])), 500.0)
     check_min("slewing torque [N m]", np.max(np.abs(res["jib.joint_torque"])), 1e5)
-    # measured 2.2e-4 N of the 2.3 kN rail force and 3.5e-4 N m of the 2.7e5 N m slewing torque (round-off
+    # measured 2.1e-4 N of the 2.4 kN rail force and 4.2e-4 N m of the 2.7e5 N m slewing torque (round-off
     # of a 14 s spatial run; the load swings 6.2 m across the jib)
-    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 2.1e-3)
+    check("rail force: joint_force + m w^2 r - S dP/du [N]", np.array(rail), 2.1e-3,
+          reason="round-off of a 14 s spatial run, which moves with the float operations (2.1e-4 to 2.2e-4 N)")
     check("slewing torque: tau - (I_jib + m r^2 + J_zz) alpha - S dP/dtheta [N m]", np.array(slew), 3.5e-3)
 
 
@@ -136,7 +145,7 @@ def test_free_swing_with_the_drum_held_conserves_energy():
         Rj = _rot(jib.joint_axis, y["jib.angle"])
         p = np.asarray(jib.pivot)
         c = p + Rj @ (np.asarray(tr.position) + y["trolley.travel"] * np.asarray(tr.joint_axis) - p)
-        anc = np.array([y["payload.position.x"], y["payload.position.y"], y["payload.position.z"]])
+        anc = _anchor(y)
         T, _ = tangent(c, dr.radius, Rj @ np.asarray(dr.axis), -1.0, anc, 0.0, None, 1.0)
         L.append(float(np.linalg.norm(anc - T)))
     L0 = np.array(L) / (1.0 + S / EA)
@@ -147,7 +156,7 @@ def test_free_swing_with_the_drum_held_conserves_energy():
     check_min("trolley slid out [m]", u[-1], 0.5)
     check_min("load's speed [m/s]", np.max(np.sqrt(v2)), 0.5)
     E1 = E[after]
-    # measured 4.3e-3 J of about 7 kJ kinetic energy (the generalized-alpha step's error on the 3.4 Hz
+    # measured 4.4e-3 J of about 7 kJ kinetic energy (the generalized-alpha step's error on the 3.4 Hz
     # axial mode and the swing)
     check("energy change after the push [J]", E1 - E1[0], 0.04)
 
