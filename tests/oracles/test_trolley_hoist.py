@@ -8,6 +8,7 @@ along the slew axis) is spun by its motor; and the scenes refused with the key."
 import math
 import tomllib
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -177,6 +178,37 @@ def test_free_swing_with_the_drum_held_conserves_energy():
     # measured 4.4e-3 J of about 7 kJ kinetic energy (the generalized-alpha step's error on the 3.4 Hz
     # axial mode and the swing)
     check("energy change after the push [J]", E1 - E1[0], 0.04)
+
+
+def _traction_trolley():
+    """scenes/tower_crane.toml with the hoist's traction sheave on the trolley: the rope runs from an
+    anchor on the counter-jib over the trolley's sheave (a traction sheave, J = 5 kg m^2, driven) down to
+    the box; weightless, 1000 x stiffer; the length puts the lead at about the box's weight."""
+    text = Path("scenes/tower_crane.toml").read_text(encoding="utf-8")
+    a, b = text.index('[[sheaves]]\nname = "winch"'), text.index('[[sheaves]]\nname = "trolley_sheave"')
+    text = text[:a] + text[b:]
+    for old, new in (('name = "trolley_sheave"\nbody = "trolley"', 'name = "trolley_sheave"\nkind = "traction"\n'
+                                                                    'body = "trolley"\ninertia = 5.0'),
+                     ('{ sheave = "winch", wrap = "cw" }', '{ anchor = "jib", at = [-14.0, 0.0, 0.85] }'),
+                     ('length = 210.55277883', 'length = 60.56323'), ('sheave = "winch"', 'sheave = "trolley_sheave"'),
+                     ('EA = 40e6', 'EA = 40e9'), ('rhoA = 1.2', 'rhoA = 1e-6')):
+        assert old in text, old
+        text = text.replace(old, new)
+    return loads_scene(text, "traction_trolley.toml")
+
+
+def test_traction_sheave_on_the_trolley_holds_the_tension_difference():
+    """A traction sheave on the trolley (a joint on the slewing jib) at rest: its drive torque is
+    R x (the tension difference of its two spans), the fall carries the box's weight."""
+    m = build_model(_traction_trolley())
+    sim = Simulator(m)
+    y = dict(zip(m.output_names, sim.outputs(sim.initial_state())))
+    d = y["trolley_sheave.tension_in"] - y["trolley_sheave.tension_out"]
+    check_min("tension difference [N]", abs(d), 100.0)
+    # measured 1.0e-8 (the rope's own weight, 1e-6 kg/m)
+    check("fall tension / box weight - 1", y["trolley_sheave.tension_out"] / (3000.0 * G) - 1.0, 1e-7)
+    # measured 7.4e-7 of the 105 N m torque (the wrap counts its rope unstretched)
+    check("drive torque / (R x tension difference) - 1", y["motor.torque"] / (0.35 * d) - 1.0, 7.4e-6)
 
 
 SPIN = """
