@@ -205,8 +205,8 @@ def test_traction_sheave_on_the_trolley_holds_the_tension_difference():
     y = dict(zip(m.output_names, sim.outputs(sim.initial_state())))
     d = y["trolley_sheave.tension_in"] - y["trolley_sheave.tension_out"]
     check_min("tension difference [N]", abs(d), 100.0)
-    # measured 1.0e-8 (the rope's own weight, 1e-6 kg/m)
-    check("fall tension / box weight - 1", y["trolley_sheave.tension_out"] / (3000.0 * G) - 1.0, 1e-7)
+    # measured 9.6e-9 (the rope's own weight, 1e-6 kg/m)
+    check("fall tension / box weight - 1", y["trolley_sheave.tension_out"] / (3000.0 * G) - 1.0, 9e-8)
     # measured 7.4e-7 of the 105 N m torque (the wrap counts its rope unstretched)
     check("drive torque / (R x tension difference) - 1", y["motor.torque"] / (0.35 * d) - 1.0, 7.4e-6)
 
