@@ -1,11 +1,12 @@
 """A winch on a joint on a moving body: the tower crane whose trolley carries its own hoist drum
 (scenes/tower_crane_trolley_hoist.toml; the trolley on a prismatic joint on the slewing jib, the load
 hanging from the drum), against the mechanics written here: the rope the drum winds = the change of the
-rope path while the jib slews and the trolley travels (rigid limit), the drum's holding torque R x the
-rope's tension (= the load's weight), a traction sheave's R x its tension difference, the trolley's rail force m w^2 r plus the rope's pull along the rail and
-the slewing torque (I_jib + m r^2 + J_zz) alpha plus the rope's moment during a prescribed slew, the
-energy of a free swing with the drum held, the angular momentum of a jib whose trolley's drum (axis
-along the slew axis) is spun by its motor; and the scenes refused with the key."""
+rope path while the jib slews and the trolley travels (rigid limit); the drum's holding torque R x the
+rope's tension (= the load's weight) and a traction sheave's R x its tension difference; the trolley's
+rail force m w^2 r plus the rope's pull along the rail and the slewing torque (I_jib + m r^2 + J_zz)
+alpha plus the rope's moment during a prescribed slew; the energy of a free swing with the drum held;
+the angular momentum of a jib whose trolley's drum (axis along the slew axis) is spun by its motor; and
+the scenes refused with the key."""
 import math
 import tomllib
 from dataclasses import replace
