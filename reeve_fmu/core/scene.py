@@ -370,6 +370,7 @@ def parse_scene(data: dict, source: str = "<scene>") -> Scene:
                          used_sheaves)
     _check_exact_tangents(r, ropes, tangents)
     drive = _parse_drive(r, data, sheaves, ropes, used_sheaves)
+    _check_chained_winches(r, sheaves, bodies, drive)
     brake = _parse_brake(r, data, drive)
     buffers = _parse_buffers(r, data, names, bodies)
 
@@ -652,9 +653,32 @@ def _check_winch_body(r: _Reader, key, kind, b) -> None:
     if "rotation" in b.free:
         r.fail(key, f"a {kind} on body {b.name!r}, a spatial rigid body ('rotation' in free), is not "
                     f"available: mount it on a body with a joint or free translations")
-    if b.parent is not None:
-        r.fail(key, f"a {kind} on body {b.name!r}, which is on a joint on {b.parent!r}, is not available: "
-                    f"mount it on {b.parent!r} (a counter-jib winch, a superstructure's winch)")
+
+
+def _check_chained_winches(r: _Reader, sheaves, bodies, drive) -> None:
+    """A drum or traction sheave on a body on a joint on a moving body (a trolley's own hoist): its spin
+    J (omega . a) couples its rope coordinate with each joint's turn by J (k . a) / R, k the joint's
+    axis, a the sheave's. The builder holds these as constants: the own joint's always (a and k turn
+    together), the parent's when k_parent . a does not change as the child turns: a prismatic child, a
+    parent that does not turn, a sheave axis along the child's hinge or a hinge along the parent's, or
+    J = 0 (sheave and motor inertia)."""
+    by_name = {b.name: b for b in bodies}
+    for i, sh in enumerate(sheaves):
+        b = by_name.get(sh.body)
+        if sh.kind == "idler" or b is None or b.parent is None:
+            continue
+        p = by_name[b.parent]
+        J = sh.inertia + (drive.motor_inertia if drive.sheave == sh.name else 0.0)
+        kc, kp, a = (np.asarray(v, float) for v in (b.joint_axis, p.joint_axis, sh.axis))
+        if (b.joint == "prismatic" or p.joint == "prismatic" or J == 0.0
+                or np.linalg.norm(np.cross(a, kc)) < 1e-9 or np.linalg.norm(np.cross(kp, kc)) < 1e-9):
+            continue
+        r.fail(f"sheaves[{i}].axis", f"a {sh.kind} with inertia {J:g} kg m^2 (sheave and motor) on body "
+                                     f"{b.name!r}, whose revolute joint turns it about {list(b.joint_axis)} "
+                                     f"relative to {p.name!r} (turning about {list(p.joint_axis)}): its spin "
+                                     f"couples with {p.name!r}'s turn by a factor that changes with "
+                                     f"{b.name!r}'s angle, which is not modelled; give it an axis along "
+                                     f"{list(b.joint_axis)}, mount it on {p.name!r}, or give it inertia 0")
 
 
 def _check_overlaps(r: _Reader, sheaves):

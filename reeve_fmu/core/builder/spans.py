@@ -116,14 +116,22 @@ def _spin_coupling(bs: BuildState, sh, j, sense, J) -> None:
     -sense sigma_dot / R (the rim carries the rope along the route), its absolute spin about its axis
     a adds omega_body . a, so 1/2 J (omega_body . a - sense sigma_dot / R)^2 couples sigma with the
     body's turn (revolute angle, planar theta) by -sense J (k . a) / R, k the turn's axis (a and k turn
-    together: constant). The sheave's own J (omega . a)^2 is part of the body's inertia."""
+    together: constant). On a joint on a moving body omega_body adds the parent's turn: its k . a is
+    constant where scene._check_chained_winches lets the sheave on (a prismatic child, a hinge along
+    the parent's axis or the sheave's axis along the hinge), so both terms are taken at the scene's
+    pose. The sheave's own J (omega . a)^2 is part of the body's inertia."""
     b = bs.bodies[sh.body]
-    dofs = bs.body_dofs[sh.body]
-    jr, k = (dofs.get("angle"), b.joint_axis) if b.joint == "revolute" else (dofs.get("theta"), (0.0, -1.0, 0.0))
-    c = -sense * J * float(np.dot(k, sh.axis)) / sh.radius
-    if jr is not None and c != 0.0:
-        bs.M0_terms.append((j, jr, c))
-        bs.M0_terms.append((jr, j, c))
+    turns = [b] + ([bs.bodies[b.parent]] if b.parent is not None else [])
+    for body in turns:
+        dofs = bs.body_dofs[body.name]
+        if body.joint == "revolute":
+            jr, k = dofs.get("angle"), body.joint_axis
+        else:
+            jr, k = dofs.get("theta"), (0.0, -1.0, 0.0)
+        c = -sense * J * float(np.dot(k, sh.axis)) / sh.radius
+        if jr is not None and c != 0.0:
+            bs.M0_terms.append((j, jr, c))
+            bs.M0_terms.append((jr, j, c))
 
 
 def _add_span(bs: BuildState, rb: _Rope, k: int, span_nodes, rope_wraps):
