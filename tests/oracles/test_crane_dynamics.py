@@ -221,7 +221,7 @@ def test_two_fall_statics_by_yaw_continuation_against_the_exact_equilibrium():
             e = math.sin(psi) / (K_D_AB * h) - 1.0 if ref is None else h / ref.equilibrium(psi)[0] - 1.0
             err.setdefault(bool(sets), []).append(e)
     check('sin(psi) at prescribed yaw / closed form - 1', err[False], 4.3e-4)
-    check('h at prescribed yaw / exact - 1 (weightless rope)', err[True], 8e-8)        # measured 8.0e-9
+    check('h at prescribed yaw / exact - 1 (weightless rope)', err[True], 7.5e-8)        # measured 8.0e-9
 
 
 def test_slow_lowering_cables_where_the_sweep_finds_the_fold():
