@@ -96,8 +96,7 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
             bs.M0_terms.append((j, j, J / sh.radius ** 2 + rb.rhoA * lump))
         if sh.kind == "drum":
             bs.drums.append((j, rb.rhoA, 1.0 if k == 0 else -1.0))
-            if bs.nd > 1:
-                _stored_rope_weight(bs, rb, k, j)
+            _stored_rope_weight(bs, rb, k, j)
         if sh.kind != "idler" and sh.body is not None and J > 0.0:
             _spin_coupling(bs, sh, j, rb.geo[k][3], J)
         if lump > 0 and sh.body is not None:
@@ -115,12 +114,13 @@ def _add_sheave_coordinates(bs: BuildState, rb: _Rope, s_at, scale) -> None:
 
 def _stored_rope_weight(bs: BuildState, rb: _Rope, k, j) -> None:
     """The weight of the rope stored on a drum, at the drum's centre: the spans weigh their rope by its
-    world position, so rope paid out from a drum high up would otherwise gain its weight from nowhere
-    (a drum 40 m up held its load with 1.5 % too little torque). The stored length is the drum's
-    coordinate (s in [0, sigma] at a route's start), so its potential -rhoA sigma g.c is a constant force
-    rhoA g.c on sigma. Exact while the drum's height does not change with its body's motion (a ground
-    drum, a winch on a slewing part or a travelling trolley); a drum that rises or falls with its body
-    (a winch on a luffing boom) keeps its stored rope at the scene's height."""
+    position in the scene's frame, so rope paid out from a drum high up would otherwise gain its weight
+    from nowhere (a drum 40 m up held its load with 1.5 % too little torque). The stored length is the
+    drum's coordinate (s in [0, sigma] at a route's start), so its potential -rhoA sigma g.c is a
+    constant force rhoA g.c on sigma: the holding torque no longer depends on where the scene puts z = 0
+    (1D, planar and spatial models). Exact while the drum's height does not change with its body's
+    motion (a ground drum, a winch on a slewing part or a travelling trolley); a drum that rises or
+    falls with its body (a winch on a luffing boom) keeps its stored rope at the scene's height."""
     c = np.asarray(rb.geo[k][0], float)
     sign = 1.0 if k == 0 else -1.0
     bs.F0[j] = bs.F0.get(j, 0.0) + sign * rb.rhoA * float(bs.g @ c)
