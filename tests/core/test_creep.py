@@ -198,7 +198,8 @@ def test_drum_torque_is_radius_times_tension(mode, V):
     RT = R * res["rope.tension_start"]
     expect = RT if mode == "creep" else RT * (1 + eps / 2)
     check('R T - R m g (constant load)', RT[-1] - R * M_CAR * G, 5e-11 * R * M_CAR * G)
-    check('drum torque + R T (rigid: R T (1 + eps/2))', res["motor.torque"] + expect, 5e-11 * R * M_CAR * G)
+    check('drum torque + R T (rigid: R T (1 + eps/2))', res["motor.torque"] + expect, 1e-13 * R * M_CAR * G,
+          reason="round-off: 0 to 2.9e-11 N m of R m g = 2.9e3 N m (the stored rope weighs at the drum)")
 
 
 def test_drum_pays_out_at_the_strain_it_wound_with():
