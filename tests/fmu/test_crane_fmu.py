@@ -63,9 +63,11 @@ def test_speed_input_is_integrated_exactly_and_torque_input_equals_the_torque_ta
         ya = a.step(0.01, 0.0, 0.0, [tau])
         yb = b.step(0.01, 0.0, 0.0)
     assert np.array_equal(ya, yb)
-    # measured 3.6e-12 N m of 3e4 (round-off of the joint's force sum)
-    check('a.output("jib.joint_torque") - tau', a.output("jib.joint_torque") - tau, 1e-15 * np.max(np.abs(tau)),
-          reason="round-off, which differs by platform")
+    # measured 6.7e-9 N m of 3e4: the output is M a - Q + the table, i.e. the table plus the joint row's
+    # Newton residual at convergence
+    check('a.output("jib.joint_torque") - tau', a.output("jib.joint_torque") - tau, 1e-7,
+          reason="the joint row's Newton residual where the step converged: 3.6e-12 to 6.7e-9 N m as the "
+                 "trajectory changes (the reel's stored rope weight moved it)")
     assert a.output("jib.angular_velocity") > 0.0
     with pytest.raises(ValueError, match="jib.torque must be finite"):
         a.step(0.01, 0.0, 0.0, [math.nan])
