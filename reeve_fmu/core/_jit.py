@@ -124,9 +124,11 @@ def _cache_dir():
     target = base / source_hash()
     try:
         target.mkdir(parents=True, exist_ok=True)
-        probe = target / ".write-test"
-        probe.write_text("ok", encoding="utf-8")
-        probe.unlink()
+        # a file of this process's own: with one shared name, a process starting beside another
+        # could find its probe already removed and run without the cache and its compile locks
+        import tempfile
+        with tempfile.NamedTemporaryFile(dir=target, prefix=".write-test-"):
+            pass
     except OSError:
         return None
     try:

@@ -44,3 +44,30 @@ def test_processes_starting_together_compile_a_kernel_once(tmp_path):
         res.append(json.loads(out))
     assert res[0]["jit"]
     assert sorted((r["cache_misses"], r["cache_hits"]) for r in res) == [(0, 1), (1, 0)]
+
+
+def test_processes_starting_together_all_find_the_cache(tmp_path, monkeypatch):
+    """Every process that starts beside others on an empty cache directory gets that directory and
+    its compile locks. With one shared name for the writability probe, a starter could find its probe
+    already removed by another and silently run without the cache, compiling every kernel again
+    (before the probe got a name of its own, 8 threads x 50 rounds here lost the cache 20 times)."""
+    import threading
+    from reeve_fmu.core import _jit
+
+    monkeypatch.setenv("REEVE_FMU_CACHE_DIR", str(tmp_path))
+    lost = []
+    for _ in range(50):
+        barrier = threading.Barrier(8)
+        found = []
+
+        def start():
+            barrier.wait()
+            found.append(_jit._cache_dir())
+
+        threads = [threading.Thread(target=start) for _ in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        lost += [d for d in found if d is None]
+    assert not lost, f"{len(lost)} of 400 starts ran without the cache"
