@@ -50,11 +50,13 @@ def test_processes_starting_together_all_find_the_cache(tmp_path, monkeypatch):
     """Every process that starts beside others on an empty cache directory gets that directory and
     its compile locks. With one shared name for the writability probe, a starter could find its probe
     already removed by another and silently run without the cache, compiling every kernel again
-    (before the probe got a name of its own, 8 threads x 50 rounds here lost the cache 20 times)."""
+    (with one name, 131 of these 400 starts lost the cache)."""
     import threading
     from reeve_fmu.core import _jit
 
     monkeypatch.setenv("REEVE_FMU_CACHE_DIR", str(tmp_path))
+    # hashing the package's sources (0.1 s, reading files: other starters run meanwhile) as a 2 ms wait
+    monkeypatch.setattr(_jit, "source_hash", lambda: (time.sleep(0.002), "sources")[1])
     lost = []
     for _ in range(50):
         barrier = threading.Barrier(8)
