@@ -220,6 +220,10 @@ def cli_demo(args) -> int:
     case = demo_case(args)
     if beside is not None:
         _preload_plotting()     # in a thread, while the FMUs build and their warm-ups wait for kernels
+        # the drive's kernel now, while the other process still compiles the stepping kernel: the
+        # drive FMU's warm-up then loads it instead of compiling it after the plant's is done
+        from .components.drive import ElectricDrive
+        ElectricDrive().warm_up()
     scene_file, name = _plant_source(case, out)
     plant_fmu, drive_fmu = cosim.ensure_fmus(fmu_dir(), scene=scene_file, name=name,
                                              rebuild=bool(getattr(args, "rebuild", False)))

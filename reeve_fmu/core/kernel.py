@@ -14,7 +14,7 @@ import numpy as np
 
 from collections import namedtuple
 
-from ._jit import JIT
+from ._jit import JIT, njit
 
 # The model's arrays, (name, type): "int" / "float" scalars, "int[]" / "float[,]" ... C-contiguous
 # int64 / float64 arrays of one, two, ... dimensions (model.build_model fills them). Nothing writes
@@ -153,7 +153,6 @@ STATE_FIELDS = (("c", "float[]"), ("q_ref", "float[]"), ("q", "float[]"), ("v", 
 StateArrays = namedtuple("StateArrays", [name for name, _ in STATE_FIELDS])
 
 if JIT:
-    from numba import njit
     from numba.core import types
     from numba.experimental import structref
 
