@@ -117,7 +117,7 @@ class Simulator:
         # The assembly first, directly: it starts the longest chain of compiles (assemble_ws ->
         # newton_step -> _integrate), and integrate's own typing would first reach kernels the
         # other process is compiling (creep terms, outputs) and wait for them.
-        assemble_ws.compile((typeof(self.model.KJ), WORK_TYPE, typeof(S.c), typeof(S.q), typeof(S.v), float64,
+        assemble_ws.compile((typeof(self.model.KJ), WORK_TYPE, typeof(st.c), typeof(st.q), typeof(st.v), float64,
                              typeof(np.empty(1))))
         ybuf = np.empty((1, len(self.model.output_names) + 1))
         integrate.compile(tuple(typeof(x) for x in (self.model.KJ, S, 0.0, self.h, 1, self.params,
