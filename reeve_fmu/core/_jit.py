@@ -263,17 +263,17 @@ def njit(*args, **kwargs):
     return lambda f: f
 
 
-def entry_point(dispatcher, first=None):
+def entry_point(dispatcher, *leading):
     """The compiled specialization's entry point: calling it skips numba's per-call argument typing
     (a cost per array argument on every call). The caller must pass arguments of exactly that
-    signature's types. With `first` (the first argument the caller passes, e.g. a compiled kernel)
-    the one signature whose first type is that argument's; else the only signature. Otherwise
-    (several candidates, no numba) the dispatcher itself."""
+    signature's types. With `leading` (the first arguments the caller passes, e.g. a compiled kernel
+    and None or a banded-matrix layout) the one signature that begins with their types; else the only
+    signature. Otherwise (several candidates, no numba) the dispatcher itself."""
     try:
         sigs = dispatcher.signatures
-        if first is not None:
-            ty = _numba.typeof(first)
-            sigs = [s for s in sigs if s[0] == ty]
+        if leading:
+            tys = tuple(_numba.typeof(x) for x in leading)
+            sigs = [s for s in sigs if tuple(s[:len(tys)]) == tys]
         if len(sigs) == 1:
             return dispatcher.overloads[sigs[0]].entry_point
     except (AttributeError, ValueError):

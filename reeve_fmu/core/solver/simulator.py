@@ -18,7 +18,7 @@ from .newton import SPARSE_MIN_FREE
 from .result import STATUS_TEXT, Result, SolverError
 from .scipy_path import advance_scipy
 from .statics import Statics
-from .stepping import integrate, integrate_sparse
+from .stepping import integrate
 
 
 class Simulator:
@@ -97,9 +97,7 @@ class Simulator:
 
     def _integrate(self, st: State, t0, h, n, ybuf, every):
         SP = self._newton_path(st)
-        if SP is None:
-            return integrate(self.model.KJ, st.arrays(), t0, h, n, self.params, ybuf, every)
-        return integrate_sparse(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
+        return integrate(self.model.KJ, SP, st.arrays(), t0, h, n, self.params, ybuf, every)
 
     def compile_stepping(self) -> None:
         """Compile the dense stepping kernel for this model (or load it from the cache) without running
@@ -115,12 +113,12 @@ class Simulator:
         st = new_state(self.model)
         S = st.arrays()
         # The assembly first, directly: it starts the longest chain of compiles (assemble_ws ->
-        # newton_step -> _integrate), and integrate's own typing would first reach kernels the
+        # newton_step -> integrate), and integrate's own typing would first reach kernels the
         # other process is compiling (creep terms, outputs) and wait for them.
         assemble_ws.compile((typeof(self.model.KJ), WORK_TYPE, typeof(st.c), typeof(st.q), typeof(st.v), float64,
                              typeof(np.empty(1))))
         ybuf = np.empty((1, len(self.model.output_names) + 1))
-        integrate.compile(tuple(typeof(x) for x in (self.model.KJ, S, 0.0, self.h, 1, self.params,
+        integrate.compile(tuple(typeof(x) for x in (self.model.KJ, None, S, 0.0, self.h, 1, self.params,
                                                     ybuf, 1)))
 
     # ------------------------------------------------------------------ statics / initial state
@@ -189,15 +187,12 @@ class Simulator:
             self._steprow = buf[0, 1:]      # the returned view, made once
             status, t, done = self._integrate(st, t0, h, n, buf, n)
             self._sp_state = st
-            self._fast_integrate = entry_point(integrate if self._sp is None else integrate_sparse, self.model.KJ)
+            self._fast_integrate = entry_point(integrate, self.model.KJ, self._sp)
         else:
             if st is not self._sp_state:
                 self._newton_path(st)
                 self._sp_state = st
-            if self._sp is None:
-                status, t, done = fast(self.model.KJ, st.arrays(), t0, h, n, self.params, buf, n)
-            else:
-                status, t, done = fast(self.model.KJ, self._sp, st.arrays(), t0, h, n, self.params, buf, n)
+            status, t, done = fast(self.model.KJ, self._sp, st.arrays(), t0, h, n, self.params, buf, n)
         if status != 0:
             st.t = t0 + done * h
             raise SolverError(self._status_message(status, st))

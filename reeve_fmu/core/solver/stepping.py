@@ -70,27 +70,15 @@ def _slots(dst, src, ncrp, save):
 
 
 @njit(cache=True)
-def integrate(K, S, t0, h, nsteps, params, ybuf, out_every):
+def integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
     """Advance the state arrays S (kernel.new_state_arrays) by nsteps of size h in place. A step whose
     Newton iteration fails is redone as 4, 16 and 64 substeps (sharp events: slack -> taut, buffer
     contact, brake engagement). Writes outputs every out_every steps into ybuf rows (0: none).
     S.info = [h of jac, steps, iterations, jacobian builds, status, brake engagement,
     brake deflection, element of a vanishing span]. Returns (status, t, steps done); on failure the
-    state is the last good step. Dense Newton matrix (S.jac is nf x nf)."""
-    return _integrate(K, None, S, t0, h, nsteps, params, ybuf, out_every)
-
-
-@njit(cache=True)
-def integrate_sparse(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
-    """integrate() with the banded Newton matrix SP (core/sparse.py); S.jac has shape
-    sparse.jac_shape(SP)."""
-    return _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every)
-
-
-@njit(cache=True)
-def _integrate(K, SP, S, t0, h, nsteps, params, ybuf, out_every):
-    """The stepping loop of integrate / integrate_sparse (SP None: dense; the branch is resolved at
-    compile time)."""
+    state is the last good step. SP None: dense Newton matrix (S.jac is nf x nf); else the banded
+    one (core/sparse.py; S.jac has shape sparse.jac_shape(SP)). The branch is resolved at compile
+    time: one specialization each, and no wrapper to compile."""
     c = S.c
     q_ref = S.q_ref
     q = S.q
