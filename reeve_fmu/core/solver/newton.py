@@ -19,7 +19,7 @@ from .lu import lu_factor, lu_solve
 SPARSE_MIN_FREE = 16
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _residual(K, W, c, q, v, qdd, t, u, r):
     st = assemble_ws(K, W, c, q, v, t, u)
     M = W.M
@@ -110,7 +110,7 @@ def build_jacobian(K, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, bq, gv):
     return 1 if lu_factor(jac, piv) else 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analytic):
     """The factorised Newton matrix: dense by finite differences (SP None: build_jacobian) or banded,
     from element Jacobians (core/jacobian.py) or coloured differences (core/sparse.py). Returns -1
@@ -122,7 +122,7 @@ def _matrix(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv, analyti
     return jacobian_sparse(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, r0, rb, bq, gv)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _correction(K, SP, W, c, q, v, qdd, t1, ue, jac, piv, r, rb):
     """The Newton correction of the free accelerations into rb, in the order of newton_step's `order`
     (dense: rb is r, the free rows; banded: SP.perm). Returns the residual's status (< 0: a vanishing
