@@ -63,6 +63,28 @@ def _clip_ylim(ax, y, lo_q=0.5, hi_q=99.5, pad=0.1, floor=None, ceil=None):
     return float(np.max(y)) > hi + pad * span
 
 
+def _envelope(t, y, buckets: int = 1500):
+    """(t, y) thinned for a plot line: each of `buckets` runs of samples keeps its smallest and largest
+    sample, in time order. A 1000-pixel-wide axis shows the same line (every pixel column still
+    spans its samples' range, peaks included) from 3000 points instead of 61 000, drawn in a fraction
+    of the time. Lines with non-finite samples are kept whole."""
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    k = t.size // buckets
+    if k < 4 or t.size != y.size or not np.all(np.isfinite(y)):
+        return t, y
+    m = (t.size // k) * k
+    tb, yb = t[:m].reshape(-1, k), y[:m].reshape(-1, k)
+    lo, hi = np.argmin(yb, axis=1), np.argmax(yb, axis=1)
+    rows = np.arange(tb.shape[0])[:, None]
+    pick = np.sort(np.stack([lo, hi], axis=1), axis=1)
+    return (np.concatenate([tb[rows, pick].ravel(), t[m:]]), np.concatenate([yb[rows, pick].ravel(), y[m:]]))
+
+
+def _line(ax, t, y, *args, **kw):
+    return ax.plot(*_envelope(t, y), *args, **kw)
+
+
 def plot_trip(out: Path, t, c, *, limits: dict, title: str, landings=(), sis=None, stops=()) -> list:
     """results.png (car kinematics), traction.png, motor.png, levelling.png; returns the file names."""
     import matplotlib
@@ -77,12 +99,12 @@ def plot_trip(out: Path, t, c, *, limits: dict, title: str, landings=(), sis=Non
     fig, ax = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
     for a, key, lab in ((ax[0], "position", "position [m]"), (ax[1], "velocity", "speed [m/s]"),
                         (ax[2], "acceleration", "acceleration [m/s²]")):
-        a.plot(t, c[f"car.{key}"], lw=0.7 if key == "acceleration" else 1.2, label="car")
+        _line(a, t, c[f"car.{key}"], lw=0.7 if key == "acceleration" else 1.2, label="car")
         if f"car.{key}_ref" in c:
-            a.plot(t, c[f"car.{key}_ref"], "--", lw=0.8, label="drive reference")
+            _line(a, t, c[f"car.{key}_ref"], "--", lw=0.8, label="drive reference")
         a.set_ylabel(lab)
         a.legend(loc="best")
-    ax[3].plot(t, jerk_of(t, c["car.acceleration"]), lw=0.8)
+    _line(ax[3], t, jerk_of(t, c["car.acceleration"]), lw=0.8)
     ax[3].set_ylabel("jerk [m/s³]\n(10 Hz low-pass)")
     ax[3].set_xlabel("time [s]")
     for a in ax:
@@ -107,12 +129,12 @@ def _plot_traction(plt, out, t, c, limits):
     fig, ax = plt.subplots(n, 1, figsize=(10, 3.2 * n), sharex=True)
     tens = [k for k in c if k.endswith((".tension_in", ".tension_out"))]
     for k in tens:
-        ax[0].plot(t, np.asarray(c[k]) / 1e3, lw=0.9, label=k)
+        _line(ax[0], t, np.asarray(c[k]) / 1e3, lw=0.9, label=k)
     ax[0].set_ylabel("rope force [kN]\n(all parallel ropes)")
     ax[0].legend(loc="best", fontsize=7, ncol=2)
     if sh is not None:
         r = np.asarray(c[f"{sh}.traction_ratio"], float)
-        ax[1].plot(t, r, lw=0.9, label="T1/T2")
+        _line(ax[1], t, r, lw=0.9, label="T1/T2")
         for key, col in (("loading", "C3"), ("emergency_braking", "C1")):
             ax[1].axhline(limits[key], color=col, ls="--",
                           label=f"EN 81-50 {key.replace('_', ' ')}, μ = {limits['mu_' + key]:.3g}: "
@@ -121,7 +143,7 @@ def _plot_traction(plt, out, t, c, limits):
         ax[1].set_ylabel("traction ratio" + ("\n(axis clipped: slack rope)" if clipped else ""))
         ax[1].legend(loc="best", fontsize=8)
     for k in extra:
-        ax[2].plot(t, c[k], lw=0.9, label=k)
+        _line(ax[2], t, c[k], lw=0.9, label=k)
     if extra:
         ax[2].set_ylabel("slip [m] / buffer force [N]")
         ax[2].legend(loc="best", fontsize=8)
@@ -137,14 +159,14 @@ def _plot_traction(plt, out, t, c, limits):
 
 def _plot_motor(plt, out, t, c):
     fig, ax = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    ax[0].plot(t, c["motor.torque"], label="motor (drive output)")
+    _line(ax[0], t, c["motor.torque"], label="motor (drive output)")
     if "brake.torque" in c:
-        ax[0].plot(t, c["brake.torque"], lw=0.8, label="brake (plant)")
+        _line(ax[0], t, c["brake.torque"], lw=0.8, label="brake (plant)")
     ax[0].set_ylabel("torque [N·m]")
     ax[0].legend(loc="best")
-    ax[1].plot(t, np.asarray(c["motor.speed"]) * 60 / (2 * math.pi), label="motor")
+    _line(ax[1], t, np.asarray(c["motor.speed"]) * 60 / (2 * math.pi), label="motor")
     if "motor.speed_ref" in c:
-        ax[1].plot(t, np.asarray(c["motor.speed_ref"]) * 60 / (2 * math.pi), "--", lw=0.8, label="reference")
+        _line(ax[1], t, np.asarray(c["motor.speed_ref"]) * 60 / (2 * math.pi), "--", lw=0.8, label="reference")
     ax[1].set_ylabel("speed [rpm]")
     ax[1].set_xlabel("time [s]")
     ax[1].legend(loc="best")

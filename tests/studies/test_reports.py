@@ -84,3 +84,26 @@ def test_crane_simulate_plots_and_writes_the_jib_swing_and_yaw_angles(tmp_path, 
     assert k > 0 and swing[k] < 0 and c["jib.angular_velocity"][k] > 0
     assert (tmp_path / "crane.png").stat().st_size > 10_000
     assert "![crane.png](crane.png)" in (tmp_path / "report.md").read_text(encoding="utf-8")
+
+
+def test_plot_lines_keep_every_bucket_extreme():
+    """Plot lines are thinned to each run of samples' smallest and largest value (report._envelope):
+    a 61 050-sample trip becomes about 3000 points, in time order, that still reach every local extreme of
+    the run, so the drawn line covers the same pixels; a short or non-finite line stays whole."""
+    from reeve_fmu.studies.report import _envelope
+
+    t = np.arange(61050) * 1e-3
+    y = np.sin(7.0 * t) + 0.01 * np.random.default_rng(3).standard_normal(t.size)
+    y[12345] = 5.0                                      # a one-sample spike
+    tt, yy = _envelope(t, y)
+    k = 40                                              # samples per bucket: 61050 // 1500
+    assert tt.size == 2 * (t.size // k) + t.size % k == 3062 and np.all(np.diff(tt) > 0)
+    for b in range(0, t.size // k, 97):
+        seg = y[b * k:(b + 1) * k]
+        assert set(yy[2 * b:2 * b + 2]) == {seg.min(), seg.max()}
+    assert yy.max() == 5.0 and tt[np.argmax(yy)] == t[12345]
+    assert np.array_equal(yy[-(t.size % k):], y[-(t.size % k):])    # the tail, whole
+    short = np.arange(5000.0)
+    assert _envelope(short, short)[0] is not None and _envelope(short, short)[0].size == 5000
+    y[7] = np.nan
+    assert _envelope(t, y)[1].size == t.size
