@@ -207,7 +207,7 @@ def cli_demo(args) -> int:
     beside = None
     if cache_is_cold():
         print("compiling the model's kernels for this machine (the first run with these sources: about "
-              "40 s on 2 cores; later runs and the FMUs load them)")
+              "half a minute on 2 cores; later runs and the FMUs load them)")
         # the stepping kernel compiles on the other core while this process compiles the statics
         beside = compile_beside(getattr(args, "scene", None) or cosim.default_scene_path())
     # imported after the second process has started: scipy.signal alone takes 1.5 s
