@@ -82,7 +82,8 @@ from reeve_fmu.core.scene import load_scene
 from reeve_fmu.core.solver import Simulator
 from reeve_fmu.core.solver.stepping import integrate
 from reeve_fmu.core.system import assemble_ws
-sigs = lambda: [sorted(map(str, f.signatures)) for f in (integrate, assemble_ws)]
+# plain-Python kernels (no numba) have no signatures: compile_stepping then does nothing
+sigs = lambda: [sorted(map(str, getattr(f, "signatures", []))) for f in (integrate, assemble_ws)]
 sim = Simulator(build_model(load_scene(sys.argv[1])))
 sim.compile_stepping()
 before = sigs()
@@ -91,14 +92,14 @@ print(json.dumps([before, sigs()]))
 """
 
 
-@pytest.mark.skipif(not _JIT, reason="REEVE_FMU_NO_JIT=1 or numba not installed: the kernels run as plain Python and there is no compiled-kernel cache to test")
 def test_compile_stepping_compiles_what_a_run_uses():
     """The process a first demo starts beside itself (Simulator.compile_stepping) compiles the assembly
     and the stepping kernel with the signatures a run of the scene calls: in a fresh interpreter, a
-    run after it adds no specialization of either (a mismatch would compile them a second time)."""
+    run after it adds no specialization of either (a mismatch would compile them a second time).
+    Without numba it compiles nothing and the run goes on in plain Python."""
     p = subprocess.run([sys.executable, "-c", STEPPING_SIGNATURES, str(ROOT / "scenes" / "elevator_2to1.toml")],
                        cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stderr[-3000:]
     before, after = json.loads(p.stdout.strip().splitlines()[-1])
-    assert [len(s) for s in before] == [1, 1]
+    assert [len(s) for s in before] == ([1, 1] if _JIT else [0, 0])
     assert after == before
