@@ -227,6 +227,13 @@ def _kernel_type(features: int):
     return _KERNEL_TYPES[features]
 
 
+def compiled_kernel_type(K: Kernel, features: int | None = None):
+    """The numba type compiled_kernel(K, features) has, without building it (JIT only): what a process
+    that only compiles kernels for K's model passes to `dispatcher.compile`."""
+    f = compiled_features(K) if features is None else features
+    return KERNEL_TYPE if f == ALL_FEATURES else _kernel_type(f)
+
+
 def compiled_kernel(K: Kernel, features: int | None = None):
     """StructRef twin of K for the compiled kernels (K itself without numba), typed with K's features
     (kernel_features) or `features` (a superset: ALL_FEATURES compiles every path)."""

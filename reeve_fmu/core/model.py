@@ -133,15 +133,17 @@ class Model:
         return self.output_names.index(name)
 
 
-def build_model(scene: Scene) -> Model:
-    """Compile a validated scene."""
+def build_model(scene: Scene, *, compiled: bool = True) -> Model:
+    """Compile a validated scene. compiled=False leaves Model.KJ None: the model's arrays without the
+    compiled kernels' struct, for a process that only compiles kernels for the model's types
+    (Simulator.compile_stepping) and so need not compile the struct's constructor first."""
     try:
-        return _build(scene)
+        return _build(scene, compiled)
     except GeometryError as exc:
         raise SceneError(f"{scene.source}: geometry: {exc}") from None
 
 
-def _build(scene: Scene) -> Model:
+def _build(scene: Scene, compiled: bool = True) -> Model:
     """The build steps in order (builder/__init__.py lists them)."""
     bs = start(scene)
     add_body_coordinates(bs)
@@ -157,7 +159,7 @@ def _build(scene: Scene) -> Model:
     K = kernel_arrays(bs, arr, drive, crp, outs, mot_crp)
     eqs, unknowns = statics_sets(bs, drive)
     inputs = ("motor.torque", "brake.command") if scene.drive.kind in ("external", "speed-input") else ()
-    return Model(scene=scene, nd=bs.nd, K=K, KJ=compiled_kernel(K), q_names=tuple(bs.q_names),
+    return Model(scene=scene, nd=bs.nd, K=K, KJ=compiled_kernel(K) if compiled else None, q_names=tuple(bs.q_names),
                  q_kind=tuple(bs.q_kind), q0=np.array(bs.q0, float), B=arr.B, Bpar=arr.Bpar, c0=arr.c0,
                  par0=bs.par0, output_names=tuple(outs.names), input_names=inputs, sheave_dof=bs.sheave_dof,
                  body_dofs=bs.body_dofs, ropes=tuple(bs.rope_info), statics_unknowns=tuple(unknowns),

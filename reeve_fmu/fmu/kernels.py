@@ -62,7 +62,7 @@ import sys
 from reeve_fmu.core.model import build_model
 from reeve_fmu.core.scene import load_scene
 from reeve_fmu.core.solver import Simulator
-Simulator(build_model(load_scene(sys.argv[1]))).compile_stepping()
+Simulator(build_model(load_scene(sys.argv[1]), compiled=False)).compile_stepping()
 """
 
 

@@ -108,18 +108,19 @@ class Simulator:
         if self.sparse is None and len(self.model.K.free) >= SPARSE_MIN_FREE:
             return
         from numba import float64, typeof
-        from ..kernel import WORK_TYPE
+        from ..kernel import STATE_TYPE, WORK_TYPE, compiled_kernel_type
         from ..system import assemble_ws
-        st = new_state(self.model)
-        S = st.arrays()
+        # types, not instances: building the kernel's struct would first compile its constructor
+        # (~1.5 s), which the other process compiles anyway for its own model (build_model(compiled=False))
+        KT = typeof(self.model.KJ) if self.model.KJ is not None else compiled_kernel_type(self.model.K)
+        vec = typeof(np.empty(1))
         # The assembly first, directly: it starts the longest chain of compiles (assemble_ws ->
         # newton_step -> integrate), and integrate's own typing would first reach kernels the
         # other process is compiling (creep terms, outputs) and wait for them.
-        assemble_ws.compile((typeof(self.model.KJ), WORK_TYPE, typeof(st.c), typeof(st.q), typeof(st.v), float64,
-                             typeof(np.empty(1))))
+        assemble_ws.compile((KT, WORK_TYPE, vec, vec, vec, float64, vec))
         ybuf = np.empty((1, len(self.model.output_names) + 1))
-        integrate.compile(tuple(typeof(x) for x in (self.model.KJ, None, S, 0.0, self.h, 1, self.params,
-                                                    ybuf, 1)))
+        integrate.compile((KT, typeof(None), STATE_TYPE) + tuple(typeof(x) for x in (0.0, self.h, 1, self.params,
+                                                                                      ybuf, 1)))
 
     # ------------------------------------------------------------------ statics / initial state
     def initial_state(self, statics: str | None = None, t0: float = 0.0) -> State:
