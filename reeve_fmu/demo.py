@@ -190,6 +190,30 @@ def _preload_plotting() -> None:
     threading.Thread(target=load, name="reeve-preload-pyplot", daemon=True).start()
 
 
+def _in_background(fn):
+    """Run fn() in a thread; returns a function that waits for it and gives its result (or raises)."""
+    import threading
+
+    box = {}
+
+    def run():
+        try:
+            box["result"] = fn()
+        except BaseException as exc:   # noqa: BLE001 - handed to the waiting caller
+            box["error"] = exc
+
+    th = threading.Thread(target=run, name="reeve-finish-fmus", daemon=True)
+    th.start()
+
+    def wait():
+        th.join()
+        if "error" in box:
+            raise box["error"]
+        return box["result"]
+
+    return wait
+
+
 def cli_demo(args) -> int:
     from .fmu import cosim
     from .studies import report
@@ -225,8 +249,10 @@ def cli_demo(args) -> int:
         from .components.drive import ElectricDrive
         ElectricDrive().warm_up()
     scene_file, name = _plant_source(case, out)
-    plant_fmu, drive_fmu = cosim.ensure_fmus(fmu_dir(), scene=scene_file, name=name,
-                                             rebuild=bool(getattr(args, "rebuild", False)))
+    # the FMUs are co-simulated as soon as they are built; their precompiled kernels (a warm-up run of
+    # each, in subprocesses) are added while this process writes the results (fmus.finish)
+    fmus = cosim.prepare_fmus(fmu_dir(), scene=scene_file, name=name, rebuild=bool(getattr(args, "rebuild", False)))
+    plant_fmu, drive_fmu = fmus.plant, fmus.drive
     if beside is not None:
         beside.wait()
     drive_values = {k: v for k, v in case.drive_values.items() if k not in SIS_PARAMETERS}
@@ -254,12 +280,17 @@ def cli_demo(args) -> int:
                                drive_values=drive_values, progress=progress)
     except BaseException as exc:
         _stop_sis_run(sis_run)
-        if isinstance(exc, CosimError) and exc.result is not None:   # keep what was computed, exit 3
-            _write_stopped(out, case, exc, output_dt)
+        if isinstance(exc, CosimError):     # the FMUs are sound: complete them
+            fmus.finish()
+            if exc.result is not None:      # keep what was computed, exit 3
+                _write_stopped(out, case, exc, output_dt)
+        else:
+            fmus.discard()
         raise
     finally:
         if bar is not None:
             bar.close()
+    finishing = _in_background(fmus.finish)
     t, c = res.time, res.columns
     summary = summarize_case(case, t, c, res.info)
     verdicts = list(summary.pop("verdicts"))
@@ -297,6 +328,7 @@ def cli_demo(args) -> int:
     stops = [(r["t_stop_s"], r["landing_m"]) for r in summary["trips"]]
     pngs = report.plot_trip(out, t, c, limits=limits, title=f"{case.describe()}, co-simulation (plant + "
                             f"drive FMUs, {step * 1e3:g} ms)", stops=stops, sis=sis)
+    plant_fmu, drive_fmu = finishing()
     scenario = {"scene": case.scene.name, "scene_file": str(scene_file), "car_load_kg": case.load,
                 "landings_m": list(case.sequence), "dwell_s": case.dwell,
                 "pretorque_Nm": pre, "drive_level": level, "communication_step_s": step,

@@ -37,12 +37,12 @@ import tempfile
 import threading
 import zipfile
 from pathlib import Path
-from typing import Iterable, Mapping, Optional, Union
+from typing import Callable, Iterable, Mapping, Optional, Union
 
 from . import _bootstrap
 from ._bootstrap import PACKAGE, STAMP_NAME, VENDOR_DIR, copy_package, package_files, package_hash
 
-__all__ = ["build_fmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
+__all__ = ["build_fmu", "start_fmu_build", "PendingFmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
            "FmuBuildError", "DEFAULT_REQUIREMENTS", "NUMPY", "SCIPY", "NUMBA", "TOMLI", "requirements_txt"]
 
 #: what the model code of an FMU imports (module, pip requirement, optional?, only below Python X.Y)
@@ -166,11 +166,45 @@ def _stage_resources(staging: Path, resources: Mapping[str, Union[bytes, str, os
 
 def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
               project_files: Iterable[Union[str, Path]] = (),
-              resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
-              validate: bool = True, requirements: Iterable = DEFAULT_REQUIREMENTS,
-              native_loader="auto", log=None, kernels: bool = True, standalone: bool = False,
-              fmi_version: int = 2, **options) -> Path:
-    """Build the FMU of `entry_script` into `dest_dir` and return its path.
+              resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, **kwargs) -> Path:
+    """Build the FMU of `entry_script` into `dest_dir` and return its path (start_fmu_build, then
+    PendingFmu.finish; the arguments are start_fmu_build's)."""
+    return start_fmu_build(entry_script, dest_dir, project_files, resources, **kwargs).finish()
+
+
+class PendingFmu:
+    """An FMU built, validated and usable, but not yet carrying what travels with it (its precompiled
+    kernels, the interpreter) nor moved to its destination. `path` (a private directory next to the
+    destination) can be loaded at once, e.g. by a run that loads the kernels from this machine's cache
+    anyway; finish() adds the rest (the kernels' warm-up run is a subprocess) and moves the FMU into
+    place; discard() drops it. Until finish() the destination keeps what it had."""
+
+    def __init__(self, path: Path, dest_dir: Path, out_tmp: Path, carry: Callable[[Path], None]):
+        self.path, self.dest_dir, self._out_tmp, self._carry = path, dest_dir, out_tmp, carry
+        self.final: Optional[Path] = None
+
+    def finish(self) -> Path:
+        if self.final is None:
+            try:
+                self._carry(self.path)
+                final = self.dest_dir / self.path.name
+                os.replace(self.path, final)
+                self.final = final
+            finally:
+                self.discard()
+        return self.final
+
+    def discard(self) -> None:
+        shutil.rmtree(self._out_tmp, ignore_errors=True)
+
+
+def start_fmu_build(entry_script: Union[str, Path], dest_dir: Union[str, Path],
+                    project_files: Iterable[Union[str, Path]] = (),
+                    resources: Optional[Mapping[str, Union[bytes, str, os.PathLike]]] = None, *,
+                    validate: bool = True, requirements: Iterable = DEFAULT_REQUIREMENTS,
+                    native_loader="auto", log=None, kernels: bool = True, standalone: bool = False,
+                    fmi_version: int = 2, **options) -> PendingFmu:
+    """Build the FMU of `entry_script` for `dest_dir` up to what travels with it (PendingFmu).
 
     entry_script   file defining exactly one deepest ReeveSlave subclass; its module name must be
                    unique among FMUs (it is imported by name at instantiate).
@@ -195,7 +229,7 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
     options        further CoSimulation attributes for pythonfmu (e.g. needsExecutionTool=True).
 
     Raises FmuBuildError if pythonfmu fails or `fmpy validate` finds problems; an existing FMU at
-    the destination is then left untouched (the new one replaces it atomically only when valid).
+    the destination is then left untouched (the new one replaces it atomically, at finish()).
     """
     from pythonfmu import __version__ as pythonfmu_version
 
@@ -300,14 +334,14 @@ def build_fmu(entry_script: Union[str, Path], dest_dir: Union[str, Path],
             if problems:
                 raise FmuBuildError(f"fmpy validate found {len(problems)} problem(s) in "
                                     f"{built.name}", problems)
-        # 5. what travels with the FMU: the compiled kernels, the interpreter
-        _carry(built, reqs, kernels=kernels, standalone=standalone, log=log)
-        final = dest_dir / built.name
-        os.replace(built, final)
+    except BaseException:
+        shutil.rmtree(out_tmp, ignore_errors=True)
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-        shutil.rmtree(out_tmp, ignore_errors=True)
-    return final
+    # 5. (finish) what travels with the FMU: the compiled kernels, the interpreter
+    return PendingFmu(built, dest_dir, out_tmp,
+                      lambda path: _carry(path, reqs, kernels=kernels, standalone=standalone, log=log))
 
 
 _IMPORT_LOCK = threading.Lock()

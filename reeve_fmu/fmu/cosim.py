@@ -213,31 +213,128 @@ def plant_build_inputs(scene=None, name: str = PLANT_NAME, workdir: Optional[Pat
     return _plant_entry(name, workdir), resources
 
 
-def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True,
-                    standalone: bool = False, fmi_version: int = 2) -> tuple[Path, bool]:
-    """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?).
-    standalone: the FMU carries its interpreter; fmi_version 3: an FMI 3.0 FMU (build_fmu)."""
-    from .build import build_fmu, fmu_is_stale
+def _start_plant_build(dest: Path, scene, name: str, force: bool, standalone: bool = False,
+                       fmi_version: int = 2):
+    """The plant FMU's PendingFmu (build.start_fmu_build), or its path when up to date and not force."""
+    from .build import fmu_is_stale, start_fmu_build
 
-    dest = Path(dest)
     with tempfile.TemporaryDirectory(prefix="reeve_plant_entry_") as work:
         entry, res = plant_build_inputs(scene, name, Path(work))
         path = dest / f"{name}.fmu"
         if not force and not fmu_is_stale(path, entry, res):
-            return path, False
-        return build_fmu(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version), True
+            return path
+        return start_fmu_build(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version)
+
+
+def _start_drive_build(dest: Path, force: bool, standalone: bool = False, fmi_version: int = 2):
+    from .build import NUMBA, NUMPY, fmu_is_stale, start_fmu_build
+
+    entry = entry_script("drive")
+    path = dest / f"{DRIVE_NAME}.fmu"
+    if not force and not fmu_is_stale(path, entry):
+        return path
+    return start_fmu_build(entry, dest, requirements=(NUMPY, NUMBA), standalone=standalone,   # no TOML read
+                           fmi_version=fmi_version)
+
+
+def _finished(job) -> tuple[Path, bool]:
+    return (job, False) if isinstance(job, Path) else (job.finish(), True)
+
+
+def build_plant_fmu(dest="fmus", scene=None, name: str = PLANT_NAME, *, force: bool = True,
+                    standalone: bool = False, fmi_version: int = 2) -> tuple[Path, bool]:
+    """Build (or, with force=False, reuse if up to date) the plant FMU; returns (path, built?).
+    standalone: the FMU carries its interpreter; fmi_version 3: an FMI 3.0 FMU (build_fmu)."""
+    return _finished(_start_plant_build(Path(dest), scene, name, force, standalone, fmi_version))
 
 
 def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False,
                     fmi_version: int = 2) -> tuple[Path, bool]:
-    from .build import NUMBA, NUMPY, build_fmu, fmu_is_stale
+    return _finished(_start_drive_build(Path(dest), force, standalone, fmi_version))
 
-    entry = entry_script("drive")
-    path = Path(dest) / f"{DRIVE_NAME}.fmu"
-    if not force and not fmu_is_stale(path, entry):
-        return path, False
-    return build_fmu(entry, dest, requirements=(NUMPY, NUMBA), standalone=standalone,   # no TOML read
-                     fmi_version=fmi_version), True
+
+class FmuPair:
+    """The plant and drive FMUs of prepare_fmus. `plant` and `drive` can be loaded at once; a rebuilt
+    one is still without its precompiled kernels (a run on this machine loads them from its cache)
+    and not yet in `dest`. finish() collects the kernels (a warm-up run of each rebuilt FMU in a
+    subprocess, the two side by side), moves the FMUs into place and returns their paths; discard()
+    drops the rebuilt ones (`dest` keeps what it had)."""
+
+    def __init__(self, jobs: list, log: Optional[Callable[[str], None]]):
+        self._jobs = jobs            # [(PendingFmu or the up-to-date path, seconds spent)]
+        self._log = log
+        self.done: Optional[tuple[Path, Path]] = None
+
+    def _path(self, i: int) -> Path:
+        job = self._jobs[i][0]
+        return job if isinstance(job, Path) else job.path
+
+    @property
+    def plant(self) -> Path:
+        return self._path(0)
+
+    @property
+    def drive(self) -> Path:
+        return self._path(1)
+
+    def finish(self) -> tuple[Path, Path]:
+        from concurrent.futures import ThreadPoolExecutor
+
+        if self.done is not None:
+            return self.done
+
+        def finish(job, spent):
+            t0 = time.perf_counter()
+            path, built = _finished(job)
+            if built and self._log is not None:
+                self._log(f"built {path} ({spent + time.perf_counter() - t0:.1f} s)")
+            return path
+
+        try:
+            with ThreadPoolExecutor(2) as pool:
+                paths = [f.result() for f in [pool.submit(finish, *j) for j in self._jobs]]
+        except BaseException:
+            self.discard()
+            raise
+        self.done = (paths[0], paths[1])
+        return self.done
+
+    def discard(self) -> None:
+        for job, _ in self._jobs:
+            if not isinstance(job, Path):
+                job.discard()
+
+
+def prepare_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
+                 log: Optional[Callable[[str], None]] = print) -> FmuPair:
+    """The plant and drive FMUs in `dest`, rebuilt if missing, stale or `rebuild`, up to their
+    precompiled kernels (FmuPair: usable at once, finish() completes them). The two builds run side by
+    side."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    dest = Path(dest)
+
+    def start(fn):
+        t0 = time.perf_counter()
+        return fn(), time.perf_counter() - t0
+
+    with ThreadPoolExecutor(2) as pool:
+        futures = [pool.submit(start, lambda: _start_plant_build(dest, scene, name, rebuild)),
+                   pool.submit(start, lambda: _start_drive_build(dest, rebuild))]
+        jobs, failed = [], None
+        for f in futures:
+            try:
+                jobs.append(f.result())
+            except BaseException as exc:   # keep the other build's result to discard it
+                failed = failed or exc
+    pair = FmuPair(jobs, log)
+    if failed is not None:
+        pair.discard()
+        raise failed
+    for job, _ in jobs:
+        if isinstance(job, Path) and log is not None:
+            log(f"{job} is up to date")
+    return pair
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
@@ -245,21 +342,7 @@ def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool =
     """Build the plant and drive FMUs into `dest` if missing, stale or `rebuild`; return their paths.
     The two builds run side by side (each build's warm-up is a subprocess that may compile kernels:
     two cores, two compiles)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    def build(fn):
-        t0 = time.perf_counter()
-        path, built = fn(rebuild)
-        return path, built, time.perf_counter() - t0
-
-    with ThreadPoolExecutor(2) as pool:
-        jobs = [pool.submit(build, lambda f: build_plant_fmu(dest, scene, name, force=f)),
-                pool.submit(build, lambda f: build_drive_fmu(dest, force=f))]
-        results = [j.result() for j in jobs]
-    for path, built, dt in results:
-        if log is not None:
-            log(f"built {path} ({dt:.1f} s)" if built else f"{path} is up to date")
-    return results[0][0], results[1][0]
+    return prepare_fmus(dest, scene, name, rebuild, log).finish()
 
 
 # ------------------------------------------------------------------------------------------------
