@@ -245,14 +245,6 @@ def njit(*args, **kwargs):
         # numpy error model: float division by zero gives inf/nan instead of a branch + exception
         # on every division (measurably faster in the element kernels); callers check finiteness.
         kwargs.setdefault("error_model", "numpy")
-        if not (len(args) == 1 and callable(args[0])) and os.environ.get("REEVE_EXP_NOINLINE"):
-            return lambda f: njit(f, **kwargs)
-        _exp = os.environ.get("REEVE_EXP_NOINLINE")
-        if _exp and kwargs.get("inline") == "always":
-            _f = args[0] if args and callable(args[0]) else None
-            _keep = set(os.environ.get("REEVE_EXP_KEEP", "").split(","))
-            if _exp == "all" or (_f is not None and _f.__name__ not in _keep):
-                kwargs.pop("inline")
         if _LOCK_DIR is None or not kwargs.get("cache"):
             return _numba.njit(*args, **kwargs)
         if len(args) == 1 and callable(args[0]):

@@ -142,6 +142,44 @@ def test_build_refuses_generic_entry_names_and_broken_definitions(tmp_path):
     assert (out / "ReeveBadnameProbe.fmu").read_bytes() == b"previous good build"
 
 
+PROBE = ("from reeve_fmu.fmu.slave import ReeveSlave\n"
+         "class ReevePendingProbe(ReeveSlave):\n"
+         "    def define(self):\n"
+         "        self.add_real('u', 'input', unit='N', start=0.0)\n"
+         "        self.add_real('y', 'output', unit='N')\n"
+         "    def step(self, t, dt):\n"
+         "        return True\n")
+
+
+def test_a_pending_build_is_usable_and_replaces_the_destination_only_when_finished(tmp_path, monkeypatch):
+    """start_fmu_build (what the demo co-simulates before the FMUs' kernels are collected): the FMU is
+    valid at once in a private directory, the destination keeps its previous FMU until finish() has
+    added what travels with the FMU and moved it into place; discard() drops a pending build."""
+    from reeve_fmu.fmu import build
+
+    carried = []
+    monkeypatch.setattr(build, "_carry", lambda path, reqs, **kw: carried.append(
+        (path, zipfile.is_zipfile(path), (out / "ReevePendingProbe.fmu").read_bytes())))
+    src = tmp_path / "reeve_pending_probe.py"
+    src.write_text(PROBE, encoding="utf-8")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "ReevePendingProbe.fmu").write_bytes(b"previous build")
+    pending = build.start_fmu_build(src, out, native_loader=False)   # the loader plays no part here
+    assert pending.path.is_file() and pending.path.parent.parent == out
+    with zipfile.ZipFile(pending.path) as zf:
+        assert "modelDescription.xml" in zf.namelist()
+    assert (out / "ReevePendingProbe.fmu").read_bytes() == b"previous build" and carried == []
+    final = pending.finish()
+    assert carried == [(pending.path, True, b"previous build")]       # carried before the move
+    assert final == out / "ReevePendingProbe.fmu" and zipfile.is_zipfile(final)
+    assert [p.name for p in out.iterdir()] == ["ReevePendingProbe.fmu"]   # the private directory is gone
+    assert pending.finish() == final and len(carried) == 1               # finish() is idempotent
+    dropped = build.start_fmu_build(src, out, native_loader=False)
+    dropped.discard()
+    assert [p.name for p in out.iterdir()] == ["ReevePendingProbe.fmu"] and carried[1:] == []
+
+
 # ------------------------------------------------------------------------------------------------
 # FMU state
 # ------------------------------------------------------------------------------------------------
