@@ -21,8 +21,8 @@ def block(doc: str, after: str) -> str:
     return m.group(1)
 
 
-def _run(code: str, cwd) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+def _run(code: str, cwd, **env_extra) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env_extra)
     return subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=900)
 
@@ -41,8 +41,11 @@ def test_the_fmpy_loop_of_cosim_md_runs_as_written(fmus, tmp_path):
     code = block("cosim.md", "### Coupling the two FMUs in your own fmpy loop")
     assert len(code.strip().splitlines()) <= 30
     (tmp_path / "fmus").symlink_to(Path(fmus["base"]) / "fmus")          # "from the repository root"
-    p = _run(code, tmp_path)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    p = _run(code, tmp_path, TMPDIR=str(scratch))
     assert p.returncode == 0, p.stdout + p.stderr
+    assert list(scratch.iterdir()) == []          # the unpacked FMUs are removed (5 MB a run otherwise)
     m = re.fullmatch(r"car at (\S+) m after 10 s\n", p.stdout)
     assert m, p.stdout
     ref = run_in_subprocess(f"{__file__}:master_car_position", fmus["plant"], fmus["drive"], 10.0, timeout=900)
