@@ -252,7 +252,7 @@ def cli_demo(args) -> int:
     # the FMUs are co-simulated as soon as they are built; their precompiled kernels (a warm-up run of
     # each, in subprocesses) are added while this process writes the results (fmus.finish)
     fmus = cosim.prepare_fmus(fmu_dir(), scene=scene_file, name=name, rebuild=bool(getattr(args, "rebuild", False)))
-    plant_fmu, drive_fmu = fmus.plant, fmus.drive
+    plant_fmu, drive_fmu = fmus.paths
     if beside is not None:
         beside.wait()
     drive_values = {k: v for k, v in case.drive_values.items() if k not in SIS_PARAMETERS}
@@ -420,12 +420,8 @@ def cli_build(args) -> int:
         scene = path
     if crane:
         return _build_crane(dest, scene, name, standalone, fmi_version)
-    t0 = time.perf_counter()
-    plant, _ = cosim.build_plant_fmu(dest, scene, name, standalone=standalone, fmi_version=fmi_version)
-    print(f"built {plant} ({time.perf_counter() - t0:.1f} s)")
-    t0 = time.perf_counter()
-    drive, _ = cosim.build_drive_fmu(dest, standalone=standalone, fmi_version=fmi_version)
-    print(f"built {drive} ({time.perf_counter() - t0:.1f} s)")
+    plant, drive = cosim.prepare_fmus(dest, scene, name, rebuild=True, standalone=standalone,
+                                      fmi_version=fmi_version).finish()
     if "elevator" in sc.extra:
         from .studies.trip import trip_case
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import functools
 import hashlib
 import json
 import os
@@ -35,14 +36,15 @@ import shutil
 import sys
 import tempfile
 import threading
+import time
 import zipfile
 from pathlib import Path
-from typing import Callable, Iterable, Mapping, Optional, Union
+from typing import Callable, Iterable, Mapping, Optional, Sequence, Union
 
 from . import _bootstrap
 from ._bootstrap import PACKAGE, STAMP_NAME, VENDOR_DIR, copy_package, package_files, package_hash
 
-__all__ = ["build_fmu", "start_fmu_build", "PendingFmu", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
+__all__ = ["build_fmu", "start_fmu_build", "PendingFmu", "start_builds", "FmuBuilds", "fmu_is_stale", "read_stamp", "current_package_hash", "package_dir",
            "FmuBuildError", "DEFAULT_REQUIREMENTS", "NUMPY", "SCIPY", "NUMBA", "TOMLI", "requirements_txt"]
 
 #: what the model code of an FMU imports (module, pip requirement, optional?, only below Python X.Y)
@@ -196,6 +198,83 @@ class PendingFmu:
 
     def discard(self) -> None:
         shutil.rmtree(self._out_tmp, ignore_errors=True)
+
+
+class FmuBuilds:
+    """FMU builds started side by side (start_builds). `paths` can be loaded at once: a rebuilt FMU is
+    its PendingFmu's (without its precompiled kernels yet: a run on this machine loads them from its
+    cache), an up-to-date one its own. finish() completes the rebuilt ones side by side (each
+    kernels' warm-up run is a subprocess), logs "built PATH (seconds)" for each and returns the
+    final paths; discard() drops the rebuilt ones (their destinations keep what they had)."""
+
+    def __init__(self, jobs: list, log):
+        self._jobs = jobs            # [(PendingFmu or the up-to-date FMU's path, seconds spent)]
+        self._log = log
+        self.final: Optional[list] = None
+
+    @property
+    def paths(self) -> list:
+        return [job if isinstance(job, Path) else job.path for job, _ in self._jobs]
+
+    def finish(self) -> list:
+        if self.final is None:
+            def finish(job, spent):
+                if isinstance(job, Path):
+                    return job
+                t0 = time.perf_counter()
+                path = job.finish()
+                if self._log is not None:
+                    self._log(f"built {path} ({spent + time.perf_counter() - t0:.1f} s)")
+                return path
+
+            done = side_by_side([functools.partial(finish, *j) for j in self._jobs])
+            failed = [exc for _, exc in done if exc is not None]
+            if failed:
+                self.discard()
+                raise failed[0]
+            self.final = [path for path, _ in done]
+        return self.final
+
+    def discard(self) -> None:
+        for job, _ in self._jobs:
+            if not isinstance(job, Path):
+                job.discard()
+
+
+def side_by_side(fns: Sequence[Callable[[], object]]) -> list:
+    """Call each of `fns` in a thread of its own (an FMU build is mostly subprocesses and file I/O:
+    pythonfmu, the C compiler, the kernels' warm-up run); [(result, None) or (None, exception)] in
+    order, once all have ended."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    def call(fn):
+        try:
+            return fn(), None
+        except BaseException as exc:   # noqa: BLE001 - handed to the caller with the others' results
+            return None, exc
+
+    with ThreadPoolExecutor(max(1, len(fns))) as pool:
+        return list(pool.map(call, fns))
+
+
+def start_builds(starters: Sequence[Callable[[], object]], log=None) -> FmuBuilds:
+    """Run the `starters` (each returns start_fmu_build's PendingFmu, or the path of an FMU that is up to
+    date) side by side: FmuBuilds. Logs "PATH is up to date" for the latter; if one starter fails, the
+    others' builds are dropped and its exception is raised."""
+    def timed(fn):
+        t0 = time.perf_counter()
+        return fn(), time.perf_counter() - t0
+
+    done = side_by_side([functools.partial(timed, fn) for fn in starters])
+    builds = FmuBuilds([r for r, exc in done if exc is None], log)
+    failed = [exc for _, exc in done if exc is not None]
+    if failed:
+        builds.discard()
+        raise failed[0]
+    for job, _ in builds._jobs:
+        if isinstance(job, Path) and log is not None:
+            log(f"{job} is up to date")
+    return builds
 
 
 def start_fmu_build(entry_script: Union[str, Path], dest_dir: Union[str, Path],

@@ -253,88 +253,17 @@ def build_drive_fmu(dest="fmus", *, force: bool = True, standalone: bool = False
     return _finished(_start_drive_build(Path(dest), force, standalone, fmi_version))
 
 
-class FmuPair:
-    """The plant and drive FMUs of prepare_fmus. `plant` and `drive` can be loaded at once; a rebuilt
-    one is still without its precompiled kernels (a run on this machine loads them from its cache)
-    and not yet in `dest`. finish() collects the kernels (a warm-up run of each rebuilt FMU in a
-    subprocess, the two side by side), moves the FMUs into place and returns their paths; discard()
-    drops the rebuilt ones (`dest` keeps what it had)."""
-
-    def __init__(self, jobs: list, log: Optional[Callable[[str], None]]):
-        self._jobs = jobs            # [(PendingFmu or the up-to-date path, seconds spent)]
-        self._log = log
-        self.done: Optional[tuple[Path, Path]] = None
-
-    def _path(self, i: int) -> Path:
-        job = self._jobs[i][0]
-        return job if isinstance(job, Path) else job.path
-
-    @property
-    def plant(self) -> Path:
-        return self._path(0)
-
-    @property
-    def drive(self) -> Path:
-        return self._path(1)
-
-    def finish(self) -> tuple[Path, Path]:
-        from concurrent.futures import ThreadPoolExecutor
-
-        if self.done is not None:
-            return self.done
-
-        def finish(job, spent):
-            t0 = time.perf_counter()
-            path, built = _finished(job)
-            if built and self._log is not None:
-                self._log(f"built {path} ({spent + time.perf_counter() - t0:.1f} s)")
-            return path
-
-        try:
-            with ThreadPoolExecutor(2) as pool:
-                paths = [f.result() for f in [pool.submit(finish, *j) for j in self._jobs]]
-        except BaseException:
-            self.discard()
-            raise
-        self.done = (paths[0], paths[1])
-        return self.done
-
-    def discard(self) -> None:
-        for job, _ in self._jobs:
-            if not isinstance(job, Path):
-                job.discard()
-
-
 def prepare_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
-                 log: Optional[Callable[[str], None]] = print) -> FmuPair:
-    """The plant and drive FMUs in `dest`, rebuilt if missing, stale or `rebuild`, up to their
-    precompiled kernels (FmuPair: usable at once, finish() completes them). The two builds run side by
-    side."""
-    from concurrent.futures import ThreadPoolExecutor
+                 log: Optional[Callable[[str], None]] = print, *, standalone: bool = False,
+                 fmi_version: int = 2):
+    """The plant and drive FMUs in `dest`, rebuilt (side by side) if missing, stale or `rebuild`, up to
+    their precompiled kernels: build.FmuBuilds, whose `paths` (plant, drive) load at once and whose
+    finish() completes them."""
+    from .build import start_builds
 
     dest = Path(dest)
-
-    def start(fn):
-        t0 = time.perf_counter()
-        return fn(), time.perf_counter() - t0
-
-    with ThreadPoolExecutor(2) as pool:
-        futures = [pool.submit(start, lambda: _start_plant_build(dest, scene, name, rebuild)),
-                   pool.submit(start, lambda: _start_drive_build(dest, rebuild))]
-        jobs, failed = [], None
-        for f in futures:
-            try:
-                jobs.append(f.result())
-            except BaseException as exc:   # keep the other build's result to discard it
-                failed = failed or exc
-    pair = FmuPair(jobs, log)
-    if failed is not None:
-        pair.discard()
-        raise failed
-    for job, _ in jobs:
-        if isinstance(job, Path) and log is not None:
-            log(f"{job} is up to date")
-    return pair
+    return start_builds([lambda: _start_plant_build(dest, scene, name, rebuild, standalone, fmi_version),
+                         lambda: _start_drive_build(dest, rebuild, standalone, fmi_version)], log)
 
 
 def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool = False,
@@ -342,7 +271,8 @@ def ensure_fmus(dest="fmus", scene=None, name: str = PLANT_NAME, rebuild: bool =
     """Build the plant and drive FMUs into `dest` if missing, stale or `rebuild`; return their paths.
     The two builds run side by side (each build's warm-up is a subprocess that may compile kernels:
     two cores, two compiles)."""
-    return prepare_fmus(dest, scene, name, rebuild, log).finish()
+    plant, drive = prepare_fmus(dest, scene, name, rebuild, log).finish()
+    return plant, drive
 
 
 # ------------------------------------------------------------------------------------------------

@@ -176,7 +176,7 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None, standalone: boo
     values for CraneDrive.fmu)."""
     from ..components.cranedrive import crane_drive_defaults
     from ..core.scene import load_scene
-    from .build import NUMBA, NUMPY, build_fmu
+    from .build import NUMBA, NUMPY, start_builds, start_fmu_build
     from .cosim import _slug
 
     scene_path = Path(scene)
@@ -186,16 +186,22 @@ def build_crane_fmus(dest, scene, *, name: Optional[str] = None, standalone: boo
     cfg = crane_config(scene_path, name)
     res = {CRANE_SCENE: scene_path.read_bytes(), CRANE_CONFIG: (json.dumps(cfg, indent=1) + "\n").encode()}
     dest = Path(dest)
-    with tempfile.TemporaryDirectory(prefix="reeve_crane_entry_") as work:
-        entry = _entry("crane")
-        if name != CRANE_NAME:
-            # a unique entry module per model: two FMUs sharing one run each other's code in a process
-            copy = Path(work) / f"reeve_crane_{_slug(name)}_slave.py"
-            copy.write_bytes(entry.read_bytes())
-            entry = copy
-        plant = build_fmu(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version)
-    drive = build_fmu(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone,
-                      fmi_version=fmi_version)
+
+    def start_plant():
+        with tempfile.TemporaryDirectory(prefix="reeve_crane_entry_") as work:
+            entry = _entry("crane")
+            if name != CRANE_NAME:
+                # a unique entry module per model: two FMUs sharing one run each other's code in a process
+                copy = Path(work) / f"reeve_crane_{_slug(name)}_slave.py"
+                copy.write_bytes(entry.read_bytes())
+                entry = copy
+            return start_fmu_build(entry, dest, resources=res, standalone=standalone, fmi_version=fmi_version)
+
+    def start_drive():
+        return start_fmu_build(_entry("cranedrive"), dest, requirements=(NUMPY, NUMBA), standalone=standalone,
+                               fmi_version=fmi_version)
+
+    plant, drive = start_builds([start_plant, start_drive]).finish()     # side by side
     return plant, drive, crane_drive_defaults(load_scene(scene_path), cfg["holding_torque"])
 
 
