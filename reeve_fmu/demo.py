@@ -174,6 +174,31 @@ def _sis_result(sis_run, case, step):
     return run_case(case, step=step, sis=True)
 
 
+def _levelling(sis_run, case, step, summary: dict, verdicts: list):
+    """The levelling comparison: the trip with the shaft information system (run in the other process)
+    summarized into summary["levelling"] and its verdicts added; returns (its time and columns, the
+    report's rows per stop)."""
+    from .studies.trip import summarize_case
+    from .studies.verdicts import levelling_verdicts
+
+    rs = _sis_result(sis_run, case, step)
+    ss = summarize_case(case, rs.time, rs.columns, rs.info)
+    verdicts[2:2] = [v.as_dict() for v in levelling_verdicts(ss["stopping_error_mm"], " (with SIS)")]
+    lev_rows = [(k, summary["stopping_error_mm"][k], ss["stopping_error_mm"].get(k, float("nan")))
+                for k in summary["stopping_error_mm"]]
+    summary["levelling"] = {
+        "motor_encoder_only_mm": summary["stopping_error_mm"], "with_sis_mm": ss["stopping_error_mm"],
+        "relevelling_needed_encoder": any(abs(e) > 20 for e in summary["stopping_error_mm"].values()),
+        "relevelling_needed_sis": any(abs(e) > 20 for e in ss["stopping_error_mm"].values()),
+        "sis": {"resolution_m": case.drive_values.get("sis.resolution", 0.5e-3),
+                "delay_s": case.drive_values.get("sis.delay", 2e-3),
+                "zone_m": case.drive_values.get("sis.zone", 0.0) or "braking distance",
+                "filter_s": case.drive_values.get("sis.filter", 0.2),
+                "run": "in process (Plant + ElectricDrive at the same step; the drive FMU has no "
+                       "car-position input)"}}
+    return (rs.time, rs.columns), lev_rows
+
+
 def _preload_plotting() -> None:
     """Import matplotlib's pyplot (1.3 s) in a thread: on a cold cache this process then waits for
     the kernels the other process compiles, and the plots at the end no longer pay the import."""
@@ -239,7 +264,7 @@ def cli_demo(args) -> int:
     from .fmu.master import CosimError
     from .studies.analysis import traction_limits
     from .studies.trip import run_case, run_parameters, summarize_case
-    from .studies.verdicts import explain, levelling_verdicts, print_verdicts, worst
+    from .studies.verdicts import explain, print_verdicts, worst
 
     case = demo_case(args)
     if beside is not None:
@@ -294,25 +319,7 @@ def cli_demo(args) -> int:
     t, c = res.time, res.columns
     summary = summarize_case(case, t, c, res.info)
     verdicts = list(summary.pop("verdicts"))
-    sis = None
-    lev_rows = None
-    if sis_run is not None:
-        rs = _sis_result(sis_run, case, step)
-        ss = summarize_case(case, rs.time, rs.columns, rs.info)
-        sis = (rs.time, rs.columns)
-        verdicts[2:2] = [v.as_dict() for v in levelling_verdicts(ss["stopping_error_mm"], " (with SIS)")]
-        lev_rows = [(k, summary["stopping_error_mm"][k], ss["stopping_error_mm"].get(k, float("nan")))
-                    for k in summary["stopping_error_mm"]]
-        summary["levelling"] = {
-            "motor_encoder_only_mm": summary["stopping_error_mm"], "with_sis_mm": ss["stopping_error_mm"],
-            "relevelling_needed_encoder": any(abs(e) > 20 for e in summary["stopping_error_mm"].values()),
-            "relevelling_needed_sis": any(abs(e) > 20 for e in ss["stopping_error_mm"].values()),
-            "sis": {"resolution_m": case.drive_values.get("sis.resolution", 0.5e-3),
-                    "delay_s": case.drive_values.get("sis.delay", 2e-3),
-                    "zone_m": case.drive_values.get("sis.zone", 0.0) or "braking distance",
-                    "filter_s": case.drive_values.get("sis.filter", 0.2),
-                    "run": "in process (Plant + ElectricDrive at the same step; the drive FMU has no "
-                           "car-position input)"}}
+    sis, lev_rows = _levelling(sis_run, case, step, summary, verdicts) if sis_run is not None else (None, None)
     out.mkdir(parents=True, exist_ok=True)
     order = []
     for n in res.info["plant_outputs"]:
