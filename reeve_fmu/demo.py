@@ -216,7 +216,8 @@ def _preload_plotting() -> None:
 
 
 def _in_background(fn):
-    """Run fn() in a thread; returns a function that waits for it and gives its result (or raises)."""
+    """Run fn() in a thread; returns a function that waits for it and gives its result (or raises). Not
+    a daemon thread: should the rest of the run fail, the interpreter still waits for it at exit."""
     import threading
 
     box = {}
@@ -227,7 +228,7 @@ def _in_background(fn):
         except BaseException as exc:   # noqa: BLE001 - handed to the waiting caller
             box["error"] = exc
 
-    th = threading.Thread(target=run, name="reeve-finish-fmus", daemon=True)
+    th = threading.Thread(target=run, name="reeve-finish-fmus", daemon=False)
     th.start()
 
     def wait():
