@@ -155,6 +155,29 @@ def test_demo_report_says_what_ran(demo):
     assert "## Parameters" in md and "| `drive.level` | 1 |" in md and "| `ropes.hoist.EA` | 2.9e+06 |" in md
 
 
+def test_a_demo_that_builds_its_fmus_packs_their_kernels_and_leaves_nothing_behind(tmp_path):
+    """A first demo (no FMUs yet) co-simulates the FMUs it has just built, before their kernels are
+    packed, and packs them while it writes the results: the FMUs in the FMU directory carry their
+    kernels, the summary names them there, and no build directory is left."""
+    import zipfile
+
+    from reeve_fmu.fmu._bootstrap import KERNELS_DIR
+
+    fmu_dir, out = tmp_path / "fmus", tmp_path / "out"
+    env = dict(os.environ, REEVE_FMU_FMUS=str(fmu_dir))
+    p = subprocess.run([sys.executable, "-m", "reeve_fmu.cli", "demo", "--landings", "0,3", "--levelling", "encoder",
+                        "--out", str(out), "--no-progress"], cwd=ROOT, env=env, capture_output=True, text=True,
+                       timeout=900)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert sorted(f.name for f in fmu_dir.iterdir()) == ["ElectricDrive.fmu", "ReevingPlant.fmu"]
+    for fmu in fmu_dir.iterdir():
+        with zipfile.ZipFile(fmu) as zf:
+            assert f"resources/{KERNELS_DIR}/manifest.json" in zf.namelist(), fmu.name
+        assert f"built {fmu}" in p.stdout
+    sc = json.loads((out / "summary.json").read_text(encoding="utf-8"))["scenario"]
+    assert (sc["plant_fmu"], sc["drive_fmu"]) == (str(fmu_dir / "ReevingPlant.fmu"), str(fmu_dir / "ElectricDrive.fmu"))
+
+
 @pytest.fixture(scope="module")
 def demo_level2(fmus, tmp_path_factory):
     out = tmp_path_factory.mktemp("demo2")
