@@ -162,6 +162,11 @@ def run_in_subprocess(func_path_or_code: str, *args, timeout: float = 120.0,
     child_env.setdefault("PYTHONFAULTHANDLER", "1")
     python = python or sys.executable
     with tempfile.TemporaryDirectory(prefix="reeve_job_") as workdir:
+        if env is None or "TMPDIR" not in env:
+            # the child's temporary files (fmpy.extract's unpacked FMUs: ~5 MB each) go with the job:
+            # a job ends without interpreter finalisation, so nothing in it would remove them
+            child_env["TMPDIR"] = os.path.join(workdir, "tmp")
+            os.mkdir(child_env["TMPDIR"])
         args_path = os.path.join(workdir, "args.json")
         with open(args_path, "w", encoding="utf-8") as fh:
             json.dump(list(args), fh, allow_nan=True, default=_json_default)

@@ -366,6 +366,26 @@ def test_host_that_already_imported_reeve_fmu(toy):
 # ------------------------------------------------------------------------------------------------
 # run_in_subprocess semantics (no FMU)
 # ------------------------------------------------------------------------------------------------
+def test_a_jobs_temporary_files_go_with_it(tmp_path):
+    """A job ends without interpreter finalisation (os._exit), so what it unpacked into the temporary
+    directory (fmpy.extract: ~5 MB per FMU) would stay: the job's temporary directory is inside its
+    working directory, removed with it, also after a crash; a TMPDIR the caller sets is kept."""
+    code = ("import os, tempfile\n"
+            "d = tempfile.mkdtemp()\n"
+            "open(os.path.join(d, 'unpacked'), 'w').close()\n"
+            "result = d\n")
+    left = run_in_subprocess(code)
+    assert os.path.isabs(left) and not os.path.exists(left), left
+    crashed = tmp_path / "crashed"
+    with pytest.raises(SubprocessJobError, match="without writing its result"):
+        run_in_subprocess(f"import os, tempfile; open({str(crashed)!r}, 'w').write(tempfile.mkdtemp()); os.abort()")
+    assert not os.path.exists(crashed.read_text())
+    own = tmp_path / "own"
+    own.mkdir()
+    kept = run_in_subprocess(code, env=dict(os.environ, TMPDIR=str(own)))
+    assert os.path.dirname(kept) == str(own) and os.path.exists(os.path.join(kept, "unpacked"))
+
+
 def test_run_in_subprocess_results_errors_and_exit_aborts(tmp_path):
     assert run_in_subprocess("result = [ARGS[0] * 2, float('nan') != float('nan')]", 21) == [42, True]
     assert run_in_subprocess("os.path:join", "a", "b") == os.path.join("a", "b")
